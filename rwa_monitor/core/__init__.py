@@ -1,0 +1,1 @@
+"""Pure numpy/scipy algorithms and models: no ROS, no file I/O."""

@@ -1,0 +1,30 @@
+"""The one vocabulary of event and health fields.
+
+Anomaly events (``anomalies`` topic, events JSON) and health statuses (``/diagnostics``)
+carry these keys. A key with a unit ends in it (``_s`` seconds, ``_nm`` newton metres,
+``_nms`` newton metre seconds per radian, ``_rad_s`` radians per second). The events JSON
+uses the same names, except that the estimated change time and row are ``time`` and
+``index`` as the events-file contract fixes them.
+"""
+
+DETECTOR = 'detector'
+COMPONENT = 'component'
+KIND = 'kind'
+CHANGE_TIME = 'change_time_s'
+CHANGE_INDEX = 'change_index'
+DECLARATION_TIME = 'declaration_time_s'
+DECLARATION_INDEX = 'declaration_index'
+P_VALUE = 'p_value'
+REVISION = 'revision'
+DELTA_DRY = 'delta_dry_nm'
+DELTA_VISCOUS = 'delta_viscous_nms'
+NOISE_STD = 'noise_std_nm'
+
+# Event kinds, by detector.
+FRICTION_KINDS = ('dry', 'viscous', 'both')
+GYRO_KINDS = ('drift', 'bias')
+WINDOW_KINDS = ('dry', 'viscous', 'fss1', 'fss2')
+
+# Names of fields in the events JSON that differ from the KeyValue key.
+JSON_NAME = {CHANGE_TIME: 'time', CHANGE_INDEX: 'index',
+             DECLARATION_TIME: 'declared_time', DECLARATION_INDEX: 'declared_index'}

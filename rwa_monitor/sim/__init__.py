@@ -1,0 +1,1 @@
+"""Seeded telemetry generators that write the telemetry schema with truth columns."""

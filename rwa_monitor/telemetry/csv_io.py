@@ -1,0 +1,104 @@
+"""Telemetry CSV files: a header row, one row per sample, numbers only.
+
+Empty cells, ``nan`` and ``inf`` are read as such (the detectors skip and count them);
+anything else that is not a number is an error naming the file, the line and the column.
+``time`` must be finite and strictly increasing.
+"""
+
+from __future__ import annotations
+
+import csv
+import os
+import warnings
+
+import numpy as np
+
+from rwa_monitor.exceptions import TelemetrySchemaError
+from rwa_monitor.telemetry.schema import Telemetry, TIME
+
+
+def read_csv(path: str | os.PathLike) -> Telemetry:
+    """Read a telemetry CSV file; raise TelemetrySchemaError naming file, line and column."""
+    path = os.fspath(path)
+    try:
+        with open(path, newline='') as handle:
+            header = next(csv.reader(handle), None)
+    except OSError as err:
+        raise TelemetrySchemaError(path, f'cannot read: {err.strerror}') from None
+    if not header:
+        raise TelemetrySchemaError(path, 'empty file: expected a header row', line=1)
+    header = [name.strip() for name in header]
+    for i, name in enumerate(header):
+        if not name:
+            raise TelemetrySchemaError(path, f'empty column name at position {i + 1}', 1)
+        if header.index(name) != i:
+            raise TelemetrySchemaError(path, 'duplicate column', 1, name)
+    if TIME not in header:
+        raise TelemetrySchemaError(path, 'missing required column', 1, TIME)
+    data = _parse_rows(path, header)
+    columns = {name: data[:, i] for i, name in enumerate(header)}
+    _check_time(path, columns[TIME])
+    try:
+        return Telemetry.from_columns(columns, source=path)
+    except KeyError as err:
+        raise TelemetrySchemaError(path, 'missing column(s) of a group', 1,
+                                   err.args[0]) from None
+
+
+def _parse_rows(path: str, header: list[str]) -> np.ndarray:
+    with warnings.catch_warnings():
+        warnings.simplefilter('ignore', UserWarning)  # a header-only file is valid
+        try:
+            data = np.loadtxt(path, delimiter=',', skiprows=1, ndmin=2, dtype=float)
+        except ValueError:
+            data = None
+    if data is not None and data.shape[0] == 0:
+        return np.empty((0, len(header)))
+    if data is not None and data.shape[1] == len(header):
+        return data
+    return _parse_slowly(path, header)
+
+
+def _parse_slowly(path: str, header: list[str]) -> np.ndarray:
+    """Parse cell by cell: empty cells become NaN, anything else unreadable is an error."""
+    rows = []
+    with open(path, newline='') as handle:
+        reader = csv.reader(handle)
+        next(reader)
+        for line, row in enumerate(reader, start=2):
+            if len(row) != len(header):
+                raise TelemetrySchemaError(
+                    path, f'expected {len(header)} values, found {len(row)}', line)
+            values = []
+            for name, cell in zip(header, row):
+                text = cell.strip()
+                try:
+                    values.append(float(text) if text else np.nan)
+                except ValueError:
+                    raise TelemetrySchemaError(
+                        path, f'not a number: {cell!r}', line, name) from None
+            rows.append(values)
+    return np.array(rows, dtype=float).reshape(len(rows), len(header))
+
+
+def _check_time(path: str, time: np.ndarray) -> None:
+    bad = np.flatnonzero(~np.isfinite(time))
+    if bad.size:
+        raise TelemetrySchemaError(path, 'time must be finite', int(bad[0]) + 2, TIME)
+    back = np.flatnonzero(np.diff(time) <= 0)
+    if back.size:
+        k = int(back[0]) + 1
+        raise TelemetrySchemaError(
+            path, f'time must be strictly increasing ({time[k]!r} follows {time[k - 1]!r})',
+            k + 2, TIME)
+
+
+def write_csv(path: str | os.PathLike, telemetry: Telemetry, fmt: str = '%.10g') -> None:
+    """Write a telemetry record as CSV (columns in the canonical order)."""
+    columns = telemetry.columns()
+    lengths = {name: len(values) for name, values in columns.items()}
+    if len(set(lengths.values())) > 1:
+        raise ValueError(f'columns of different lengths: {lengths}')
+    table = np.column_stack([np.asarray(v, dtype=float) for v in columns.values()])
+    np.savetxt(os.fspath(path), table, delimiter=',', fmt=fmt,
+               header=','.join(columns), comments='')

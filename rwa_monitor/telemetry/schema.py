@@ -1,0 +1,102 @@
+"""The telemetry data model: one row per sample, SI units (REP 103).
+
+Columns (DESIGN.md contract):
+``time`` (s, strictly increasing); per wheel ``<id>_speed`` (rad/s) and ``<id>_friction``
+(N m); optional ``gyro_x/y/z`` (rad/s, body frame); optional ``q_x/y/z/w`` (body attitude,
+scalar last); optional ``ref_x/y/z`` (rad/s); optional ``truth_*`` (ground truth, ignored by
+detectors); any other numeric column is an auxiliary channel.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+TIME = 'time'
+SPEED_SUFFIX = '_speed'
+FRICTION_SUFFIX = '_friction'
+TRUTH_PREFIX = 'truth_'
+GYRO = ('gyro_x', 'gyro_y', 'gyro_z')
+ATTITUDE = ('q_x', 'q_y', 'q_z', 'q_w')
+REFERENCE = ('ref_x', 'ref_y', 'ref_z')
+VECTOR_GROUPS = {'gyro': GYRO, 'attitude': ATTITUDE, 'reference_rate': REFERENCE}
+
+
+@dataclass
+class Wheel:
+    """One wheel's channels: spin rate (rad/s) and friction torque (N m, may be absent)."""
+
+    speed: np.ndarray
+    friction: np.ndarray | None = None
+
+
+@dataclass
+class Telemetry:
+    """A telemetry record held as numpy arrays of equal length ``n``."""
+
+    time: np.ndarray
+    wheels: dict[str, Wheel] = field(default_factory=dict)
+    gyro: np.ndarray | None = None
+    attitude: np.ndarray | None = None
+    reference_rate: np.ndarray | None = None
+    aux: dict[str, np.ndarray] = field(default_factory=dict)
+    truth: dict[str, np.ndarray] = field(default_factory=dict)
+    source: str | None = None
+
+    def __len__(self) -> int:
+        return len(self.time)
+
+    def columns(self) -> dict[str, np.ndarray]:
+        """Return every channel as column name -> array, in the canonical column order."""
+        cols: dict[str, np.ndarray] = {TIME: self.time}
+        for wheel_id, wheel in self.wheels.items():
+            cols[wheel_id + SPEED_SUFFIX] = wheel.speed
+            if wheel.friction is not None:
+                cols[wheel_id + FRICTION_SUFFIX] = wheel.friction
+        for group, names in VECTOR_GROUPS.items():
+            values = getattr(self, group)
+            if values is not None:
+                for i, name in enumerate(names):
+                    cols[name] = values[:, i]
+        cols.update(self.aux)
+        cols.update({TRUTH_PREFIX + k: v for k, v in self.truth.items()})
+        return cols
+
+    @classmethod
+    def from_columns(cls, columns: dict[str, np.ndarray],
+                     source: str | None = None) -> 'Telemetry':
+        """Build a record from column name -> array; raise KeyError naming what is missing.
+
+        The caller (a file reader) turns KeyError into a schema error with the file name.
+        """
+        if TIME not in columns:
+            raise KeyError(TIME)
+        names = list(columns)
+        tele = cls(time=np.asarray(columns[TIME], dtype=float), source=source)
+        for group, members in VECTOR_GROUPS.items():
+            present = [m for m in members if m in columns]
+            if present and len(present) < len(members):
+                missing = [m for m in members if m not in columns]
+                raise KeyError(', '.join(missing))
+            if present:
+                setattr(tele, group, np.column_stack([columns[m] for m in members]))
+        grouped = {TIME, *GYRO, *ATTITUDE, *REFERENCE}
+        for name in names:
+            if name.endswith(SPEED_SUFFIX) and name not in grouped:
+                wheel_id = name[:-len(SPEED_SUFFIX)]
+                friction = columns.get(wheel_id + FRICTION_SUFFIX)
+                tele.wheels[wheel_id] = Wheel(np.asarray(columns[name], dtype=float),
+                                              None if friction is None
+                                              else np.asarray(friction, dtype=float))
+        for name in names:
+            if name in grouped or name.endswith(SPEED_SUFFIX):
+                continue
+            if name.endswith(FRICTION_SUFFIX):
+                if name[:-len(FRICTION_SUFFIX)] not in tele.wheels:
+                    raise KeyError(name[:-len(FRICTION_SUFFIX)] + SPEED_SUFFIX)
+            elif name.startswith(TRUTH_PREFIX):
+                tele.truth[name[len(TRUTH_PREFIX):]] = np.asarray(columns[name], dtype=float)
+            else:
+                tele.aux[name] = np.asarray(columns[name], dtype=float)
+        return tele
