@@ -1,0 +1,381 @@
+"""What every rwa_monitor node shares: QoS profiles, parameters, diagnostics, ``main``.
+
+The API (documented in docs/nodes.md):
+
+- QoS: :func:`telemetry_qos`, :data:`EVENTS_QOS`, :data:`DIAGNOSTICS_QOS`,
+  :data:`CLOCK_QOS`; :func:`qos_event_callbacks` logs incompatible-QoS peers once.
+- Parameters: :class:`ParamSpec` (name, default, description, range or choices, read-only)
+  and :func:`declare_parameters`, which declares each with a ParameterDescriptor, validates
+  the start-up values (ConfigError naming the parameter) and rejects bad values at run time
+  with a reason naming the parameter. The returned :class:`Parameters` mapping always holds
+  the current values.
+- Diagnostics: :class:`DiagnosticsPublisher` publishes one DiagnosticStatus per component
+  on ``/diagnostics`` every period (1 s) of the node clock, named ``"<node>: <check>"``,
+  ``hardware_id`` = component, KeyValues with units in the key, STALE when the component's
+  input stops.
+- :func:`run_node`: the body of every console script's ``main``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+import math
+import sys
+from typing import Any, Callable, Iterator, Mapping, Sequence
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
+                                SetParametersResult)
+import rclpy
+from rclpy.clock import Clock
+from rclpy.clock_type import ClockType
+from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
+from rclpy.exceptions import (InvalidParameterTypeException, InvalidParameterValueException,
+                              ParameterException)
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+from rwa_monitor.core.params import check_choice, check_int, check_real
+from rwa_monitor.exceptions import ConfigError
+
+# --------------------------------------------------------------------------------- QoS
+
+# History depth of the telemetry topics on both ends (messages a subscriber may lag).
+TELEMETRY_DEPTH = 1000
+
+
+def telemetry_qos(depth: int = TELEMETRY_DEPTH) -> QoSProfile:
+    """Return the telemetry QoS: RELIABLE, VOLATILE, KEEP_LAST ``depth``.
+
+    Reliable so that a replay at ``rate`` 0 loses nothing; a reliable publisher also serves
+    best-effort (sensor-data) subscribers.
+    """
+    return QoSProfile(depth=depth, history=HistoryPolicy.KEEP_LAST,
+                      reliability=ReliabilityPolicy.RELIABLE,
+                      durability=DurabilityPolicy.VOLATILE)
+
+
+# Anomaly events: reliable, and the last 100 kept for subscribers that join late.
+EVENTS_QOS = QoSProfile(depth=100, history=HistoryPolicy.KEEP_LAST,
+                        reliability=ReliabilityPolicy.RELIABLE,
+                        durability=DurabilityPolicy.TRANSIENT_LOCAL)
+
+# /diagnostics: reliable, volatile (a periodic state; the next one comes in 1 s).
+DIAGNOSTICS_QOS = QoSProfile(depth=10, history=HistoryPolicy.KEEP_LAST,
+                             reliability=ReliabilityPolicy.RELIABLE,
+                             durability=DurabilityPolicy.VOLATILE)
+
+# /clock publisher: reliable, so it matches the best-effort clock subscribers too.
+CLOCK_QOS = QoSProfile(depth=10, history=HistoryPolicy.KEEP_LAST,
+                       reliability=ReliabilityPolicy.RELIABLE,
+                       durability=DurabilityPolicy.VOLATILE)
+
+
+def qos_event_callbacks(node: Node, topic: str, publisher: bool = False
+                        ) -> PublisherEventCallbacks | SubscriptionEventCallbacks:
+    """Return event callbacks that log an incompatible-QoS peer on ``topic`` (once)."""
+    warned: set[str] = set()
+
+    def incompatible(event: Any) -> None:
+        policy = getattr(event, 'last_policy_kind', '?')
+        if str(policy) not in warned:
+            warned.add(str(policy))
+            node.get_logger().warning(
+                f'incompatible QoS with a peer on {topic}: policy {policy} '
+                f'(total {event.total_count}); the peer gets no messages')
+
+    if publisher:
+        return PublisherEventCallbacks(incompatible_qos=incompatible)
+    return SubscriptionEventCallbacks(incompatible_qos=incompatible)
+
+
+# -------------------------------------------------------------------------- parameters
+
+_BIG = sys.float_info.max
+
+
+@dataclass(frozen=True)
+class ParamSpec:
+    """One node parameter: its default, meaning, allowed values and mutability.
+
+    The ROS type is the type of ``default`` (bool, int, float, str or list of str). Numbers
+    are limited to ``[low, high]`` (``low_open``/``high_open`` exclude an end point);
+    strings may be limited to ``choices``; ``validate`` adds a check of its own (raise
+    ValueError naming the parameter). ``read_only`` parameters are set at start-up only.
+    """
+
+    name: str
+    default: Any
+    description: str
+    low: float | None = None
+    high: float | None = None
+    low_open: bool = False
+    high_open: bool = False
+    choices: tuple[str, ...] | None = None
+    read_only: bool = False
+    validate: Callable[[Any], Any] | None = None
+
+    def check(self, value: Any) -> Any:
+        """Return ``value`` if allowed, else raise ValueError naming the parameter."""
+        kind = type(self.default)
+        if kind is bool:
+            if not isinstance(value, bool):
+                raise ValueError(f'{self.name} must be true or false, got {value!r}')
+        elif kind is int:
+            value = check_int(self.name, value,
+                              None if self.low is None else int(self.low),
+                              None if self.high is None else int(self.high))
+        elif kind is float:
+            value = check_real(self.name, value,
+                               -math.inf if self.low is None else self.low,
+                               math.inf if self.high is None else self.high,
+                               self.low_open, self.high_open)
+        elif kind is str:
+            if not isinstance(value, str):
+                raise ValueError(f'{self.name} must be a string, got {value!r}')
+            if self.choices is not None:
+                check_choice(self.name, value, self.choices)
+        elif kind is list:
+            if not all(isinstance(v, str) for v in value):
+                raise ValueError(f'{self.name} must be a list of strings, got {value!r}')
+            value = list(value)
+        if self.validate is not None:
+            self.validate(value)
+        return value
+
+    def descriptor(self) -> ParameterDescriptor:
+        """Return the ParameterDescriptor: description, range, read-only flag."""
+        text = self.description
+        if self.choices:
+            text += f' One of: {", ".join(self.choices)}.'
+        desc = ParameterDescriptor(name=self.name, description=text,
+                                   read_only=self.read_only)
+        kind = type(self.default)
+        if kind is float and (self.low is not None or self.high is not None):
+            desc.floating_point_range = [FloatingPointRange(
+                from_value=-_BIG if self.low is None else float(self.low),
+                to_value=_BIG if self.high is None else float(self.high), step=0.0)]
+        elif kind is int and (self.low is not None or self.high is not None):
+            desc.integer_range = [IntegerRange(
+                from_value=-2 ** 63 if self.low is None else int(self.low),
+                to_value=2 ** 63 - 1 if self.high is None else int(self.high), step=1)]
+        if self.choices:
+            desc.additional_constraints = 'one of: ' + ', '.join(self.choices)
+        return desc
+
+
+class Parameters(Mapping[str, Any]):
+    """The current, validated values of a node's parameters (updated on every set)."""
+
+    def __init__(self, values: dict[str, Any]) -> None:
+        self._values = values
+
+    def __getitem__(self, name: str) -> Any:
+        return self._values[name]
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._values)
+
+    def __len__(self) -> int:
+        return len(self._values)
+
+
+def declare_parameters(node: Node, specs: Sequence[ParamSpec],
+                       on_change: Callable[[str, Any], None] | None = None) -> Parameters:
+    """Declare ``specs`` on ``node``, validate them, and guard every later change.
+
+    Start-up values (defaults, ``--params-file``, ``-p``) that break a spec raise
+    :class:`ConfigError` naming the parameter. At run time a set request with a bad value
+    is rejected with that reason; accepted values update the returned mapping, then
+    ``on_change(name, value)`` is called for each.
+    """
+    by_name = {spec.name: spec for spec in specs}
+    values: dict[str, Any] = {}
+    for spec in specs:
+        try:
+            param = node.declare_parameter(spec.name, spec.default, spec.descriptor())
+        except (InvalidParameterValueException, InvalidParameterTypeException,
+                ParameterException) as err:
+            raise ConfigError(f'parameter {spec.name}: {err}') from None
+        try:
+            values[spec.name] = spec.check(param.value)
+        except ValueError as err:
+            raise ConfigError(f'parameter {err}') from None
+
+    def on_set(params: list[Parameter]) -> SetParametersResult:
+        for param in params:
+            spec = by_name.get(param.name)
+            if spec is None:
+                continue
+            try:
+                spec.check(param.value)
+            except ValueError as err:
+                return SetParametersResult(successful=False, reason=str(err))
+        return SetParametersResult(successful=True)
+
+    def post_set(params: list[Parameter]) -> None:
+        for param in params:
+            if param.name in by_name:
+                values[param.name] = by_name[param.name].check(param.value)
+                if on_change is not None:
+                    on_change(param.name, values[param.name])
+
+    node.add_on_set_parameters_callback(on_set)
+    node.add_post_set_parameters_callback(post_set)
+    return Parameters(values)
+
+
+# ------------------------------------------------------------------------- diagnostics
+
+OK = DiagnosticStatus.OK
+WARN = DiagnosticStatus.WARN
+ERROR = DiagnosticStatus.ERROR
+STALE = DiagnosticStatus.STALE
+LEVEL_NAMES = {OK: 'OK', WARN: 'WARN', ERROR: 'ERROR', STALE: 'STALE'}
+
+
+def key_values(values: Mapping[str, Any]) -> list[KeyValue]:
+    """Return KeyValues; floats keep every digit (``repr``), so they read back exactly."""
+    return [KeyValue(key=str(k), value=format_value(v)) for k, v in values.items()]
+
+
+def format_value(value: Any) -> str:
+    """Return a KeyValue value string: ``repr`` of floats (exact), ``str`` otherwise."""
+    if isinstance(value, float):
+        return repr(value)
+    if isinstance(value, bool):
+        return 'true' if value else 'false'
+    return str(value)
+
+
+class ComponentHealth:
+    """The health of one component: level, message, KeyValues, time of the last input."""
+
+    def __init__(self, hardware_id: str, check: str) -> None:
+        self.hardware_id = hardware_id
+        self.check = check
+        self.level = OK
+        self.message = 'waiting for input'
+        self.values: dict[str, Any] = {}
+        self.last_input: float | None = None
+
+
+class DiagnosticsPublisher:
+    """Publish component health on ``/diagnostics`` the way diagnostic_updater does.
+
+    Every ``period`` seconds of the node clock (sim time under a replay) one
+    DiagnosticArray holds a status per component, named ``"<node>: <check>"``. A
+    component whose input has not arrived for ``stale_timeout`` seconds is reported
+    STALE (its last level is kept in the KeyValue ``last_level``). Staleness is measured
+    on the steady clock, because a stopped replay stops the sim clock too; for the same
+    reason a steady-clock timer publishes when the node clock has not ticked for 1.5
+    periods. Only level constants are assigned to ``level``.
+    """
+
+    def __init__(self, node: Node, *, period: float = 1.0, stale_timeout: float = 3.0,
+                 topic: str = '/diagnostics') -> None:
+        self._node = node
+        self.period = period
+        self.stale_timeout = stale_timeout
+        self.components: dict[str, ComponentHealth] = {}
+        self._steady = Clock(clock_type=ClockType.STEADY_TIME)
+        self._started = self._now()
+        self._last_publish = self._started
+        self._pub = node.create_publisher(DiagnosticArray, topic, DIAGNOSTICS_QOS)
+        self._timer = node.create_timer(period, self.publish)
+        self._watchdog = node.create_timer(period, self._publish_if_clock_stopped,
+                                           clock=self._steady)
+
+    def _now(self) -> float:
+        return self._steady.now().nanoseconds * 1e-9
+
+    def component(self, hardware_id: str, check: str) -> ComponentHealth:
+        """Return the health record of ``hardware_id`` (created on first use)."""
+        health = self.components.get(hardware_id)
+        if health is None:
+            health = self.components[hardware_id] = ComponentHealth(hardware_id, check)
+        return health
+
+    def set(self, hardware_id: str, check: str, level: bytes, message: str,
+            **values: Any) -> None:
+        """Set a component's level and message; merge ``values`` into its KeyValues."""
+        health = self.component(hardware_id, check)
+        health.level, health.message = level, message
+        health.values.update(values)
+
+    def mark_input(self, hardware_id: str, check: str) -> None:
+        """Record that input for ``hardware_id`` arrived now (resets its staleness)."""
+        self.component(hardware_id, check).last_input = self._now()
+
+    def remove(self, hardware_id: str) -> None:
+        """Stop reporting a component."""
+        self.components.pop(hardware_id, None)
+
+    def status(self, health: ComponentHealth, now: float | None = None) -> DiagnosticStatus:
+        """Return the DiagnosticStatus of one component, STALE if its input stopped."""
+        now = self._now() if now is None else now
+        since = now - (self._started if health.last_input is None else health.last_input)
+        values = dict(health.values)
+        level, message = health.level, health.message
+        if since > self.stale_timeout:
+            values['last_level'] = LEVEL_NAMES[health.level]
+            level, message = STALE, f'no input for {since:.1f} s; last: {health.message}'
+        values['since_input_s'] = round(since, 3)
+        return DiagnosticStatus(level=level, name=f'{self._node.get_name()}: {health.check}',
+                                message=message, hardware_id=health.hardware_id,
+                                values=key_values(values))
+
+    def publish(self) -> None:
+        """Publish the statuses of every component now."""
+        now = self._now()
+        self._last_publish = now
+        msg = DiagnosticArray()
+        msg.header.stamp = self._node.get_clock().now().to_msg()
+        msg.status = [self.status(h, now) for h in self.components.values()]
+        self._pub.publish(msg)
+
+    def _publish_if_clock_stopped(self) -> None:
+        if self._now() - self._last_publish > 1.5 * self.period:
+            self.publish()
+
+    def destroy(self) -> None:
+        """Destroy the timers and the publisher."""
+        self._node.destroy_timer(self._timer)
+        self._node.destroy_timer(self._watchdog)
+        self._node.destroy_publisher(self._pub)
+
+
+# -------------------------------------------------------------------------------- main
+
+def run_node(factory: Callable[[], Node], args: Sequence[str] | None = None,
+             executor: str = 'single') -> int:
+    """Initialise rclpy with ``args``, create the node, spin it; return an exit code.
+
+    A :class:`ConfigError` at start-up (a bad parameter) is printed and gives 2; Ctrl-C
+    and an external shutdown end cleanly with 0. The node may end itself by calling
+    ``rclpy.try_shutdown(context=node.context)`` (the replay does when it is done).
+    ``executor`` is ``'single'`` or ``'events'`` (rclpy.experimental.EventsExecutor).
+    """
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = factory()
+        if executor == 'events':
+            from rclpy.experimental import EventsExecutor
+            runner = EventsExecutor()
+        else:
+            runner = rclpy.executors.SingleThreadedExecutor()
+        runner.add_node(node)
+        runner.spin()
+    except ConfigError as err:
+        print(f'error: {err}', file=sys.stderr)
+        return 2
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return getattr(node, 'exit_code', 0)
