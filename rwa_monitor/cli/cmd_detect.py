@@ -1,0 +1,127 @@
+"""``rwa-monitor detect FILE``: run every detector whose input columns the file has."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import pathlib
+import sys
+import time
+from typing import Any
+
+import yaml
+
+from rwa_monitor import paths, pipelines
+from rwa_monitor.core.events import AnomalyEvent
+from rwa_monitor.exceptions import ConfigError
+from rwa_monitor.telemetry import read_telemetry, Telemetry
+
+SHARED_BLOCK = '/**'
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add the ``detect`` sub-command."""
+    parser = subparsers.add_parser(
+        'detect', help='detect anomalies in a telemetry file (events JSON)',
+        description='Run every detector whose input columns the telemetry file has; '
+                    'write the events JSON ({"events": [...], "summary": {...}}) or print '
+                    'a table. Times are seconds of the file, torques N m.')
+    parser.add_argument('file', type=pathlib.Path, help='telemetry file (.csv or .mcap)')
+    parser.add_argument('--config', type=pathlib.Path, metavar='YAML',
+                        help='parameters file in the node format (node blocks with '
+                             'ros__parameters; default: the installed config/rwa_monitor.yaml)')
+    parser.add_argument('-o', '--output', type=pathlib.Path, metavar='FILE',
+                        help='write the events JSON here (default: print a table)')
+    parser.set_defaults(func=run)
+
+
+def load_config(path: pathlib.Path | None) -> dict[str, Any]:
+    """Return the node blocks of a parameters YAML file (the installed one by default)."""
+    if path is None:
+        try:
+            path = paths.config_file()
+        except FileNotFoundError:
+            return {}
+    try:
+        data = yaml.safe_load(pathlib.Path(path).read_text())
+    except OSError as err:
+        raise ConfigError(f'{path}: cannot read: {err.strerror}') from None
+    except yaml.YAMLError as err:
+        raise ConfigError(f'{path}: not valid YAML: {err}') from None
+    if data is None:
+        return {}
+    if not isinstance(data, dict):
+        raise ConfigError(f'{path}: expected a mapping of node blocks')
+    return data
+
+
+def node_parameters(config: dict[str, Any], node: str) -> dict[str, Any]:
+    """Return the shared ``/**`` parameters overlaid with the node's own block."""
+    params: dict[str, Any] = {}
+    for block in (SHARED_BLOCK, node):
+        values = (config.get(block) or {}).get('ros__parameters') or {}
+        if not isinstance(values, dict):
+            raise ConfigError(f'{block}: ros__parameters must be a mapping')
+        params.update(values)
+    return params
+
+
+def detect(tele: Telemetry, config: dict[str, Any]) -> tuple[list[AnomalyEvent], dict]:
+    """Run every applicable pipeline; return (events sorted by time, summary)."""
+    events: list[AnomalyEvent] = []
+    summary: dict[str, Any] = {'samples': len(tele), 'source': tele.source, 'pipelines': {}}
+    for name, module in sorted(pipelines.available().items()):
+        if not module.applies(tele):
+            continue
+        params = node_parameters(config, getattr(module, 'NODE', f'{name}_detector'))
+        start = time.perf_counter()
+        try:
+            if hasattr(module, 'run_with_summary'):
+                found, components = module.run_with_summary(tele, params)
+            else:
+                found, components = module.run(tele, params), {}
+        except ValueError as err:
+            raise ConfigError(f'{name}: {err}') from None
+        for event in found:
+            entry = components.setdefault(event.component, {})
+            kinds = entry.setdefault('by_kind', {})
+            kinds[event.kind] = kinds.get(event.kind, 0) + 1
+        summary['pipelines'][name] = {'events': len(found), 'components': components,
+                                      'runtime_s': time.perf_counter() - start}
+        events.extend(found)
+    events.sort(key=lambda e: (e.time, e.component, e.revision))
+    summary['events'] = len(events)
+    return events, summary
+
+
+def run(args: argparse.Namespace) -> int:
+    """Read the file, detect, and write the JSON or print the table."""
+    tele = read_telemetry(args.file)
+    config = load_config(args.config)
+    events, summary = detect(tele, config)
+    if args.output is not None:
+        document = {'events': [e.to_json() for e in events], 'summary': summary}
+        args.output.write_text(json.dumps(document, indent=2) + '\n')
+        print(f'wrote {args.output}: {len(events)} events')
+    else:
+        print_table(events, summary, sys.stdout)
+    return 0
+
+
+def print_table(events: list[AnomalyEvent], summary: dict[str, Any], out) -> None:
+    """Print the events one per line, then the per-pipeline summary."""
+    header = (f'{"time_s":>10} {"component":<9} {"detector":<8} {"kind":<8} '
+              f'{"p_value":>9} {"declared_s":>10}  details')
+    print(header, file=out)
+    for e in events:
+        details = ' '.join(f'{k}={v:.3g}' if isinstance(v, float) else f'{k}={v}'
+                           for k, v in e.details.items())
+        print(f'{e.time:>10.1f} {e.component:<9} {e.detector:<8} {e.kind:<8} '
+              f'{e.p_value:>9.2g} {e.declared_time:>10.1f}  {details}', file=out)
+    if not events:
+        print('(no anomaly declared)', file=out)
+    print(f'{summary["samples"]} samples', file=out)
+    for name, info in summary['pipelines'].items():
+        print(f'{name}: {info["events"]} events in {info["runtime_s"]:.2f} s', file=out)
+        for component, entry in info['components'].items():
+            print(f'  {component}: {json.dumps(entry)}', file=out)

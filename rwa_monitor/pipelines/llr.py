@@ -1,0 +1,63 @@
+"""The LLR friction detector on a file: one detector per wheel that has a friction column.
+
+Parameters are the ``llr_detector`` node's (config/rwa_monitor.yaml), same names:
+``window``, ``k_verif`` (0 = window / 2), ``false_alarm_rate`` and ``noise_std`` (N m;
+0 = estimate from the data). Other keys of the block (node-only ones) are ignored.
+"""
+
+from __future__ import annotations
+
+import time as _time
+from typing import Any, Mapping
+
+from rwa_monitor.core.events import AnomalyEvent
+from rwa_monitor.core.params import check_int, check_real
+from rwa_monitor.telemetry import Telemetry
+
+NODE = 'llr_detector'
+DEFAULTS = {'window': 500, 'k_verif': 0, 'false_alarm_rate': 1.0e-5, 'noise_std': 0.0}
+
+
+def applies(tele: Telemetry) -> bool:
+    """Return True if some wheel of the record has a friction column."""
+    return any(w.friction is not None for w in tele.wheels.values())
+
+
+def detector_kwargs(config: Mapping[str, Any]) -> dict[str, Any]:
+    """Return the detector keywords for a parameter block (ValueError names a bad one)."""
+    params = {**DEFAULTS, **{k: v for k, v in config.items() if k in DEFAULTS}}
+    window = check_int('window', params['window'], 2)
+    k_verif = check_int('k_verif', params['k_verif'], 0)
+    noise_std = check_real('noise_std', params['noise_std'], 0.0)
+    return {'window': window, 'k_verif': k_verif or None,
+            'false_alarm_rate': check_real('false_alarm_rate', params['false_alarm_rate'],
+                                           0.0, 1.0, low_open=True, high_open=True),
+            'noise_std': noise_std or None}
+
+
+def run_with_summary(tele: Telemetry, config: Mapping[str, Any]
+                     ) -> tuple[list[AnomalyEvent], dict[str, Any]]:
+    """Run one detector per wheel (batch path); return (events, per-wheel summary).
+
+    The summary per wheel holds the number of events, samples, the detector's counters
+    of rejected samples and its run time.
+    """
+    from rwa_monitor.core.llr import detect_batch
+    kwargs = detector_kwargs(config)
+    events: list[AnomalyEvent] = []
+    summary: dict[str, Any] = {}
+    for wheel_id, wheel in tele.wheels.items():
+        if wheel.friction is None:
+            continue
+        start = _time.perf_counter()
+        found = detect_batch(tele.time, wheel.speed, wheel.friction, component=wheel_id,
+                             **kwargs)
+        summary[wheel_id] = {'events': len(found), 'samples': len(tele),
+                             'runtime_s': _time.perf_counter() - start}
+        events.extend(found)
+    return events, summary
+
+
+def run(tele: Telemetry, config: Mapping[str, Any]) -> list[AnomalyEvent]:
+    """Return the events of one LLR detector per wheel with a friction column."""
+    return run_with_summary(tele, config)[0]
