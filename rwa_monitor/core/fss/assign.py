@@ -1,0 +1,208 @@
+"""Stage 3: maximum-likelihood assignment of changepoints, eq. (18)-(23), Algorithm 1.
+
+Which FSS caused each changepoint, then the friction levels of each FSS.
+
+The state after changepoint i is, per system s, its configuration q_s and the step of
+its last jump (equivalently tau_s, eq. 19); the input is the system that jumped or 0 to
+reject the changepoint (eq. 22). Scores are log-likelihoods, written per sojourn: the
+sum over k of log(1 - P^t) followed by log P^t at the jump (eq. 20-21) telescopes into
+log P(residence = d), so a jump of s after d steps adds log P_s(D = d) + log P^q, and at
+the end of the window each system adds log P(D > d) (its sojourn is still running). A
+system's first sojourn began before the window: tau_0 is chosen to maximise the score,
+as section IV-C1 says (see :meth:`SwitchingSystem.log_first`).
+
+Departures (docs/fss.md): eq. (23) adds c_i^rjct to a score that is maximised, which
+would favour rejecting large jumps; c_i is an increase of the squared error, so the
+reject input scores -c_i / (2 sigma^2), the log-likelihood lost by merging the two
+intervals. Impossible events score LOG_FLOOR instead of -inf so that a window which
+breaks the model still gets its most likely explanation.
+
+Search: forward dynamic programming over stages. States with the same (q, last jumps)
+are merged (the exact DP), and at most ``beam`` states are kept per stage (best
+scores). When no stage holds more than ``beam`` distinct states the result is the exact
+optimum (``exact`` is True). Cost: O(M * beam * (S + 1)) time and O(M * beam) memory
+for M changepoints and S systems, whatever the window.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+import itertools
+from typing import Sequence
+
+import numpy as np
+
+from rwa_monitor.core.fss.model import SwitchingSystem
+from rwa_monitor.core.params import check_int
+
+
+@dataclass(frozen=True)
+class Assignment:
+    """Stage-3 output: input per changepoint (0 reject, s >= 1 system s), states, score."""
+
+    inputs: np.ndarray        # (M,)
+    configs: np.ndarray       # (M + 1, S): configuration of each system on each interval
+    score: float
+    iterations: int           # states expanded, summed over stages
+    exact: bool               # no stage was cut by the beam
+
+
+def _initial(systems: Sequence[SwitchingSystem]) -> np.ndarray:
+    return np.array(list(itertools.product(*[range(s.n_config) for s in systems])),
+                    dtype=np.int64).reshape(-1, len(systems))
+
+
+def _end_scores(systems, q, last, times_ext, n) -> np.ndarray:
+    total = np.zeros(q.shape[0])
+    for s, system in enumerate(systems):
+        d = np.where(last[:, s] == 0, n, n - times_ext[last[:, s]])
+        total += system.log_survival(q[:, s], d)
+    return total
+
+
+def assign_changepoints(times: np.ndarray, signs: np.ndarray, reject_cost: np.ndarray,
+                        n: int, systems: Sequence[SwitchingSystem], *,
+                        beam: int = 256) -> Assignment:
+    """Solve eq. (18) with the reject input, by DP with merged states and a beam.
+
+    ``times``: changepoint steps (sorted, in 1 .. n - 1); ``signs``: sign of the dry
+    friction change at each (Delta f_i, +-1); ``reject_cost``: log-likelihood lost by
+    rejecting each (>= 0, c_i / (2 sigma^2)); ``n``: window length in steps.
+    """
+    beam = check_int('beam', beam, 1)
+    times = np.asarray(times, dtype=np.int64)
+    signs = np.asarray(signs, dtype=np.int64)
+    reject_cost = np.asarray(reject_cost, dtype=float)
+    m = times.size
+    if signs.size != m or reject_cost.size != m:
+        raise ValueError('times, signs and reject_cost must have the same length')
+    n_sys = len(systems)
+    times_ext = np.concatenate(([-1], times))
+    radix = np.array([s.n_config * (m + 1) for s in systems], dtype=np.int64)
+    q = _initial(systems)
+    last = np.zeros_like(q)
+    score = np.zeros(q.shape[0])
+    parents, inputs_hist = [], []
+    iterations, exact = 0, True
+    for i in range(m):
+        iterations += q.shape[0]
+        cand_q, cand_last, cand_score = [q], [last], [score - reject_cost[i]]
+        cand_parent = [np.arange(q.shape[0])]
+        cand_input = [np.zeros(q.shape[0], dtype=np.int64)]
+        for s, system in enumerate(systems):
+            new = q[:, s] + signs[i]
+            ok = (new >= 0) & (new < system.n_config)
+            if not ok.any():
+                continue
+            idx = np.flatnonzero(ok)
+            qs, ls = q[idx, s], last[idx, s]
+            d = times[i] - times_ext[ls]
+            gain = np.where(ls == 0, system.log_first(qs, times[i]),
+                            system.log_pmf(qs, d)) + system.log_pq(qs, signs[i])
+            nq, nl = q[idx].copy(), last[idx].copy()
+            nq[:, s] = new[idx]
+            nl[:, s] = i + 1
+            cand_q.append(nq)
+            cand_last.append(nl)
+            cand_score.append(score[idx] + gain)
+            cand_parent.append(idx)
+            cand_input.append(np.full(idx.size, s + 1, dtype=np.int64))
+        q = np.concatenate(cand_q)
+        last = np.concatenate(cand_last)
+        score = np.concatenate(cand_score)
+        parent = np.concatenate(cand_parent)
+        inp = np.concatenate(cand_input)
+        key = np.zeros(q.shape[0], dtype=np.int64)
+        for s in range(n_sys):
+            key = key * radix[s] + q[:, s] * (m + 1) + last[:, s]
+        order = np.lexsort((-score, key))
+        ks = key[order]
+        keep = order[np.concatenate(([True], ks[1:] != ks[:-1]))]
+        if keep.size > beam:
+            exact = False
+            keep = keep[np.argpartition(-score[keep], beam - 1)[:beam]]
+        q, last, score = q[keep], last[keep], score[keep]
+        parents.append(parent[keep])
+        inputs_hist.append(inp[keep])
+    iterations += q.shape[0]
+    final = score + _end_scores(systems, q, last, times_ext, n)
+    best = int(np.argmax(final))
+    # Backtrack the inputs, then replay them from the initial configuration.
+    u = np.zeros(m, dtype=np.int64)
+    j = best
+    for i in range(m - 1, -1, -1):
+        u[i] = inputs_hist[i][j]
+        j = parents[i][j]
+    configs = np.empty((m + 1, n_sys), dtype=np.int64)
+    configs[0] = _initial(systems)[j]
+    for i in range(m):
+        configs[i + 1] = configs[i]
+        if u[i] > 0:
+            configs[i + 1, u[i] - 1] += signs[i]
+    return Assignment(inputs=u, configs=configs, score=float(final[best]),
+                      iterations=iterations, exact=exact)
+
+
+def score_assignment(times, signs, reject_cost, n, systems, q0, inputs) -> float:
+    """Return the log-likelihood of one assignment, sample by sample (for checks).
+
+    -inf when an input moves a configuration out of its range.
+    """
+    q = list(q0)
+    last = [None] * len(systems)
+    total = 0.0
+    for t, d, c, u in zip(times, signs, reject_cost, inputs):
+        if u == 0:
+            total -= c
+            continue
+        s = u - 1
+        system = systems[s]
+        if not 0 <= q[s] + d < system.n_config:
+            return float('-inf')
+        if last[s] is None:
+            total += float(system.log_first(np.array([q[s]]), np.array([t]))[0])
+        else:
+            total += float(system.log_pmf(np.array([q[s]]), np.array([t - last[s]]))[0])
+        total += float(system.log_pq(np.array([q[s]]), np.array([d]))[0])
+        q[s] += d
+        last[s] = t
+    for s, system in enumerate(systems):
+        d = n if last[s] is None else n - last[s]
+        total += float(system.log_survival(np.array([q[s]]), np.array([d]))[0])
+    return total
+
+
+def assign_bruteforce(times, signs, reject_cost, n, systems) -> tuple[float, np.ndarray]:
+    """Return (best score, inputs) by enumerating every q0 and input sequence (small M)."""
+    best, best_u = float('-inf'), None
+    for q0 in _initial(systems):
+        for u in itertools.product(range(len(systems) + 1), repeat=len(times)):
+            sc = score_assignment(times, signs, reject_cost, n, systems, q0, u)
+            if sc > best:
+                best, best_u = sc, np.array(u)
+    return best, best_u
+
+
+def friction_levels(dry: np.ndarray, inputs: np.ndarray, configs: np.ndarray,
+                    n_systems: int) -> tuple[float, list[list[float]], list[list[int]]]:
+    """Return (base dry, levels per FSS, configurations per FSS): Algorithm 1.
+
+    ``dry``: F-hat of the intervals between the *accepted* changepoints; ``inputs`` and
+    ``configs``: the accepted changepoints' systems (1-based) and the configurations on
+    each interval (len(dry) rows). Each FSS starts at 0, adds the jump of every
+    changepoint assigned to it, and is shifted so that its minimum is 0; the base dry
+    friction takes the shifts: base = F-hat_1 + sum_s min F_s (line 18, whose printed
+    form is garbled).
+    """
+    levels = [[0.0] for _ in range(n_systems)]
+    qs = [[int(configs[0, s])] for s in range(n_systems)]
+    base = float(dry[0])
+    for i in range(1, len(dry)):
+        s = int(inputs[i - 1]) - 1
+        levels[s].append(levels[s][-1] + float(dry[i] - dry[i - 1]))
+        qs[s].append(int(configs[i, s]))
+    for s in range(n_systems):
+        low = min(levels[s])
+        levels[s] = [v - low for v in levels[s]]
+        base += low
+    return base, levels, qs

@@ -1,0 +1,97 @@
+"""Stage 2: least squares over the intervals between changepoints, eq. (12)-(17).
+
+One dry coefficient per interval and one shared viscous coefficient, fitted on the
+samples that lie at least ``dk_error`` from a changepoint (eq. 12-13). H^T H is block
+structured, so the normal equations are solved by eliminating the dry coefficients:
+O(n) with per-interval sums. Departures (docs/fss.md): the dry term multiplies
+sign(w_k) (eq. 4a); an interval shorter than 2 dk_error + ``min_samples`` keeps a
+smaller margin (the middle ``min_samples`` samples at least); an interval left with no
+usable sample (all NaN or zero speed) merges with its right neighbour (the changepoint
+between them is dropped); when the speed does not vary enough to separate dry from
+viscous friction the viscous coefficient is fixed at the prior and ``identifiable`` is
+False.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from rwa_monitor.core.params import check_int
+
+
+@dataclass(frozen=True)
+class IntervalFit:
+    """Stage-2 output (eq. 14-17) plus the fit's noise estimate and RMSE (eq. 28)."""
+
+    changepoints: np.ndarray   # the changepoints kept (those of empty intervals dropped)
+    dry: np.ndarray            # F-hat, one per interval (len = len(changepoints) + 1)
+    viscous: float
+    hth: np.ndarray            # diagonal of H^T H for the dry coefficients
+    rejection_cost: np.ndarray  # c_i^rjct per changepoint, eq. (17)
+    sigma2: float              # residual variance RSS / (n - p)
+    rmse: float                # eq. (28)
+    identifiable: bool
+
+
+def _labels(n: int, cps: np.ndarray, dk_error: int, min_samples: int) -> np.ndarray:
+    bounds = np.concatenate(([0], cps, [n])).astype(int)
+    label = np.full(n, -1, dtype=np.int64)
+    for i in range(bounds.size - 1):
+        a, b = bounds[i], bounds[i + 1]
+        margin = min(dk_error, max(0, (b - a - min_samples) // 2))
+        lo = a + (margin if i > 0 else 0)
+        hi = b - (margin if i < bounds.size - 2 else 0)
+        label[lo:hi] = i
+    return label
+
+
+def fit_intervals(y: np.ndarray, x: np.ndarray, changepoints: np.ndarray, *,
+                  dk_error: int = 10, min_samples: int = 3, viscous_prior: float = 1.0,
+                  min_speed_spread: float = 1e-3) -> IntervalFit:
+    """Fit eq. (14) by least squares and return the rejection costs of eq. (17).
+
+    ``min_speed_spread``: the viscous coefficient is identifiable when the residual
+    spread of the speed after removing the per-interval means of sign(w) exceeds it
+    (root mean square, normalised speed units).
+    """
+    dk_error = check_int('dk_error', dk_error, 0)
+    min_samples = check_int('min_samples', min_samples, 1)
+    y = np.asarray(y, dtype=float)
+    x = np.asarray(x, dtype=float)
+    n = y.size
+    ok = np.isfinite(y) & np.isfinite(x)
+    s = np.where(ok, np.sign(np.where(ok, x, 0.0)), 0.0)
+    cps = np.unique(np.asarray(changepoints, dtype=int))
+    cps = cps[(cps > 0) & (cps < n)]
+    while True:
+        label = _labels(n, cps, dk_error, min_samples)
+        use = ok & (label >= 0)
+        m = cps.size + 1
+        a = np.bincount(label[use], weights=s[use] ** 2, minlength=m)
+        empty = np.flatnonzero(a < 0.5)
+        if empty.size == 0 or cps.size == 0:
+            break
+        i = int(empty[0])
+        cps = np.delete(cps, min(i, cps.size - 1))
+    lu, su, xu, yu = label[use], s[use], x[use], y[use]
+    b = np.bincount(lu, weights=su * xu, minlength=m)
+    yy = np.bincount(lu, weights=su * yu, minlength=m)
+    a_safe = np.where(a > 0, a, 1.0)
+    sxx = float(np.sum(xu * xu))
+    denom = sxx - float(np.sum(b * b / a_safe))
+    count = int(use.sum())
+    identifiable = count > 0 and denom > (min_speed_spread ** 2) * count
+    if identifiable:
+        viscous = (float(np.sum(xu * yu)) - float(np.sum(b * yy / a_safe))) / denom
+    else:
+        viscous = float(viscous_prior)
+    dry = np.where(a > 0, (yy - b * viscous) / a_safe, np.nan)
+    resid = yu - dry[lu] * su - viscous * xu
+    rss = float(np.sum(resid ** 2))
+    dof = max(count - m - (1 if identifiable else 0), 1)
+    cost = a[:-1] * a[1:] / np.maximum(a[:-1] + a[1:], 1e-12) * (dry[:-1] - dry[1:]) ** 2
+    return IntervalFit(changepoints=cps, dry=dry, viscous=viscous, hth=a,
+                       rejection_cost=np.nan_to_num(cost), sigma2=rss / dof,
+                       rmse=float(np.sqrt(rss / max(count, 1))), identifiable=identifiable)
