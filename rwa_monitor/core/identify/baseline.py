@@ -1,0 +1,163 @@
+"""The paper's model, Coulomb + viscous, with friction jumps segmented out.
+
+Model (1) of the llr-realtime paper: f = h x + e, h = -[sign(w), w], x = [dry, viscous].
+A friction jump (the anomalies the detectors look for) would otherwise be taken for model
+error, so the baseline gives each segment between detected jumps its own dry and viscous
+coefficients, as stage 2 of the physics-informed paper does for the dry coefficient
+(eq. 12-16; here both coefficients, since a jump may be viscous).
+
+Jumps are found in two stages. First a flexible global fit (model (1) plus a
+piecewise-linear function of speed, dense near zero) removes whatever friction does as a
+function of speed, so that a Stribeck peak or a drag term, which model (1) lacks, cannot
+pass for a jump. Then, at each candidate row k, a local test on the 2w samples around k
+asks whether a step of the dry and viscous coefficients at k is needed beyond a smooth
+(quadratic in time) variation of both coefficients and of an additive offset: twice the
+log-likelihood gain of the step, with the noise known, is chi^2 with 2 degrees of
+freedom under "no jump" (nested models). A slow effect (drift, temperature, a thermal
+cycle) is absorbed by the quadratic; a jump is not. A row is a jump when the gain is the
+largest within +-w and exceeds the Bonferroni threshold (level alpha over n / w windows).
+This follows the windowed GLR of the physics-informed paper (eq. 10-11) in spirit, with
+the smooth background in place of its prior on the viscous coefficient.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import stats
+
+from rwa_monitor.core.identify.data import IdentData
+from rwa_monitor.exceptions import NotIdentifiableError
+
+RIDGE = 1e-9
+
+
+def baseline_columns(speed: np.ndarray) -> np.ndarray:
+    """Return the regressors of model (1): h = -[sign(w), w] as an (n, 2) array."""
+    speed = np.asarray(speed, dtype=float)
+    return np.column_stack([-np.sign(speed), -speed])
+
+
+def check_identifiable(speed: np.ndarray) -> None:
+    """Raise NotIdentifiableError naming the parameters the speeds cannot determine."""
+    speed = np.asarray(speed, dtype=float)
+    if np.all(speed == 0):
+        raise NotIdentifiableError(
+            'the wheel never spins (speed always 0): neither dry nor viscous friction is '
+            'identifiable')
+    spread = np.std(speed) / max(np.max(np.abs(speed)), 1e-300)
+    both_signs = np.any(speed > 0) and np.any(speed < 0)
+    if spread < 1e-6 and not both_signs:
+        raise NotIdentifiableError(
+            f'dry and viscous friction are not separable: the speed never varies (always '
+            f'{np.median(speed):g} rad/s); use a record in which the speed changes')
+
+
+@dataclass
+class Segments:
+    """Segments between friction jumps: start rows (first is 0) and the evidence."""
+
+    starts: list[int] = field(default_factory=lambda: [0])
+    evidence: list[dict] = field(default_factory=list)
+
+    def columns(self, speed: np.ndarray) -> np.ndarray:
+        """Return the baseline columns, one dry/viscous pair per segment."""
+        base = baseline_columns(speed)
+        n = len(speed)
+        bounds = list(self.starts) + [n]
+        cols = []
+        for a, b in zip(bounds[:-1], bounds[1:]):
+            part = np.zeros((n, 2))
+            part[a:b] = base[a:b]
+            cols.append(part)
+        return np.hstack(cols)
+
+    def names(self) -> list[str]:
+        """Return the column names: dry, viscous, then dry@1, viscous@1, ..."""
+        out = ['dry', 'viscous']
+        for i in range(1, len(self.starts)):
+            out += [f'dry@{i}', f'viscous@{i}']
+        return out
+
+
+def flexible_residual(data: IdentData, spacing: int,
+                      extra: np.ndarray | None = None) -> np.ndarray:
+    """Return the residual of a flexible fit: smooth in speed and slowly varying in time.
+
+    Model (1) plus a piecewise-linear function of speed plus dry, viscous and offset terms
+    that are piecewise linear in time (knots every ``spacing`` rows): without the time
+    terms a slow effect would bend the fitted function of speed and leave a residual that
+    is not smooth in time. ``extra`` columns (effects already identified) join the fit.
+    """
+    w = data.speed
+    aw = np.abs(w[w != 0])
+    near = [float(np.quantile(aw, q)) for q in (0.005, 0.01, 0.02, 0.04)] if len(aw) else []
+    knots = np.unique(np.concatenate([np.quantile(w, np.linspace(0.0, 1.0, 25)),
+                                      near, [-x for x in near], [0.0]]))
+    knots = knots[(knots >= w.min()) & (knots <= w.max())]
+    eye = np.eye(len(knots))
+    hats = np.column_stack([np.interp(w, knots, eye[j]) for j in range(len(knots))])
+    n = len(w)
+    tknots = np.unique(np.linspace(0, n - 1, max(2, n // spacing + 1)).astype(int))
+    teye = np.eye(len(tknots))
+    thats = np.column_stack([np.interp(np.arange(n), tknots, teye[j])
+                             for j in range(len(tknots))])
+    h = baseline_columns(w)
+    X = np.hstack([h, hats, h[:, :1] * thats, h[:, 1:] * thats, thats]
+                  + ([] if extra is None else [extra.reshape(n, -1)]))
+    X = X / data.noise_std[:, None]
+    y = data.friction / data.noise_std
+    coef = np.linalg.lstsq(X, y, rcond=1e-10)[0]
+    return (y - X @ coef) * data.noise_std
+
+
+def _step_gain(data: IdentData, resid: np.ndarray, k: int, window: int) -> float:
+    """Return the chi^2(2) gain of a coefficient step at k over a smooth background."""
+    sl = slice(k - window, k + window)
+    s = data.noise_std[sl]
+    h = baseline_columns(data.speed[sl])
+    tau = np.linspace(-1.0, 1.0, 2 * window)[:, None]
+    poly = np.hstack([np.ones_like(tau), tau, tau ** 2])
+    smooth = np.hstack([h[:, :1] * poly, h[:, 1:] * poly, poly]) / s[:, None]
+    step = h * (np.arange(2 * window) >= window)[:, None] / s[:, None]
+    y = resid[sl] / s
+
+    def rss(X):
+        coef = np.linalg.lstsq(X, y, rcond=1e-10)[0]
+        return float(np.sum((y - X @ coef) ** 2))
+    return rss(smooth) - rss(np.hstack([smooth, step]))
+
+
+def find_jumps(data: IdentData, window: int | None = None, alpha: float = 1e-3,
+               max_jumps: int = 20, extra: np.ndarray | None = None) -> Segments:
+    """Return the segments between abrupt friction jumps (see the module docstring)."""
+    n = len(data)
+    if window is None:
+        window = int(np.clip(n // 40, 30, 500))
+    segments = Segments()
+    if n < 4 * window:
+        return segments
+    resid = flexible_residual(data, 4 * window, extra)
+    threshold = float(stats.chi2.isf(alpha * window / n, 2))
+    stride = max(1, window // 10)
+    coarse = np.arange(window, n - window + 1, stride)
+    gains = np.array([_step_gain(data, resid, k, window) for k in coarse])
+    found: list[int] = []
+    order = np.argsort(gains)[::-1]
+    for i in order:
+        if gains[i] <= threshold or len(found) >= max_jumps:
+            break
+        k0 = int(coarse[i])
+        if any(abs(k0 - k) < window for k in found):
+            continue
+        fine = np.arange(max(window, k0 - stride), min(n - window, k0 + stride) + 1)
+        fine_gains = [_step_gain(data, resid, k, window) for k in fine]
+        k = int(fine[int(np.argmax(fine_gains))])
+        found.append(k)
+        segments.evidence.append({'index': k, 'time': float(data.time[k]),
+                                  'step_chi2': float(max(fine_gains)),
+                                  'threshold': threshold, 'window': window})
+    segments.starts = [0] + sorted(found)
+    segments.evidence.sort(key=lambda e: e['index'])
+    return segments

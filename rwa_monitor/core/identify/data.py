@@ -1,0 +1,187 @@
+"""The samples the identification loop works on: time, speed, friction, noise, aux."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from rwa_monitor.core.identify.differentiate import local_noise_std
+from rwa_monitor.core.identify.differentiate import local_polynomial_derivative
+from rwa_monitor.core.params import check_int, check_real
+from rwa_monitor.exceptions import NotIdentifiableError
+from rwa_monitor.telemetry.schema import Telemetry
+
+MIN_SAMPLES = 50
+NOISE_BLOCK = 200
+GAP_FACTOR = 5.0
+
+
+def _block(n: int) -> int:
+    return max(NOISE_BLOCK, n // 20)
+
+
+@dataclass
+class IdentData:
+    """Valid samples of one wheel, with the per-sample noise standard deviation (N m).
+
+    ``derived`` is True when friction was estimated from speed (eq. 1b); then the
+    residual noise is correlated over ``stride`` samples and the whiteness test uses
+    every ``stride``-th residual.
+    """
+
+    wheel: str
+    time: np.ndarray
+    speed: np.ndarray
+    friction: np.ndarray
+    noise_std: np.ndarray
+    aux: dict[str, np.ndarray] = field(default_factory=dict)
+    derived: bool = False
+    stride: int = 1
+    counts: dict[str, int] = field(default_factory=dict)
+    notes: list[str] = field(default_factory=list)
+
+    def __len__(self) -> int:
+        return len(self.time)
+
+    @property
+    def noise_floor(self) -> float:
+        """Return the root-mean-square noise standard deviation (N m)."""
+        return float(np.sqrt(np.mean(self.noise_std ** 2)))
+
+
+def choose_wheel(tele: Telemetry, wheel: str | None) -> str:
+    """Return the wheel id to identify: the one asked for, or the file's only/first."""
+    if not tele.wheels:
+        raise NotIdentifiableError('the file has no <id>_speed column: nothing to identify')
+    if wheel is None:
+        return next(iter(tele.wheels))
+    if wheel not in tele.wheels:
+        raise NotIdentifiableError(f'no wheel {wheel!r} in the file; it has: '
+                                   f'{", ".join(tele.wheels)}')
+    return wheel
+
+
+def _chunks(time: np.ndarray, ok: np.ndarray) -> list[np.ndarray]:
+    """Return index arrays of runs of valid samples without long time gaps."""
+    index = np.flatnonzero(ok)
+    if len(index) == 0:
+        return []
+    dt = np.diff(time[index])
+    typical = np.median(dt) if len(dt) else 0.0
+    breaks = np.flatnonzero((np.diff(index) > 1) | (dt > GAP_FACTOR * typical)) + 1
+    return np.split(index, breaks)
+
+
+def prepare(tele: Telemetry, wheel: str | None = None, inertia: float | None = None,
+            torque_constant: float | None = None, half_width: int = 5) -> IdentData:
+    """Return the samples of one wheel, with friction measured or estimated (eq. 1b).
+
+    Rows with a non-finite time, speed or friction are dropped and counted. Without a
+    friction column the friction is J dw/dt - K_T I from a local-polynomial derivative on
+    each run of valid samples (runs split at NaN rows and at time gaps longer than five
+    typical steps; runs shorter than the window are dropped and counted).
+    """
+    half_width = check_int('half_width', half_width, 1, 1000)
+    wheel = choose_wheel(tele, wheel)
+    channels = tele.wheels[wheel]
+    time = np.asarray(tele.time, dtype=float)
+    speed = np.asarray(channels.speed, dtype=float)
+    counts = {'rows': len(time)}
+    notes: list[str] = []
+    if channels.friction is not None and np.any(np.isfinite(channels.friction)):
+        ok = np.isfinite(time) & np.isfinite(speed) & np.isfinite(channels.friction)
+        counts['non_finite_rows'] = int(np.sum(~ok))
+        keep = np.flatnonzero(ok)
+        _need(len(keep))
+        friction = np.asarray(channels.friction, dtype=float)[keep]
+        noise = local_noise_std(time[keep], friction, half_width, 2, _block(len(keep)))
+        derived, stride = False, 1
+    else:
+        keep, friction, noise = _from_speed(tele, wheel, inertia, torque_constant,
+                                            half_width, counts, notes)
+        derived, stride = True, 2 * half_width + 1
+    aux = _aux_channels(tele, keep, notes, counts)
+    return IdentData(wheel=wheel, time=time[keep], speed=speed[keep], friction=friction,
+                     noise_std=noise, aux=aux, derived=derived, stride=stride,
+                     counts=counts, notes=notes)
+
+
+def _need(n: int) -> None:
+    if n < MIN_SAMPLES:
+        raise NotIdentifiableError(
+            f'too few valid samples: {n}; the identification needs at least {MIN_SAMPLES}')
+
+
+def _from_speed(tele: Telemetry, wheel: str, inertia: float | None,
+                torque_constant: float | None, half_width: int, counts: dict[str, int],
+                notes: list[str]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    current_name = f'{wheel}_current'
+    current = tele.aux.get(current_name)
+    if inertia is None:
+        need = 'the wheel inertia J (--inertia, kg m^2)'
+        if current is not None:
+            need += ' and the motor torque constant K_T (--torque-constant, N m/A)'
+        raise NotIdentifiableError(
+            f'no {wheel}_friction column: friction must be estimated from speed as '
+            f'f = J dw/dt - K_T I (eq. 1b), which needs {need}')
+    inertia = check_real('inertia', inertia, 0.0, low_open=True)
+    if current is not None and torque_constant is None:
+        raise NotIdentifiableError(
+            f'the file has a {current_name} column (motor current): the friction '
+            f'estimate f = J dw/dt - K_T I needs the torque constant (--torque-constant, '
+            f'N m/A)')
+    if torque_constant is not None:
+        torque_constant = check_real('torque_constant', torque_constant, 0.0, low_open=True)
+        if current is None:
+            raise NotIdentifiableError(
+                f'--torque-constant given but the file has no {current_name} column')
+    time = np.asarray(tele.time, dtype=float)
+    speed = np.asarray(tele.wheels[wheel].speed, dtype=float)
+    ok = np.isfinite(time) & np.isfinite(speed)
+    if current is not None:
+        ok &= np.isfinite(current)
+    counts['non_finite_rows'] = int(np.sum(~ok))
+    pieces, dropped = [], 0
+    for run in _chunks(time, ok):
+        if len(run) < max(2 * half_width + 1, 3 * half_width):
+            dropped += len(run)
+            continue
+        slope, gain = local_polynomial_derivative(time[run], speed[run], half_width)
+        speed_noise = local_noise_std(time[run], speed[run], half_width, 2, NOISE_BLOCK)
+        friction = inertia * slope
+        variance = (inertia * gain * speed_noise) ** 2
+        if current is not None:
+            friction = friction - torque_constant * current[run]
+            current_noise = local_noise_std(time[run], current[run], half_width, 2,
+                                            NOISE_BLOCK)
+            variance = variance + (torque_constant * current_noise) ** 2
+        pieces.append((run, friction, np.sqrt(variance)))
+    counts['dropped_short_run_rows'] = dropped
+    if not pieces:
+        _need(0)
+    keep = np.concatenate([p[0] for p in pieces])
+    _need(len(keep))
+    notes.append(f'friction estimated from speed: f = J dw/dt'
+                 f'{" - K_T I" if current is not None else ""} with J = {inertia:g} kg m^2, '
+                 f'local quadratic over {2 * half_width + 1} samples')
+    return (keep, np.concatenate([p[1] for p in pieces]),
+            np.concatenate([p[2] for p in pieces]))
+
+
+def _aux_channels(tele: Telemetry, keep: np.ndarray, notes: list[str],
+                  counts: dict[str, int]) -> dict[str, np.ndarray]:
+    """Return the aux channels on the kept rows, gaps filled by interpolation in time."""
+    out = {}
+    time = np.asarray(tele.time, dtype=float)[keep]
+    for name, values in tele.aux.items():
+        values = np.asarray(values, dtype=float)[keep]
+        ok = np.isfinite(values)
+        if np.sum(ok) < 0.5 * len(values):
+            notes.append(f'aux channel {name} skipped: more than half of it is missing')
+            continue
+        if not np.all(ok):
+            counts[f'aux_filled:{name}'] = int(np.sum(~ok))
+            values = np.interp(time, time[ok], values[ok])
+        out[name] = values
+    return out

@@ -1,0 +1,91 @@
+"""Friction from speed: local-polynomial differentiation with its noise propagated.
+
+Implements eq. (1b) of the physics-informed paper, f = J dw/dt - K_T I, with one
+departure: the paper's central difference (w[k+1] - w[k-1]) / (t[k+1] - t[k-1]) is
+replaced by the slope of a local polynomial (order 2, 2h+1 samples, any spacing). The
+central difference is the h = 1, order 1 case; a wider window trades bias (curvature of
+the speed over the window) for noise. The derivative is linear in the speeds,
+dw/dt[i] = sum_j g[i, j] w[j], so white speed noise of standard deviation s gives
+derivative noise of standard deviation s * sqrt(sum_j g[i, j]^2): that gain is returned
+with every derivative and propagated to the friction noise floor. The derivative noise is
+correlated over 2h samples (overlapping windows); docs/identify.md says how the
+whiteness test allows for it.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from rwa_monitor.core.params import check_int
+
+_MAD_TO_STD = 1.4826
+
+
+def _local_fit_weights(time: np.ndarray, half_width: int, order: int
+                       ) -> tuple[np.ndarray, np.ndarray]:
+    """Return (window indices (n, m), weights (n, order + 1, m)) of local polynomial fits.
+
+    Row i of the weights maps the window's values to the polynomial's coefficients in
+    powers of (t - t[i]); windows are shifted inward at the ends (same width).
+    """
+    n = len(time)
+    m = 2 * half_width + 1
+    start = np.clip(np.arange(n) - half_width, 0, n - m)
+    idx = start[:, None] + np.arange(m)[None, :]
+    dt = time[idx] - time[:, None]
+    scale = np.max(np.abs(dt), axis=1)
+    scale[scale == 0] = 1.0
+    u = dt / scale[:, None]
+    powers = u[:, :, None] ** np.arange(order + 1)[None, None, :]      # (n, m, q)
+    gram = np.einsum('nmp,nmq->npq', powers, powers)
+    coef = np.linalg.solve(gram, np.transpose(powers, (0, 2, 1)))      # (n, q, m)
+    coef /= scale[:, None, None] ** np.arange(order + 1)[None, :, None]
+    return idx, coef
+
+
+def local_polynomial_derivative(time: np.ndarray, values: np.ndarray, half_width: int = 5,
+                                order: int = 2) -> tuple[np.ndarray, np.ndarray]:
+    """Return (dvalues/dt, noise gain sqrt(sum g^2)) at every sample.
+
+    ``time`` must be strictly increasing and finite, ``values`` finite, and there must be
+    at least 2 * half_width + 1 samples.
+    """
+    half_width = check_int('half_width', half_width, 1, 1000)
+    order = check_int('order', order, 1, 2 * half_width)
+    time = np.asarray(time, dtype=float)
+    values = np.asarray(values, dtype=float)
+    if len(time) < 2 * half_width + 1:
+        raise ValueError(f'need at least {2 * half_width + 1} samples to differentiate, '
+                         f'got {len(time)}')
+    idx, coef = _local_fit_weights(time, half_width, order)
+    slope = coef[:, 1, :]
+    return np.sum(slope * values[idx], axis=1), np.sqrt(np.sum(slope ** 2, axis=1))
+
+
+def local_noise_std(time: np.ndarray, values: np.ndarray, half_width: int = 5,
+                    order: int = 2, block: int = 0) -> np.ndarray:
+    """Return a robust estimate of the white-noise standard deviation of ``values``.
+
+    The residual of each sample from the local polynomial through its window has variance
+    s^2 (1 - 2 g_ii + sum_j g_ij^2) under white noise; its median absolute value (times
+    1.4826) over the whole record, or over blocks of ``block`` samples when block > 0,
+    estimates s robustly (jumps and rare spikes do not move a median). Returned per
+    sample (constant when block == 0).
+    """
+    time = np.asarray(time, dtype=float)
+    values = np.asarray(values, dtype=float)
+    idx, coef = _local_fit_weights(time, half_width, order)
+    level = coef[:, 0, :]
+    n = len(time)
+    own = level[np.arange(n), np.arange(n) - idx[:, 0]]
+    factor = np.sqrt(np.maximum(1.0 - 2.0 * own + np.sum(level ** 2, axis=1), 1e-12))
+    scaled = np.abs(values - np.sum(level * values[idx], axis=1)) / factor
+    if block <= 0 or block >= n:
+        return np.full(n, _MAD_TO_STD * np.median(scaled))
+    out = np.empty(n)
+    for start in range(0, n, block):
+        stop = start + block if n - (start + block) >= block // 2 else n
+        out[start:stop] = _MAD_TO_STD * np.median(scaled[start:stop])
+        if stop == n:
+            break
+    return out

@@ -1,0 +1,199 @@
+"""Candidate friction effects: the physics of each, and its regressor columns.
+
+Every column follows the sign of model (1) of the llr-realtime paper: f = h x with
+h = -[sign(w), w], so a positive weight is a torque that opposes the motion. Each effect
+adds linear columns; the few nonlinear parameters (a speed scale, an exponent, a
+frequency) are profiled over a small grid, and every grid point counts as one test in
+the Bonferroni correction of the selection (select.py).
+
+Effects (names are the DESIGN.md vocabulary):
+
+- ``stribeck``: at low speed the lubricant film has not built up and the contact is
+  metal-on-metal; friction rises from the Coulomb level to the static (breakaway) level
+  as |w| -> 0. Column -sign(w) exp(-(|w|/w_s)^d); the weight is the static excess
+  torque, w_s the Stribeck speed, d = 2 (Gaussian) or 1 (exponential).
+- ``asymmetric_coulomb``: dry friction that differs with the spin direction (preload or
+  seal lay, a bias in the torque or current measurement). Column -1 for w != 0, so that
+  dry_positive = dry + offset, dry_negative = dry - offset. Needs both directions.
+- ``drag``: losses that grow faster than linearly with speed: aerodynamic drag
+  (~ w|w|) and lubricant churning (exponent between 1 and 2 or beyond). Column
+  -sign(w)|w|^n, n = 2 or free (grid).
+- ``aux:<column>:dry`` / ``aux:<column>:viscous``: dry or viscous friction depending on
+  an auxiliary channel a (temperature changes the lubricant's viscosity and the bearing
+  preload; current heats the motor). Column -sign(w)(a - a0) or -w(a - a0), a0 the mean.
+- ``drift``: slow change in time (lubricant loss or migration, run-in, wear). Column
+  -sign(w) tau (dry), -w tau (viscous) or -tau (torque offset), tau = (t - t0) / T.
+- ``periodic``: a disturbance periodic in time (thermal cycle of an orbit, a structural
+  mode, a cage frequency). Columns cos(2 pi f (t - t0)), sin(...); f from the largest
+  peaks of the residual's spectrum.
+- ``smooth_speed``: the generic fallback, a piecewise-linear function of speed (hat
+  functions on quantile knots). Not physics: it proves that friction depends on speed in
+  a way model (1) misses when no named effect fits.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+from rwa_monitor.core.identify.data import IdentData
+
+Column = Callable[..., np.ndarray]
+NAMED = ('stribeck', 'asymmetric_coulomb', 'drag', 'aux', 'drift', 'periodic')
+FALLBACK = 'smooth_speed'
+DRAG_EXPONENTS = (2.0, 1.25, 1.5, 1.75, 2.5, 3.0, 4.0)
+STRIBECK_QUANTILES = (0.01, 0.02, 0.05, 0.1, 0.2, 0.35)
+PERIODIC_PEAKS = 3
+SMOOTH_KNOTS = 12
+
+
+def _get(aux, name):
+    if aux is None or name not in aux:
+        raise KeyError(f'the friction model needs the auxiliary channel {name!r}')
+    return np.asarray(aux[name], dtype=float)
+
+
+def regressor_columns(kind: str, params: dict) -> list[tuple[str, Column]]:
+    """Return (weight name, column(speed, time, aux)) pairs of an effect.
+
+    ``aux`` is a mapping of auxiliary channel name -> values (arrays or scalars). These
+    callables are the single definition of every effect, used by the selection and by
+    the refined model fed back to the detectors.
+    """
+    if kind == 'stribeck':
+        ws, shape = float(params['velocity_rad_s']), float(params.get('shape', 2.0))
+        return [('stribeck', lambda w, t, a: -np.sign(w) * np.exp(-(np.abs(w) / ws) ** shape))]
+    if kind == 'asymmetric_coulomb':
+        return [('offset', lambda w, t, a: -(np.asarray(w) != 0).astype(float))]
+    if kind == 'drag':
+        n = float(params['exponent'])
+        return [('drag', lambda w, t, a: -np.sign(w) * np.abs(w) ** n)]
+    if kind == 'aux':
+        col, comp, a0 = params['column'], params['component'], float(params['center'])
+        if comp == 'dry':
+            return [('aux', lambda w, t, a: -np.sign(w) * (_get(a, col) - a0))]
+        return [('aux', lambda w, t, a: -np.asarray(w) * (_get(a, col) - a0))]
+    if kind == 'drift':
+        comp, t0, scale = params['component'], float(params['t0_s']), float(params['scale_s'])
+        factor = {'dry': lambda w: -np.sign(w), 'viscous': lambda w: -np.asarray(w),
+                  'offset': lambda w: -np.ones_like(np.asarray(w, dtype=float))}[comp]
+        return [('drift', lambda w, t, a: factor(w) * (np.asarray(t) - t0) / scale)]
+    if kind == 'periodic':
+        f, t0 = float(params['frequency_hz']), float(params['t0_s'])
+        return [('cos', lambda w, t, a: np.cos(2 * np.pi * f * (np.asarray(t) - t0))),
+                ('sin', lambda w, t, a: np.sin(2 * np.pi * f * (np.asarray(t) - t0)))]
+    if kind == 'smooth_speed':
+        knots = np.asarray(params['knots_rad_s'], dtype=float)
+        return [(f'hat{j}', _hat(knots, j)) for j in range(len(knots))]
+    raise ValueError(f'unknown effect kind {kind!r}')
+
+
+def _hat(knots: np.ndarray, j: int) -> Column:
+    def column(w, t, a):
+        values = np.zeros(len(knots))
+        values[j] = 1.0
+        return np.interp(w, knots, values)
+    return column
+
+
+def evaluate(kind: str, params: dict, data: IdentData) -> np.ndarray:
+    """Return the effect's columns on the data as an (n, k) array."""
+    return np.column_stack([col(data.speed, data.time, data.aux)
+                            for _, col in regressor_columns(kind, params)])
+
+
+@dataclass
+class Candidate:
+    """An effect to test: its vocabulary name, kind and grid of nonlinear parameters."""
+
+    name: str
+    kind: str
+    grid: list[dict]
+    tests: int = 0
+    skipped: str | None = None
+    extra: dict = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if not self.tests:
+            self.tests = len(self.grid)
+
+
+def named_candidates(data: IdentData, residual: np.ndarray) -> list[Candidate]:
+    """Return the named effects that can be tested on these data (with skip reasons)."""
+    w = data.speed
+    aw = np.abs(w[w != 0])
+    out = []
+    scales = sorted({float(np.quantile(aw, q)) for q in STRIBECK_QUANTILES} - {0.0})
+    out.append(Candidate('stribeck', 'stribeck',
+                         [{'velocity_rad_s': s, 'shape': d} for s in scales for d in (2.0, 1.0)]))
+    share = min(np.mean(w > 0), np.mean(w < 0))
+    out.append(Candidate('asymmetric_coulomb', 'asymmetric_coulomb', [{}],
+                         skipped=None if share >= 0.02 else
+                         'not testable: the wheel spins one way only'))
+    out.append(Candidate('drag', 'drag', [{'exponent': n} for n in DRAG_EXPONENTS]))
+    for column, values in data.aux.items():
+        spread = np.std(values)
+        reason = None
+        if not np.isfinite(spread) or spread <= 1e-9 * (1.0 + abs(np.mean(values))):
+            reason = f'not testable: auxiliary channel {column} is constant'
+        for comp in ('dry', 'viscous'):
+            out.append(Candidate(f'aux:{column}:{comp}', 'aux',
+                                 [{'column': column, 'component': comp,
+                                   'center': float(np.mean(values))}], skipped=reason))
+    t0, span = float(data.time[0]), float(data.time[-1] - data.time[0])
+    out.append(Candidate('drift', 'drift', [{'component': c, 't0_s': t0, 'scale_s': span}
+                                            for c in ('dry', 'viscous', 'offset')]))
+    freqs, tested = spectral_peaks(data.time, residual, PERIODIC_PEAKS)
+    out.append(Candidate('periodic', 'periodic',
+                         [{'frequency_hz': f, 't0_s': t0} for f in freqs],
+                         tests=max(tested, 1),
+                         skipped=None if freqs else 'not testable: too few samples'))
+    return out
+
+
+def fallback_candidate(data: IdentData) -> Candidate:
+    """Return the smooth-function-of-speed fallback (knots at speed quantiles)."""
+    knots = np.unique(np.quantile(data.speed, np.linspace(0.0, 1.0, SMOOTH_KNOTS)))
+    return Candidate(FALLBACK, 'smooth_speed', [{'knots_rad_s': [float(k) for k in knots]}])
+
+
+def uniform_resample(time: np.ndarray, values: np.ndarray, max_points: int = 1 << 16
+                     ) -> tuple[np.ndarray, float]:
+    """Return values linearly interpolated on a uniform grid, and the grid step (s)."""
+    n = min(len(time), max_points)
+    grid = np.linspace(time[0], time[-1], n)
+    return np.interp(grid, time, values), float(grid[1] - grid[0]) if n > 1 else 1.0
+
+
+def spectral_peaks(time: np.ndarray, residual: np.ndarray, count: int
+                   ) -> tuple[list[float], int]:
+    """Return the ``count`` largest periodogram peaks (Hz) and how many were searched.
+
+    The lowest three frequency bins are left out: a trend there is the drift effect's.
+    """
+    if len(time) < 32:
+        return [], 0
+    values, step = uniform_resample(time, residual - np.mean(residual))
+    power = np.abs(np.fft.rfft(values)) ** 2
+    freqs = np.fft.rfftfreq(len(values), step)
+    power[:3] = 0.0
+    order = np.argsort(power)[::-1]
+    picked: list[int] = []
+    for i in order:
+        if len(picked) == count:
+            break
+        if all(abs(int(i) - j) > 2 for j in picked):
+            picked.append(int(i))
+    return [_refine(freqs, power, i) for i in picked], len(freqs) - 3
+
+
+def _refine(freqs: np.ndarray, power: np.ndarray, i: int) -> float:
+    """Return the peak frequency refined by a parabola through three bins."""
+    if i <= 0 or i >= len(power) - 1 or power[i] <= 0:
+        return float(freqs[i])
+    a, b, c = np.log(np.maximum(power[i - 1:i + 2], 1e-300))
+    denom = a - 2 * b + c
+    shift = 0.5 * (a - c) / denom if denom < 0 else 0.0
+    return float(freqs[i] + np.clip(shift, -0.5, 0.5) * (freqs[1] - freqs[0]))

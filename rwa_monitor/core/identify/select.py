@@ -1,0 +1,219 @@
+"""Forward selection of friction effects, validated on held-out data.
+
+At each step every untried candidate (effects.py) is fitted on the training rows beside
+the current model; its nonlinear parameters are profiled over their grid (best training
+fit). Its evidence is the likelihood ratio with unknown noise variance,
+LR = n_train log(RSS_0 / RSS_1), chi^2 with k degrees of freedom (k = rank added) under
+"the effect is absent" (Wilks). A candidate is significant when
+
+1. its p-value is below alpha / m, where m counts every grid point and searched frequency
+   of every candidate of the step (Bonferroni: the chance of adding any effect to data
+   that have none is at most alpha per step), and
+2. it also improves the held-out rows: n_held log(RSS_0,held / RSS_1,held) above the
+   chi^2(k) critical value at level ``alpha_held`` (an effect that only fits the noise of
+   the training rows makes the held-out fit worse, not better).
+
+Among the significant named candidates the one with the smallest held-out RSS is added.
+When none is significant the smooth-speed fallback is tried with the same test. The loop
+stops when the residual passes the structure and whiteness tests (residuals.py), when
+nothing significant is left, or after ``max_effects`` effects. Every step is recorded.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import stats
+
+from rwa_monitor.core.identify import effects as fx
+from rwa_monitor.core.identify.baseline import check_identifiable, find_jumps, Segments
+from rwa_monitor.core.identify.data import IdentData
+from rwa_monitor.core.identify.fitting import Design, Fit, held_out_mask
+from rwa_monitor.core.identify.residuals import diagnose
+from rwa_monitor.core.params import check_int, check_real
+
+
+@dataclass
+class AddedEffect:
+    """An effect the selection added: vocabulary name, kind, nonlinear params, columns."""
+
+    name: str
+    kind: str
+    params: dict
+    columns: slice
+    evidence: dict
+
+
+@dataclass
+class Selection:
+    """The outcome of the identification loop on one wheel."""
+
+    data: IdentData
+    segments: Segments
+    design: Design
+    baseline_fit: Fit
+    final_fit: Fit
+    baseline_names: list[str]
+    effects: list[AddedEffect] = field(default_factory=list)
+    steps: list[dict] = field(default_factory=list)
+    stop_reason: str = ''
+    diagnostics_before: dict = field(default_factory=dict)
+    diagnostics_after: dict = field(default_factory=dict)
+    first_pass_jumps: list[int] | None = None
+
+    def residual_before(self) -> np.ndarray:
+        """Return the baseline model's residual on every row."""
+        nb = len(self.baseline_names)
+        return self.data.friction - self.design.X[:, :nb] @ self.baseline_fit.coef[:nb]
+
+    def residual_after(self) -> np.ndarray:
+        """Return the refined model's residual on every row."""
+        return self.design.residual(self.final_fit)
+
+
+def _lr(n: int, rss0: float, rss1: float) -> float:
+    return float(n * np.log(max(rss0, 1e-300) / max(rss1, 1e-300)))
+
+
+def _score(design: Design, current: Fit, cand: fx.Candidate, data: IdentData
+           ) -> dict | None:
+    """Return the best grid point of a candidate with its evidence, or None."""
+    best = None
+    for params in cand.grid:
+        cols = fx.evaluate(cand.kind, params, data)
+        if not np.all(np.isfinite(cols)):
+            continue
+        fit = design.fit(cols)
+        if best is None or fit.rss_train < best[1].rss_train:
+            best = (params, fit, cols)
+    if best is None:
+        return None
+    params, fit, cols = best
+    dof = fit.rank - current.rank
+    if dof <= 0:
+        return None
+    lr = _lr(fit.n_train, current.rss_train, fit.rss_train)
+    lr_held = _lr(fit.n_held_out, current.rss_held_out, fit.rss_held_out)
+    return {'candidate': cand, 'params': params, 'fit': fit, 'columns': cols,
+            'evidence': {'lr': lr, 'dof': int(dof), 'p_value': float(stats.chi2.sf(lr, dof)),
+                         'lr_held_out': lr_held,
+                         'rmse_in_sample': fit.rmse_train,
+                         'rmse_held_out': fit.rmse_held_out}}
+
+
+def identify(data: IdentData, alpha: float = 1e-3, alpha_held: float = 1e-2,
+             max_effects: int = 6, jumps: bool = True, jump_window: int | None = None
+             ) -> Selection:
+    """Run the loop: baseline fit with jumps, diagnostics, forward selection.
+
+    Jumps are found with the flexible background of baseline.py; once effects are
+    selected, jumps are searched again with those effects in the background, and if the
+    segments change the selection is run again on the new baseline (so that neither a
+    jump passes for an effect nor an effect for a string of jumps).
+    """
+    alpha = check_real('alpha', alpha, 0.0, 0.5, low_open=True)
+    alpha_held = check_real('alpha_held', alpha_held, 0.0, 0.5, low_open=True)
+    max_effects = check_int('max_effects', max_effects, 0, 20)
+    check_identifiable(data.speed)
+    if not jumps:
+        return _select(data, Segments(), alpha, alpha_held, max_effects)
+    segments = find_jumps(data, jump_window, alpha)
+    sel = _select(data, segments, alpha, alpha_held, max_effects)
+    if not sel.effects:
+        return sel
+    extra = np.hstack([sel.design.X[:, e.columns] for e in sel.effects])
+    again = find_jumps(data, jump_window, alpha, extra=extra)
+    if again.starts == segments.starts:
+        return sel
+    sel2 = _select(data, again, alpha, alpha_held, max_effects)
+    sel2.first_pass_jumps = [int(k) for k in segments.starts[1:]]
+    return sel2
+
+
+def _select(data: IdentData, segments: Segments, alpha: float, alpha_held: float,
+            max_effects: int) -> Selection:
+    """Run the forward selection on top of a baseline with the given segments."""
+    held = held_out_mask(len(data))
+    design = Design(data.friction, segments.columns(data.speed), held)
+    base_fit = design.fit()
+    sel = Selection(data=data, segments=segments, design=design, baseline_fit=base_fit,
+                    final_fit=base_fit, baseline_names=segments.names())
+    current = base_fit
+    residual = design.residual(current)
+    sel.diagnostics_before = diagnose(data, residual, alpha)
+    diag = sel.diagnostics_before
+    tried: set[str] = set()
+    while True:
+        if diag['passes']:
+            sel.stop_reason = 'the residual passes the structure and whiteness tests'
+            break
+        if len(sel.effects) >= max_effects:
+            sel.stop_reason = f'max_effects = {max_effects} reached'
+            break
+        chosen, record = _step(design, current, data, residual, tried, alpha, alpha_held)
+        sel.steps.append(record)
+        if chosen is None:
+            sel.stop_reason = 'no candidate effect is significant'
+            break
+        start = design.X.shape[1]
+        design.add(chosen['columns'])
+        current = design.fit()
+        residual = design.residual(current)
+        diag = diagnose(data, residual, alpha)
+        evidence = dict(chosen['evidence'])
+        evidence['residual_failing_after'] = list(diag['failing'])
+        sel.effects.append(AddedEffect(chosen['candidate'].name, chosen['candidate'].kind,
+                                       chosen['params'], slice(start, design.X.shape[1]),
+                                       evidence))
+        tried.add(chosen['candidate'].name)
+    sel.final_fit = current
+    sel.diagnostics_after = diag
+    return sel
+
+
+def _step(design: Design, current: Fit, data: IdentData, residual: np.ndarray,
+          tried: set[str], alpha: float, alpha_held: float) -> tuple[dict | None, dict]:
+    cands = [c for c in fx.named_candidates(data, residual) if c.name not in tried]
+    fallback = fx.fallback_candidate(data)
+    m = sum(c.tests for c in cands if c.skipped is None) + fallback.tests
+    level = alpha / m
+    record: dict = {'level': level, 'tests': m, 'candidates': [],
+                    'rmse_in_sample_before': current.rmse_train,
+                    'rmse_held_out_before': current.rmse_held_out}
+    scored = []
+    for cand in cands:
+        if cand.skipped is not None:
+            record['candidates'].append({'name': cand.name, 'skipped': cand.skipped})
+            continue
+        s = _score(design, current, cand, data)
+        if s is None:
+            record['candidates'].append({'name': cand.name,
+                                         'skipped': 'adds nothing the model lacks'})
+            continue
+        s['significant'] = _significant(s['evidence'], level, alpha_held)
+        record['candidates'].append({'name': cand.name, 'params': s['params'],
+                                     'significant': s['significant'], **s['evidence']})
+        scored.append(s)
+    winners = [s for s in scored if s['significant']]
+    if not winners and fallback.name not in tried:
+        s = _score(design, current, fallback, data)
+        if s is not None:
+            s['significant'] = _significant(s['evidence'], level, alpha_held)
+            record['candidates'].append({'name': fallback.name, 'params': s['params'],
+                                         'significant': s['significant'], **s['evidence']})
+            if s['significant']:
+                winners = [s]
+    if not winners:
+        record['added'] = None
+        return None, record
+    chosen = min(winners, key=lambda s: s['fit'].rss_held_out)
+    record['added'] = chosen['candidate'].name
+    return chosen, record
+
+
+def _significant(evidence: dict, level: float, alpha_held: float) -> bool:
+    evidence['level'] = level
+    evidence['held_out_threshold'] = float(stats.chi2.isf(alpha_held, evidence['dof']))
+    return bool(evidence['p_value'] < level
+                and evidence['lr_held_out'] > evidence['held_out_threshold'])
