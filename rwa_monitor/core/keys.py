@@ -28,3 +28,9 @@ WINDOW_KINDS = ('dry', 'viscous', 'fss1', 'fss2')
 # Names of fields in the events JSON that differ from the KeyValue key.
 JSON_NAME = {CHANGE_TIME: 'time', CHANGE_INDEX: 'index',
              DECLARATION_TIME: 'declared_time', DECLARATION_INDEX: 'declared_index'}
+
+# LLR friction detector (llr-realtime paper): extra event details.
+Z_DRY = 'z_dry'
+Z_VISCOUS = 'z_viscous'
+ARGMIN_INDEX = 'argmin_index'
+LOG10_P_VALUE = 'log10_p_value'

@@ -1,0 +1,270 @@
+"""Tail probability of a generalised chi-square variable (llr-realtime paper, Lemma 1, eq. (7)).
+
+``Q = sum_i w_i (Z_i + m_i)^2`` with ``Z_i`` iid N(0, 1) and ``w_i > 0``.
+
+Two-term central case (the paper's nominal LLR): exact one-dimensional integral. With
+``w1 >= w2``, polar coordinates ``Z = R (cos t, sin t)`` (``R^2`` ~ chi2_2, ``t`` uniform)
+and the change of angle ``tan t = sqrt(w1 / w2) tan psi`` give::
+
+    P(Q > x) = exp(-b) * (2/pi) * int_0^{pi/2} exp(-a sin^2 psi / (cos^2 psi + rho sin^2 psi)) dpsi
+    b = x / (2 w1),   rho = w2 / w1,   a = b (1 - rho).
+
+The factor ``exp(-b)`` carries the whole scale of the tail (so the logarithm never
+underflows) and the integrand lies in (0, 1] with a peak of width ``~1/sqrt(a)`` at 0. The
+integral is cut where the integrand falls below ``exp(-CUT)`` (``a sin^2 psi >= CUT``) and
+evaluated with a fixed Gauss-Legendre rule on the remaining interval, whose length scales
+with the peak: the rule sees the same shape for every ``a``. Accuracy (relative error
+<= 1e-9 against a high-precision reference for tails from 0.5 down to 1e-12 over weight
+ratios 1 to 1e12) is checked in test/test_gchi2.py.
+
+General case (more terms and/or non-zero means): Gil-Pelaez / Laplace inversion along the
+vertical line through the saddle point of ``K(s) - s x - log s``, with ``K`` the cumulant
+generating function; the integrand is normalised by its value at the saddle and the
+integral is evaluated by adaptive quadrature (``scipy.integrate.quad``, relative tolerance
+1e-10; its error estimate is returned by :func:`gchi2_logsf_general`).
+
+Cheap bounds for the streaming detector: with ``w_max`` the largest weight,
+``P(w_max Z^2 > x) <= P(Q > x) <= P(w_max chi2_p > x)`` (central case). For p = 2 the
+upper bound is ``exp(-b)``. :func:`log_lower_bound` gives a closed-form lower bound of
+``log erfc(sqrt(b))`` and :func:`skip_threshold` inverts it, so that a caller holding the
+smallest tail seen so far can skip the exact evaluation of any statistic that cannot beat
+it (``b_hi < skip_threshold(log_p_min)`` implies ``P > p_min``).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Sequence
+
+import numpy as np
+from numpy.polynomial.legendre import leggauss
+from scipy import integrate, optimize, special
+
+CUT = 50.0
+_GL_ORDER = 48
+_x, _w = leggauss(_GL_ORDER)
+_NODES = [float(v) for v in (_x + 1.0) / 2.0]
+_WEIGHTS = [float(v) for v in _w / 2.0]
+_NODES_ARR = (_x + 1.0) / 2.0
+_WEIGHTS_ARR = _w / 2.0
+_LOG_2_OVER_PI = math.log(2.0 / math.pi)
+_LOG_2_OVER_SQRT_PI = math.log(2.0 / math.sqrt(math.pi))
+_HALF_PI = math.pi / 2.0
+
+
+def log_sf2(x: float, w1: float, w2: float) -> float:
+    """Return log P(w1 Z1^2 + w2 Z2^2 > x) for the central two-term case (pure Python).
+
+    Lemma 1 / Algorithm 2 line 5 of the llr-realtime paper. Exact up to the quadrature
+    error (see the module docstring). ``w1``, ``w2`` >= 0 in any order; ``x <= 0`` gives 0
+    (probability one); all-zero weights give ``-inf`` for ``x > 0``.
+    """
+    if not x > 0.0:
+        return 0.0
+    if w1 < w2:
+        w1, w2 = w2, w1
+    if not w1 > 0.0:
+        return -math.inf
+    b = x / (2.0 * w1)
+    rho = w2 / w1 if w2 > 0.0 else 0.0
+    a = b * (1.0 - rho)
+    if a > CUT:
+        end = math.asin(math.sqrt(CUT / a))
+    else:
+        end = _HALF_PI
+    total = 0.0
+    sin = math.sin
+    cos = math.cos
+    exp = math.exp
+    for u, wt in zip(_NODES, _WEIGHTS):
+        psi = end * u
+        s = sin(psi)
+        c = cos(psi)
+        s2 = s * s
+        total += wt * exp(-a * s2 / (c * c + rho * s2))
+    return -b + math.log(total * end) + _LOG_2_OVER_PI
+
+
+def _log_sf2_array(x: np.ndarray, w1: float, w2: float) -> np.ndarray:
+    """Vectorised :func:`log_sf2` over ``x`` for fixed weights (w1 >= w2 >= 0, w1 > 0)."""
+    x = np.asarray(x, dtype=float)
+    out = np.zeros(x.shape)
+    pos = x > 0.0
+    if not np.any(pos):
+        return out
+    xp = x[pos]
+    b = xp / (2.0 * w1)
+    rho = w2 / w1
+    a = b * (1.0 - rho)
+    end = np.where(a > CUT, np.arcsin(np.sqrt(np.minimum(1.0, CUT / np.maximum(a, CUT)))),
+                   _HALF_PI)
+    psi = end[:, None] * _NODES_ARR[None, :]
+    s2 = np.sin(psi) ** 2
+    c2 = np.cos(psi) ** 2
+    vals = np.exp(-a[:, None] * s2 / (c2 + rho * s2)) @ _WEIGHTS_ARR
+    out[pos] = -b + np.log(vals * end) + _LOG_2_OVER_PI
+    return out
+
+
+def log_lower_bound(b: float) -> float:
+    """Return a lower bound of ``log erfc(sqrt(b))`` (closed form, b >= 0).
+
+    Uses ``erfc(z) > 2 exp(-z^2) / (sqrt(pi) (z + sqrt(z^2 + 2)))``. With ``b = x / (2
+    w_max)`` this bounds ``log P(Q > x)`` from below for any weights.
+    """
+    z = math.sqrt(b)
+    return -b + _LOG_2_OVER_SQRT_PI - math.log(z + math.sqrt(b + 2.0))
+
+
+def log_lower_bound_array(b: np.ndarray) -> np.ndarray:
+    """Vectorised :func:`log_lower_bound`."""
+    b = np.maximum(np.asarray(b, dtype=float), 0.0)
+    return -b + _LOG_2_OVER_SQRT_PI - np.log(np.sqrt(b) + np.sqrt(b + 2.0))
+
+
+def skip_threshold(log_p: float) -> float:
+    """Return ``y`` >= 0 such that ``b < y`` implies ``log_lower_bound(b) > log_p``.
+
+    :func:`log_lower_bound` is decreasing; the root is found by bisection and the
+    returned value is on the safe (smaller) side. ``log_p >= log_lower_bound(0)`` gives 0
+    (nothing can be skipped).
+    """
+    if not log_p < log_lower_bound(0.0):
+        return 0.0
+    lo, hi = 0.0, max(1.0, -log_p)
+    while log_lower_bound(hi) > log_p:
+        hi *= 2.0
+    for _ in range(100):
+        mid = 0.5 * (lo + hi)
+        if log_lower_bound(mid) > log_p:
+            lo = mid
+        else:
+            hi = mid
+        if hi - lo <= 1e-12 * hi:
+            break
+    return lo
+
+
+def _cgf(s: complex, w: np.ndarray, m2: np.ndarray) -> complex:
+    one = 1.0 - 2.0 * w * s
+    return complex(np.sum(-0.5 * np.log(one) + m2 * w * s / one))
+
+
+def gchi2_logsf_general(x: float, weights: Sequence[float],
+                        means: Sequence[float] | None = None) -> tuple[float, float]:
+    """Return ``(log P(Q > x), relative error estimate)`` for any weights and means.
+
+    Laplace inversion ``P(Q > x) = (1/pi) int_0^inf Re[M(c + i t) exp(-(c + i t) x) / (c +
+    i t)] dt`` with ``M`` the moment generating function and ``c`` in ``(0, 1/(2 w_max))``
+    the saddle point of ``K(s) - s x - log s``. The integrand is divided by its value at
+    ``t = 0`` so that the result never underflows. The error estimate is the adaptive
+    quadrature's, relative to the integral.
+    """
+    w = np.asarray(weights, dtype=float).ravel()
+    m2 = np.zeros_like(w) if means is None else np.asarray(means, dtype=float).ravel() ** 2
+    keep = w > 0.0
+    w, m2 = w[keep], m2[keep]
+    if not x > 0.0:
+        return 0.0, 0.0
+    if w.size == 0:
+        return -math.inf, 0.0
+    s_max = 1.0 / (2.0 * w.max())
+
+    def dphi(s: float) -> float:
+        one = 1.0 - 2.0 * w * s
+        return float(np.sum(w / one + m2 * w / one ** 2)) - x - 1.0 / s
+
+    lo, hi = s_max * 1e-15, s_max * (1.0 - 1e-15)
+    if dphi(lo) > 0.0:
+        c = lo
+    elif dphi(hi) < 0.0:
+        c = hi
+    else:
+        c = optimize.brentq(dphi, lo, hi, xtol=1e-300, rtol=1e-14, maxiter=500)
+    k0 = _cgf(c, w, m2).real - c * x - math.log(c)
+    one = 1.0 - 2.0 * w * c
+    d2 = float(np.sum(2.0 * w ** 2 / one ** 2 + 4.0 * m2 * w ** 2 / one ** 3)) + 1.0 / c ** 2
+    scale = 1.0 / math.sqrt(d2)
+
+    def amplitude(t: float) -> complex:
+        s = complex(c, t)
+        return np.exp(_cgf(s, w, m2) - c * x - np.log(s) - k0)
+
+    tol = 1e-11 * scale
+    cos_part, err_c = integrate.quad(lambda t: amplitude(t).real, 0.0, np.inf, weight='cos',
+                                     wvar=x, epsabs=tol, limlst=200)
+    sin_part, err_s = integrate.quad(lambda t: amplitude(t).imag, 0.0, np.inf, weight='sin',
+                                     wvar=x, epsabs=tol, limlst=200)
+    val = (cos_part + sin_part) / math.pi
+    err = (err_c + err_s) / math.pi
+    if not val > 0.0:
+        return -math.inf, math.inf
+    return k0 + math.log(val), err / val
+
+
+def gchi2_logsf(x, weights: Sequence[float], means: Sequence[float] | None = None):
+    """Return ``log P(sum_i w_i (Z_i + m_i)^2 > x)``, vectorised over ``x``.
+
+    Central two-term case: :func:`log_sf2` (exact integral, fixed Gauss-Legendre rule).
+    One term: closed form. Otherwise :func:`gchi2_logsf_general` per element.
+    """
+    w = np.asarray(weights, dtype=float).ravel()
+    if w.size == 0 or np.any(~np.isfinite(w)) or np.any(w < 0.0) or not np.any(w > 0.0):
+        raise ValueError(f'weights must be finite, >= 0 and not all zero; got {weights!r}')
+    if means is not None:
+        mu = np.asarray(means, dtype=float).ravel()
+        if mu.shape != w.shape or np.any(~np.isfinite(mu)):
+            raise ValueError('means must be finite and have one entry per weight')
+    else:
+        mu = None
+    x_arr = np.asarray(x, dtype=float)
+    central = mu is None or not np.any(mu[w > 0.0])
+    wp = np.sort(w[w > 0.0])[::-1]
+    if central and wp.size <= 2:
+        w1 = float(wp[0])
+        w2 = float(wp[1]) if wp.size == 2 else 0.0
+        out = _log_sf2_array(x_arr.ravel(), w1, w2).reshape(x_arr.shape)
+    else:
+        flat = [gchi2_logsf_general(float(v), w, mu)[0] for v in x_arr.ravel()]
+        out = np.asarray(flat, dtype=float).reshape(x_arr.shape)
+    return float(out) if out.ndim == 0 else out
+
+
+def gchi2_sf(x, weights: Sequence[float], means: Sequence[float] | None = None):
+    """Return ``P(sum_i w_i (Z_i + m_i)^2 > x)`` (Lemma 1 of the llr-realtime paper).
+
+    ``weights`` are the ``w_i >= 0`` (the eigenvalues ``lambda_i`` of Lemma 1), ``means``
+    the optional ``m_i`` (non-central case: detection probability under a change).
+    Vectorised over ``x``; ``x <= 0`` gives 1.
+    """
+    out = np.exp(gchi2_logsf(x, weights, means))
+    return float(out) if np.ndim(out) == 0 else out
+
+
+def gchi2_isf(p: float, weights: Sequence[float]) -> float:
+    """Return the ``x`` with ``P(sum_i w_i Z_i^2 > x) = p`` (central case), p in (0, 1).
+
+    Root of ``log sf(x) = log p`` bracketed by ``w_max chi2_1.isf(p)`` (lower bound of
+    the tail) and ``w_max chi2_p.isf(p)`` (upper bound).
+    """
+    if not 0.0 < p < 1.0:
+        raise ValueError(f'p must be a number in (0, 1), got {p!r}')
+    w = np.asarray(weights, dtype=float).ravel()
+    if w.size == 0 or np.any(~np.isfinite(w)) or np.any(w < 0.0) or not np.any(w > 0.0):
+        raise ValueError(f'weights must be finite, >= 0 and not all zero; got {weights!r}')
+    wmax = float(w.max())
+    npos = int(np.count_nonzero(w > 0.0))
+    lo = wmax * 2.0 * float(special.erfcinv(p)) ** 2
+    hi = wmax * float(special.chdtri(npos, p))
+    if npos == 1 or hi <= lo:
+        return lo
+    target = math.log(p)
+
+    def f(v: float) -> float:
+        return float(gchi2_logsf(v, w)) - target
+
+    if f(lo) <= 0.0:
+        return lo
+    if f(hi) >= 0.0:
+        return hi
+    return float(optimize.brentq(f, lo, hi, xtol=1e-300, rtol=1e-13, maxiter=200))
