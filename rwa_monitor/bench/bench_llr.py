@@ -28,6 +28,7 @@ FIG4_SIZES = (0.05, 0.1, 0.15, 0.2, 0.25, 0.3, 0.4, 0.5)
 FIG4_RATES = (1e-3, 1e-4, 1e-5)
 ARL_RATES = (1e-2, 1e-3, 1e-4, 1e-5)
 ARL_WINDOWS = (100, 250, 500)
+MEMORY_BUDGET_S = 240.0
 CATEGORIES = {'dry': (0.5, 0.0), 'viscous': (0.0, 0.025), 'both': (0.5, 0.025)}
 GOALS = {'streaming_per_s': 300_000, 'batch_per_s': 3_000_000, 'miss_rate_0.3': 0.02,
          'categorisation': 0.95}
@@ -227,18 +228,26 @@ def throughput(s: dict) -> dict[str, Any]:
     return {'params': params, 'rows': out}
 
 
-def memory(s: dict) -> dict[str, Any]:
-    """Measure the RSS of one streaming detector fed 1e5 .. 1e7 samples (fresh process)."""
+def memory(s: dict, stream_per_s: float) -> dict[str, Any]:
+    """Measure the RSS of one streaming detector fed 1e5 .. 1e7 samples (fresh process).
+
+    A size whose run would take more than MEMORY_BUDGET_S at the measured streaming
+    rate is skipped and listed as such.
+    """
     ctx = multiprocessing.get_context('spawn')
-    rows = []
+    rows, skipped = [], []
     for n in s['memory_n']:
+        if n / stream_per_s > MEMORY_BUDGET_S:
+            skipped.append(n)
+            print(f'  memory n={n}: skipped (~{n / stream_per_s:.0f} s)', flush=True)
+            continue
         with ctx.Pool(1) as pool:
             row = pool.apply(llr_cases.memory_probe, (n, _params()))
         row['growth_kb'] = row['peak_rss_kb'] - row['rss_after_first_chunk_kb']
         print(f'  memory n={n}: peak {row["peak_rss_kb"]} kB, '
               f'growth {row["growth_kb"]} kB ({row["seconds"]:.0f} s)', flush=True)
         rows.append(row)
-    return {'rows': rows}
+    return {'rows': rows, 'skipped': skipped, 'budget_s': MEMORY_BUDGET_S}
 
 
 def run(out_dir: pathlib.Path, quick: bool) -> dict[str, Any]:
@@ -255,7 +264,8 @@ def run(out_dir: pathlib.Path, quick: bool) -> dict[str, Any]:
         results['categorisation'] = categorisation(pool, s)
         results['peer_false_alarms'] = peer_false_alarms(pool, s)
     print('memory (fresh processes)', flush=True)
-    results['memory'] = memory(s)
+    results['memory'] = memory(s, min(row['stream_per_s']
+                                      for row in results['throughput']['rows']))
     results['goals'] = goals(results)
     results['bench_seconds'] = time.perf_counter() - started
     from rwa_monitor.bench import llr_report

@@ -178,6 +178,10 @@ def markdown(r: dict[str, Any]) -> str:
              m['growth_kb'], f'{m["seconds"]:.0f}'] for m in r['memory']['rows']]
     out.append(table(['samples', 'RSS after 1e5 (kB)', 'peak RSS (kB)', 'growth (kB)',
                       'seconds'], rows))
+    if r['memory'].get('skipped'):
+        out += ['', 'Not run (over the %.0f s budget at the measured streaming rate): %s '
+                'samples.' % (r['memory']['budget_s'],
+                              ', '.join(f'{n:.0e}' for n in r['memory']['skipped']))]
     out += ['', '### Goals', '']
     rows = []
     for g in r['goals']:
