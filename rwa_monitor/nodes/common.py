@@ -260,6 +260,7 @@ class ComponentHealth:
         self.message = 'waiting for input'
         self.values: dict[str, Any] = {}
         self.last_input: float | None = None
+        self.provider: Callable[[], tuple[bytes, str, dict[str, Any]]] | None = None
 
 
 class DiagnosticsPublisher:
@@ -281,14 +282,15 @@ class DiagnosticsPublisher:
         self.stale_timeout = stale_timeout
         self.components: dict[str, ComponentHealth] = {}
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
-        self._started = self._now()
+        self._started = self.now()
         self._last_publish = self._started
         self._pub = node.create_publisher(DiagnosticArray, topic, DIAGNOSTICS_QOS)
         self._timer = node.create_timer(period, self.publish)
         self._watchdog = node.create_timer(period, self._publish_if_clock_stopped,
                                            clock=self._steady)
 
-    def _now(self) -> float:
+    def now(self) -> float:
+        """Return the steady-clock time (s) used for staleness."""
         return self._steady.now().nanoseconds * 1e-9
 
     def component(self, hardware_id: str, check: str) -> ComponentHealth:
@@ -305,9 +307,18 @@ class DiagnosticsPublisher:
         health.level, health.message = level, message
         health.values.update(values)
 
-    def mark_input(self, hardware_id: str, check: str) -> None:
-        """Record that input for ``hardware_id`` arrived now (resets its staleness)."""
-        self.component(hardware_id, check).last_input = self._now()
+    def provide(self, hardware_id: str, check: str,
+                provider: Callable[[], tuple[bytes, str, dict[str, Any]]]) -> None:
+        """Compute a component's ``(level, message, values)`` by calling ``provider``.
+
+        The provider is called only when a status is published (once a period), so a node
+        need not update its health on every message.
+        """
+        self.component(hardware_id, check).provider = provider
+
+    def mark_input(self, hardware_id: str, check: str, now: float | None = None) -> None:
+        """Record that input for ``hardware_id`` arrived (at steady time ``now``)."""
+        self.component(hardware_id, check).last_input = self.now() if now is None else now
 
     def remove(self, hardware_id: str) -> None:
         """Stop reporting a component."""
@@ -315,8 +326,10 @@ class DiagnosticsPublisher:
 
     def status(self, health: ComponentHealth, now: float | None = None) -> DiagnosticStatus:
         """Return the DiagnosticStatus of one component, STALE if its input stopped."""
-        now = self._now() if now is None else now
+        now = self.now() if now is None else now
         since = now - (self._started if health.last_input is None else health.last_input)
+        if health.provider is not None:
+            health.level, health.message, health.values = health.provider()
         values = dict(health.values)
         level, message = health.level, health.message
         if since > self.stale_timeout:
@@ -329,7 +342,7 @@ class DiagnosticsPublisher:
 
     def publish(self) -> None:
         """Publish the statuses of every component now."""
-        now = self._now()
+        now = self.now()
         self._last_publish = now
         msg = DiagnosticArray()
         msg.header.stamp = self._node.get_clock().now().to_msg()
@@ -337,7 +350,7 @@ class DiagnosticsPublisher:
         self._pub.publish(msg)
 
     def _publish_if_clock_stopped(self) -> None:
-        if self._now() - self._last_publish > 1.5 * self.period:
+        if self.now() - self._last_publish > 1.5 * self.period:
             self.publish()
 
     def destroy(self) -> None:

@@ -1,0 +1,251 @@
+"""Node ``telemetry_replay``: publish a telemetry file (CSV or MCAP) as ROS topics.
+
+Topics (DESIGN.md): ``telemetry/wheels`` (JointState), ``telemetry/gyro`` (Imu),
+``telemetry/star_tracker`` (QuaternionStamped), ``telemetry/reference_rate``
+(Vector3Stamped) for the channels the file has, every message stamped with the telemetry
+time; ``/clock`` (the telemetry time) for the sim-time detectors; progress on
+``/diagnostics``. Pacing uses the steady clock, never the sim time it publishes.
+
+``rate`` is the time factor (1.0 real time). ``rate`` 0 publishes as fast as the
+subscribers take it, without loss: it first waits for ``min_subscribers`` (at least 1)
+matched subscriptions on ``telemetry/wheels``, then publishes ``burst`` rows per executor
+turn; see docs/nodes.md for why no message is lost. A loop restarts at ``start_offset``
+with the file's own stamps, so subscribers see the time jump backwards.
+"""
+
+from __future__ import annotations
+
+import bisect
+from typing import Any, Sequence
+
+from geometry_msgs.msg import QuaternionStamped, Vector3Stamped
+import numpy as np
+import rclpy
+from rclpy.clock import Clock
+from rclpy.clock_type import ClockType
+from rclpy.node import Node
+from rosgraph_msgs.msg import Clock as ClockMsg
+from sensor_msgs.msg import Imu, JointState
+
+from rwa_monitor.exceptions import ConfigError, RwaMonitorError
+from rwa_monitor.nodes import messages
+from rwa_monitor.nodes.common import (CLOCK_QOS, declare_parameters, DiagnosticsPublisher,
+                                      OK, ParamSpec, qos_event_callbacks, run_node,
+                                      telemetry_qos)
+from rwa_monitor.telemetry import read_telemetry, Telemetry
+
+NODE_NAME = 'telemetry_replay'
+
+PARAMETERS = (
+    ParamSpec('file', '', 'Telemetry file to replay (.csv, or .mcap written by rwa_monitor).',
+              read_only=True),
+    ParamSpec('rate', 1.0, 'Time factor: 1.0 real time, 40.0 forty times faster, 0 as fast '
+              'as the subscribers take it without loss.', low=0.0, high=1.0e6),
+    ParamSpec('start_offset', 0.0, 'Seconds from the first sample where the replay (and every '
+              'loop) starts.', low=0.0, read_only=True),
+    ParamSpec('loop', False, 'Start again at start_offset after the last sample.'),
+    ParamSpec('min_subscribers', 0, 'Matched subscriptions on telemetry/wheels to wait for '
+              'before the first sample (rate 0 waits for at least 1).', low=0, high=1000),
+    ParamSpec('burst', 1, 'Rows published per executor turn at rate 0 (keep at most the '
+              'telemetry depth divided by the number of subscriber turns per row).',
+              low=1, high=500),
+    ParamSpec('exit_when_done', True, 'Shut the process down after the last sample (no '
+              'loop); in-process users set false and poll `done`.'),
+    ParamSpec('frame_id', 'body', 'frame_id of the gyro, star-tracker and reference-rate '
+              'messages.', read_only=True),
+)
+
+_TICK = 0.005  # s of steady time between publishing turns at rate > 0
+_MAX_ROWS_PER_TICK = 2000
+
+
+class TelemetryReplay(Node):
+    """Publish a telemetry file; see the module docstring."""
+
+    def __init__(self, *, telemetry: Telemetry | None = None, **kwargs: Any) -> None:
+        """Create the node; ``telemetry`` replaces the ``file`` parameter (in-process use)."""
+        super().__init__(NODE_NAME, **kwargs)
+        self.params = declare_parameters(self, PARAMETERS, self._on_parameter)
+        if telemetry is None:
+            if not self.params['file']:
+                raise ConfigError('parameter file: a telemetry file is required')
+            try:
+                telemetry = read_telemetry(self.params['file'])
+            except RwaMonitorError as err:
+                raise ConfigError(f'parameter file: {err}') from None
+        if len(telemetry) == 0:
+            raise ConfigError('parameter file: the telemetry has no samples')
+        self.telemetry = telemetry
+        self._time = np.asarray(telemetry.time, dtype=float)
+        self._first = bisect.bisect_left(self._time.tolist(),
+                                         self._time[0] + self.params['start_offset'])
+        if self._first >= len(self._time):
+            raise ConfigError(f'parameter start_offset: {self.params["start_offset"]} s is '
+                              f'past the end of the file ({self._time[-1] - self._time[0]} s)')
+        self._rows = _Rows(telemetry)
+        self.next_row = self._first
+        self.published = 0
+        self.loops = 0
+        self.done = False
+        self.exit_code = 0
+        self._started = False
+        self._steady = Clock(clock_type=ClockType.STEADY_TIME)
+        self._anchor: tuple[float, float] | None = None
+        self._next_progress = 0.1
+
+        qos = telemetry_qos()
+        self._wheels_pub = self._publisher(JointState, 'telemetry/wheels', qos, telemetry.wheels)
+        self._gyro_pub = self._publisher(Imu, 'telemetry/gyro', qos, telemetry.gyro)
+        self._star_pub = self._publisher(QuaternionStamped, 'telemetry/star_tracker', qos,
+                                         telemetry.attitude)
+        self._ref_pub = self._publisher(Vector3Stamped, 'telemetry/reference_rate', qos,
+                                        telemetry.reference_rate)
+        self._clock_pub = self.create_publisher(ClockMsg, '/clock', CLOCK_QOS)
+        data_pubs = [p for p in (self._wheels_pub, self._gyro_pub, self._star_pub,
+                                 self._ref_pub) if p is not None]
+        self._main_pub = data_pubs[0] if data_pubs else self._clock_pub
+        self.diagnostics = DiagnosticsPublisher(self)
+        self._update_health()
+        self._timer = self.create_timer(self._period(), self._tick, clock=self._steady)
+        self.get_logger().info(
+            f'replaying {telemetry.source or "telemetry"}: {len(self._time) - self._first} '
+            f'rows, channels {", ".join(self._channels())}, rate {self.params["rate"]}')
+
+    # ------------------------------------------------------------------ set-up helpers
+    def _publisher(self, msg_type: Any, topic: str, qos: Any, channel: Any) -> Any:
+        if channel is None or (isinstance(channel, dict) and not channel):
+            return None
+        return self.create_publisher(msg_type, topic, qos,
+                                     event_callbacks=qos_event_callbacks(self, topic, True))
+
+    def _channels(self) -> list[str]:
+        pubs = {'wheels': self._wheels_pub, 'gyro': self._gyro_pub,
+                'star_tracker': self._star_pub, 'reference_rate': self._ref_pub}
+        return [name for name, pub in pubs.items() if pub is not None]
+
+    def _period(self) -> float:
+        return 0.0 if self.params['rate'] == 0.0 else _TICK
+
+    def _on_parameter(self, name: str, value: Any) -> None:
+        if name == 'rate':
+            self._anchor = None
+            self.destroy_timer(self._timer)
+            self._timer = self.create_timer(self._period(), self._tick, clock=self._steady)
+
+    # ----------------------------------------------------------------------- publishing
+    @property
+    def progress(self) -> float:
+        """Return the fraction of the current pass already published (0..1)."""
+        total = len(self._time) - self._first
+        return (self.next_row - self._first) / total
+
+    def _ready_to_start(self) -> bool:
+        needed = self.params['min_subscribers']
+        if self.params['rate'] == 0.0:
+            needed = max(needed, 1)
+        return self._main_pub.get_subscription_count() >= needed
+
+    def _tick(self) -> None:
+        if self.done:
+            return
+        if not self._started:
+            if not self._ready_to_start():
+                return
+            self._started = True
+        if self.params['rate'] == 0.0:
+            end = min(self.next_row + self.params['burst'], len(self._time))
+        else:
+            end = self._due_row()
+        if end > self.next_row:
+            self._publish_rows(self.next_row, end)
+        if self.next_row >= len(self._time):
+            self._end_of_file()
+
+    def _due_row(self) -> int:
+        """Return one past the last row whose time has come at the current rate."""
+        now = self._steady.now().nanoseconds * 1e-9
+        if self._anchor is None:
+            self._anchor = (now, self._time[self.next_row])
+        t_due = self._anchor[1] + (now - self._anchor[0]) * self.params['rate']
+        due = int(np.searchsorted(self._time, t_due, side='right'))
+        return min(due, self.next_row + _MAX_ROWS_PER_TICK)
+
+    def _publish_rows(self, start: int, end: int) -> None:
+        rows = self._rows
+        for i in range(start, end):
+            t = float(self._time[i])
+            if self._wheels_pub is not None:
+                self._wheels_pub.publish(rows.wheels(i, t))
+            if self._gyro_pub is not None:
+                self._gyro_pub.publish(messages.imu(t, rows.gyro[i], self.params['frame_id']))
+            if self._star_pub is not None:
+                self._star_pub.publish(messages.quaternion(t, rows.attitude[i],
+                                                           self.params['frame_id']))
+            if self._ref_pub is not None:
+                self._ref_pub.publish(messages.vector3(t, rows.reference[i],
+                                                       self.params['frame_id']))
+        self._clock_pub.publish(messages.clock(float(self._time[end - 1])))
+        self.published += end - start
+        self.next_row = end
+        if self.progress >= self._next_progress:
+            self.get_logger().info(f'replay {100 * self.progress:.0f}% '
+                                   f'(t={self._time[end - 1]:.1f} s, loop {self.loops})')
+            self._next_progress = np.floor(self.progress * 10 + 1) / 10
+        self._update_health()
+
+    def _end_of_file(self) -> None:
+        if self.params['loop']:
+            self.loops += 1
+            self.next_row = self._first
+            self._anchor = None
+            self._next_progress = 0.1
+            self.get_logger().info(f'replay loop {self.loops}: back to '
+                                   f't={self._time[self._first]:.1f} s')
+            return
+        self.done = True
+        self._update_health()
+        self.get_logger().info(f'replay done: {self.published} rows published')
+        if self.params['exit_when_done']:
+            for pub in (self._wheels_pub, self._gyro_pub, self._star_pub, self._ref_pub):
+                if pub is not None:
+                    pub.wait_for_all_acked(rclpy.duration.Duration(seconds=5.0))
+            rclpy.try_shutdown(context=self.context)
+
+    def _update_health(self) -> None:
+        state = 'done' if self.done else ('replaying' if self._started else 'waiting')
+        self.diagnostics.mark_input('replay', 'replay')
+        self.diagnostics.set('replay', 'replay', OK, state, progress_percent=round(
+            100 * self.progress, 2), rows_published=self.published, loops=self.loops)
+
+
+class _Rows:
+    """Row access to the telemetry as plain Python lists (fast message building)."""
+
+    def __init__(self, tele: Telemetry) -> None:
+        self.names = list(tele.wheels)
+        self.speed = np.column_stack([w.speed for w in tele.wheels.values()]).tolist() \
+            if tele.wheels else None
+        nan = np.full(len(tele), np.nan)
+        self.friction = np.column_stack(
+            [nan if w.friction is None else w.friction for w in tele.wheels.values()]
+        ).tolist() if tele.wheels else None
+        self.gyro = None if tele.gyro is None else tele.gyro.tolist()
+        self.attitude = None if tele.attitude is None else tele.attitude.tolist()
+        self.reference = None if tele.reference_rate is None else tele.reference_rate.tolist()
+
+    def wheels(self, i: int, t: float) -> JointState:
+        msg = JointState()
+        msg.header.stamp = messages.to_stamp(t)
+        msg.name = self.names
+        msg.velocity = self.speed[i]
+        msg.effort = self.friction[i]
+        return msg
+
+
+def main(args: Sequence[str] | None = None) -> int:
+    """Run the replay node (console script ``rwa-monitor-replay``)."""
+    return run_node(lambda: TelemetryReplay(), args)
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())
