@@ -1,0 +1,486 @@
+"""Online LLR friction-anomaly detector (llr-realtime paper, Algorithm 1 and 2, eq. (1)-(7)).
+
+:class:`LLRDetector` is the streaming object (one per wheel): ``update(t, speed, friction)``
+per sample, O(1) per sample via prefix sums over the reference segment, memory bounded by
+a ring of ``2 * window + k_verif + 2`` samples. :func:`detect_batch` (in
+:mod:`rwa_monitor.core.llr_batch`, re-exported here) gives the same events from whole
+arrays. The algorithm as implemented, its departures from the paper and the
+categorisation design are in docs/llr.md.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any, Mapping
+
+import numpy as np
+from scipy import linalg
+
+from rwa_monitor.core import keys, llr_stats
+from rwa_monitor.core.events import AnomalyEvent
+from rwa_monitor.core.friction import coulomb_viscous, RegressorSet
+from rwa_monitor.core.gchi2 import gchi2_logsf_general, log_sf2, skip_threshold
+from rwa_monitor.core.params import check_int, check_real
+
+COUNTER_NAMES = ('nonfinite', 'non_increasing_time', 'missing_aux', 'ill_conditioned')
+_LN10 = math.log(10.0)
+
+
+def validate_parameters(component: str = 'rw1', *, window: int = 500,
+                        k_verif: int | None = None, false_alarm_rate: float = 1e-5,
+                        noise_std: float | None = None,
+                        regressors: RegressorSet | None = None,
+                        min_excitation: float = 1e-6, category_level: float | None = None,
+                        category_revisions: int = 3, refine_change: bool = True
+                        ) -> dict[str, Any]:
+    """Check the detector's keyword parameters; return them normalised (ValueError if bad)."""
+    if not isinstance(component, str) or not component:
+        raise ValueError(f'component must be a non-empty string, got {component!r}')
+    if regressors is None:
+        regressors = coulomb_viscous()
+    if not isinstance(regressors, RegressorSet):
+        raise ValueError(f'regressors must be a RegressorSet or None, got {regressors!r}')
+    p = regressors.p
+    window = check_int('window', window, max(10, p + 2))
+    if k_verif is None:
+        k_verif = window // 2
+    k_verif = check_int('k_verif', k_verif, 0, window - 1)
+    r = check_real('false_alarm_rate', false_alarm_rate, 0.0, 1.0, True, True)
+    if noise_std is not None:
+        noise_std = check_real('noise_std', noise_std, 0.0, math.inf, True, True)
+    min_excitation = check_real('min_excitation', min_excitation, 0.0, 1.0, False, True)
+    if category_level is None:
+        category_level = r
+    category_level = check_real('category_level', category_level, 0.0, 1.0, True, True)
+    category_revisions = check_int('category_revisions', category_revisions, 0, 60)
+    if not isinstance(refine_change, bool):
+        raise ValueError(f'refine_change must be True or False, got {refine_change!r}')
+    return dict(component=component, window=window, k_verif=k_verif,
+                false_alarm_rate=r, noise_std=noise_std, regressors=regressors,
+                min_excitation=min_excitation, category_level=category_level,
+                category_revisions=category_revisions, refine_change=refine_change)
+
+
+def make_event(component: str, kind: str, rows: tuple[int, int, int],
+               times: tuple[float, float], log_p: float, dx: np.ndarray,
+               z: tuple[float, float], s2: float, revision: int) -> AnomalyEvent:
+    """Build the AnomalyEvent of a declaration or revision.
+
+    ``rows = (change row, argmin row, declaration row)``, ``times = (change time,
+    declaration time)``.
+    """
+    details = {keys.DELTA_DRY: float(dx[0]), keys.DELTA_VISCOUS: float(dx[1]),
+               keys.NOISE_STD: math.sqrt(s2), keys.Z_DRY: z[0], keys.Z_VISCOUS: z[1],
+               keys.ARGMIN_INDEX: rows[1], keys.LOG10_P_VALUE: log_p / _LN10}
+    return AnomalyEvent(detector='llr', component=component, kind=kind, time=times[0],
+                        index=rows[0], declared_time=times[1], declared_index=rows[2],
+                        p_value=math.exp(log_p), revision=revision, details=details)
+
+
+def declaration(prefix: np.ndarray, first: int, c: int, k_min: int, n: int,
+                cfg: Mapping[str, Any], z_thr: float) -> tuple[int, str, np.ndarray,
+                                                               tuple[float, float], float]:
+    """Return ``(change position, kind, dx, z, sigma^2)`` at a declaration.
+
+    ``prefix[i]`` is the prefix-sum row (reference start ``c``) at position ``first + i``,
+    covering ``[max(c, k_min - window), n + 1]``. Categorisation: before = the reference
+    ``[c, k_min)``, after = ``[k_min, n]`` (:func:`llr_stats.categorise`). Change position:
+    the ML refinement (:func:`llr_stats.refine_change`) over ``k_min +- window`` if
+    enabled, else ``k_min`` (the argmin of p_k, Algorithm 1 line 15).
+    """
+    p = cfg['regressors'].p
+    noise_var = None if cfg['noise_std'] is None else cfg['noise_std'] ** 2
+    before = prefix[k_min - first]
+    after = prefix[n + 1 - first] - before
+    kind, dx, z, s2 = llr_stats.categorise(before, k_min - c, after, n + 1 - k_min, p,
+                                           noise_var, z_thr, cfg['min_excitation'])
+    tau = k_min
+    if cfg['refine_change']:
+        w = cfg['window']
+        tau = llr_stats.refine_change(prefix, first, c, n, k_min - w, k_min + w, p,
+                                      cfg['min_excitation'], k_min)
+    return tau, kind, dx, z, s2
+
+
+def checkpoints(k_min: int, n: int, count: int) -> list[int]:
+    """Return the positions where the kind of a change declared at ``n`` is re-checked.
+
+    The after-segment ``[k_min, n]`` holds ``L0 = n - k_min + 1`` samples at declaration;
+    the kind is re-evaluated when it holds ``2 L0, 4 L0, ...`` (``count`` checks).
+    """
+    length = n - k_min + 1
+    return [k_min + length * 2 ** i - 1 for i in range(1, count + 1)]
+
+
+class LLRDetector:
+    """Streaming LLR detector of friction changes for one wheel (Algorithm 1).
+
+    Keyword parameters: ``window`` w (look-ahead samples, >= 10), ``k_verif``
+    (verification samples, default ``window // 2``, in ``[0, window - 1]``),
+    ``false_alarm_rate`` r in (0, 1), ``noise_std`` (N m; None: estimated from the
+    reference fit), ``regressors`` (a RegressorSet; None: the paper's eq. (1)),
+    ``min_excitation`` (smallest ``det(corr(Pi_P))``, in [0, 1): below it the test is
+    skipped and counted), ``category_level`` (level of the dry / viscous tests; None: r),
+    ``category_revisions`` (re-checks of the kind as data arrive), ``refine_change`` (ML
+    refinement of the change time). Positions count accepted samples; events carry the row
+    index (number of ``update`` calls before that sample since construction or reset).
+    """
+
+    def __init__(self, component: str = 'rw1', **params: Any):
+        self._cfg = validate_parameters(component, **params)
+        cfg = self._cfg
+        self._component = cfg['component']
+        self._w = cfg['window']
+        self._kverif = cfg['k_verif']
+        self._logr = math.log(cfg['false_alarm_rate'])
+        self._noise_var = None if cfg['noise_std'] is None else cfg['noise_std'] ** 2
+        self._regressors = cfg['regressors']
+        self._p = self._regressors.p
+        self._default = self._regressors.is_coulomb_viscous
+        self._min_exc = cfg['min_excitation']
+        self._z_thr = llr_stats.z_threshold(cfg['category_level'])
+        self._L = 2 * self._w + self._kverif + 2
+        self.reset()
+
+    # -- read-only state --------------------------------------------------------------
+    @property
+    def parameters(self) -> dict[str, Any]:
+        """Validated keyword parameters, defaults filled in."""
+        return dict(self._cfg)
+
+    @property
+    def component(self) -> str:
+        """Wheel id."""
+        return self._component
+
+    @property
+    def n_samples(self) -> int:
+        """Number of ``update`` calls since construction or reset (accepted or not)."""
+        return self._rows
+
+    @property
+    def counters(self) -> dict[str, int]:
+        """Rejected samples and skipped tests by reason."""
+        return dict(self._counters)
+
+    @property
+    def p_min(self) -> float:
+        """Smallest p_k since the reference start (Algorithm 1 line 14), 1 before any."""
+        return math.exp(self._logpmin)
+
+    @property
+    def log_p_min(self) -> float:
+        """Natural logarithm of :attr:`p_min` (never underflows)."""
+        return self._logpmin
+
+    @property
+    def last_statistic(self) -> float:
+        """Latest ``LLR_k / sigma^2`` (nan before the first test)."""
+        return self._last_y
+
+    @property
+    def reference_start_index(self) -> int:
+        """Row index where the current reference segment starts (-1 if no sample yet)."""
+        if self._pos <= self._c:
+            return -1
+        return self._rrow[self._c % self._L]
+
+    def _reference_row(self) -> tuple[Any, int]:
+        if self._last_k > self._c:
+            return self._rpref[self._last_k % self._L], self._last_k - self._c
+        return self._pref, self._pos - self._c
+
+    @property
+    def estimate(self) -> np.ndarray:
+        """Least-squares ``x`` (``[f_c, f_v, ...]``) over the reference segment P_k.
+
+        P_k of the latest test, or all samples since the reference start before the first
+        test; nan while not identifiable.
+        """
+        row, n = self._reference_row()
+        pi, q, _ = llr_stats.unpack(np.asarray(row, dtype=float), self._p)
+        if n <= self._p or not bool(llr_stats.well_conditioned(pi, self._min_exc)):
+            return np.full(self._p, np.nan)
+        return np.linalg.solve(pi, q)
+
+    @property
+    def noise_std(self) -> float:
+        """Noise standard deviation in use (given, or estimated on the reference)."""
+        if self._noise_var is not None:
+            return math.sqrt(self._noise_var)
+        row, n = self._reference_row()
+        pi, _, _ = llr_stats.unpack(np.asarray(row, dtype=float), self._p)
+        if n <= self._p or not bool(llr_stats.well_conditioned(pi, self._min_exc)):
+            return math.nan
+        return math.sqrt(llr_stats.segment_fit(np.asarray(row, dtype=float), n, self._p,
+                                               None)[2])
+
+    # -- state changes ----------------------------------------------------------------
+    def reset(self) -> None:
+        """Forget all data, counters and the reference (back to the constructed state)."""
+        width = llr_stats.width(self._p)
+        zero = (0.0,) * 6 if self._p == 2 else np.zeros(width)
+        self._zero = zero
+        self._rows = 0
+        self._pos = 0
+        self._last_t = -math.inf
+        self._c = 0
+        self._pref = zero
+        self._rterm = [None] * self._L
+        self._rpref = [None] * self._L
+        self._rpref[0] = zero
+        self._rrow = [0] * self._L
+        self._rtime = [0.0] * self._L
+        self._logpmin = 0.0
+        self._kmin = 0
+        self._ystar = 0.0
+        self._last_y = math.nan
+        self._last_k = -1
+        self._counters = {name: 0 for name in COUNTER_NAMES}
+        self._checks: list[int] = []
+        self._cat: dict[str, Any] | None = None
+        self._checkpoint = -1
+
+    def update(self, t: float, speed: float, friction: float,
+               aux: Mapping[str, float] | None = None) -> list[AnomalyEvent]:
+        """Process one sample; return the events it triggers (usually none).
+
+        Non-finite values (or a missing auxiliary channel of the model) and times not after
+        the last accepted one are dropped and counted; they never enter the sums.
+        """
+        row = self._rows
+        self._rows = row + 1
+        try:
+            t = float(t)
+            w = float(speed)
+            f = float(friction)
+        except (TypeError, ValueError):
+            self._counters['nonfinite'] += 1
+            return []
+        if (t - t) + (w - w) + (f - f) != 0.0:
+            self._counters['nonfinite'] += 1
+            return []
+        if not t > self._last_t:
+            self._counters['non_increasing_time'] += 1
+            return []
+        if self._default:
+            h1 = -1.0 if w > 0.0 else (1.0 if w < 0.0 else 0.0)
+            h2 = -w
+        else:
+            h = self._row(t, w, aux)
+            if h is None:
+                return []
+            if self._p != 2:
+                self._last_t = t
+                return self._update_general(row, t, f, h)
+            h1 = float(h[0])
+            h2 = float(h[1])
+        self._last_t = t
+        ta = h1 * h1
+        tb = h1 * h2
+        tc = h2 * h2
+        tu = h1 * f
+        tv = h2 * f
+        te = f * f
+        P = self._pref
+        P = (P[0] + ta, P[1] + tb, P[2] + tc, P[3] + tu, P[4] + tv, P[5] + te)
+        self._pref = P
+        j = self._pos
+        self._pos = j + 1
+        L = self._L
+        s = j % L
+        self._rterm[s] = (ta, tb, tc, tu, tv, te)
+        self._rrow[s] = row
+        self._rtime[s] = t
+        self._rpref[(j + 1) % L] = P
+        events = self._revise(j) if j == self._checkpoint else []
+        k = j - self._w + 1
+        if k <= self._c + self._w:
+            return events
+        self._last_k = k
+        A, B, C, U, V, E = self._rpref[k % L]
+        At, Bt, Ct, Ut, Vt, _ = P
+        ac = A * C
+        det = ac - B * B
+        dett = At * Ct - Bt * Bt
+        if det > self._min_exc * ac and dett > 0.0:
+            x1 = (C * U - B * V) / det
+            x2 = (A * V - B * U) / det
+            if self._noise_var is None:
+                n_p = k - self._c
+                s2 = (E - (x1 * U + x2 * V)) / (n_p - 2)
+                floor = llr_stats.NOISE_FLOOR_REL * E / n_p + llr_stats.NOISE_FLOOR_ABS
+                if not s2 > floor:
+                    s2 = floor
+            else:
+                s2 = self._noise_var
+            Aw = At - A
+            Bw = Bt - B
+            Cw = Ct - C
+            g1 = (Ut - U) - (Aw * x1 + Bw * x2)
+            g2 = (Vt - V) - (Bw * x1 + Cw * x2)
+            d1 = (Ct * g1 - Bt * g2) / dett
+            d2 = (At * g2 - Bt * g1) / dett
+            y = (A * d1 * d1 + 2.0 * B * d1 * d2 + C * d2 * d2) / s2
+            tr = (Ct * Aw - 2.0 * Bt * Bw + At * Cw) / dett
+            self._last_y = y
+            if tr > 0.0 and y > 0.0 and not y / tr < self._ystar:
+                dm = (Aw * Cw - Bw * Bw) / dett
+                logp = exact_log_p2(y, tr, dm)
+                if logp < self._logpmin:
+                    self._record(k, logp)
+        else:
+            self._counters['ill_conditioned'] += 1
+        if k > self._kmin + self._kverif and self._logpmin <= self._logr:
+            events.extend(self._declare(j))
+        return events
+
+    def _row(self, t: float, w: float, aux: Mapping[str, float] | None):
+        if aux is not None:
+            aux = {name: np.asarray([value], dtype=float) for name, value in aux.items()}
+        try:
+            h = self._regressors.matrix(np.asarray([w]), np.asarray([t]), aux)[0]
+        except KeyError:
+            self._counters['missing_aux'] += 1
+            return None
+        if not np.all(np.isfinite(h)):
+            self._counters['nonfinite'] += 1
+            return None
+        return h
+
+    def _record(self, k: int, logp: float) -> None:
+        """Algorithm 1 lines 13-15: new smallest p_k."""
+        self._logpmin = logp
+        self._kmin = k
+        self._ystar = skip_threshold(logp)
+
+    def _prefix_block(self, first: int, last: int) -> np.ndarray:
+        L = self._L
+        return np.asarray([self._rpref[i % L] for i in range(first, last + 1)], dtype=float)
+
+    def _declare(self, n: int) -> list[AnomalyEvent]:
+        """Algorithm 1 lines 18-21: declare the change at k_min and restart there."""
+        L = self._L
+        c, k_min = self._c, self._kmin
+        first = max(c, k_min - self._w)
+        prefix = self._prefix_block(first, n + 1)
+        tau, kind, dx, z, s2 = declaration(prefix, first, c, k_min, n, self._cfg, self._z_thr)
+        rows = (self._rrow[tau % L], self._rrow[k_min % L], self._rrow[n % L])
+        times = (self._rtime[tau % L], self._rtime[n % L])
+        event = make_event(self._component, kind, rows, times, self._logpmin, dx, z, s2, 0)
+        self._cat = dict(before=prefix[k_min - first].copy(), n_before=k_min - c, kind=kind,
+                         revision=0, rows=rows, time=times[0], log_p=self._logpmin,
+                         k_min=k_min)
+        self._checks = checkpoints(k_min, n, self._cfg['category_revisions'])
+        self._checkpoint = self._checks.pop(0) if self._checks else -1
+        self._restart(k_min, n)
+        return [event]
+
+    def _restart(self, c: int, n: int) -> None:
+        """Start the new reference at position ``c`` and rebuild its prefix sums."""
+        L = self._L
+        self._c = c
+        P = self._zero
+        self._rpref[c % L] = P
+        for j in range(c, n + 1):
+            t = self._rterm[j % L]
+            if self._p == 2:
+                P = (P[0] + t[0], P[1] + t[1], P[2] + t[2], P[3] + t[3], P[4] + t[4],
+                     P[5] + t[5])
+            else:
+                P = P + t
+            self._rpref[(j + 1) % L] = P
+        self._pref = P
+        self._logpmin = 0.0
+        self._kmin = c
+        self._ystar = 0.0
+        self._last_k = -1
+
+    def _revise(self, j: int) -> list[AnomalyEvent]:
+        """Re-check the kind of the last declared change at a checkpoint."""
+        cat = self._cat
+        self._checkpoint = self._checks.pop(0) if self._checks else -1
+        after = np.asarray(self._pref, dtype=float)
+        kind, dx, z, s2 = llr_stats.categorise(cat['before'], cat['n_before'], after,
+                                               j + 1 - cat['k_min'], self._p, self._noise_var,
+                                               self._z_thr, self._min_exc)
+        if kind == cat['kind']:
+            return []
+        cat['kind'] = kind
+        cat['revision'] += 1
+        rows = cat['rows'][:2] + (self._rrow[j % self._L],)
+        times = (cat['time'], self._rtime[j % self._L])
+        return [make_event(self._component, kind, rows, times, cat['log_p'], dx, z, s2,
+                           cat['revision'])]
+
+    # -- general model (p > 2): numpy per sample -------------------------------------
+    def _update_general(self, row: int, t: float, f: float, h: np.ndarray
+                        ) -> list[AnomalyEvent]:
+        p = self._p
+        term = np.concatenate([np.outer(h, h).ravel(), h * f, [f * f]])
+        P = self._pref + term
+        self._pref = P
+        j = self._pos
+        self._pos = j + 1
+        L = self._L
+        s = j % L
+        self._rterm[s] = term
+        self._rrow[s] = row
+        self._rtime[s] = t
+        self._rpref[(j + 1) % L] = P
+        events = self._revise(j) if j == self._checkpoint else []
+        k = j - self._w + 1
+        if k <= self._c + self._w:
+            return events
+        self._last_k = k
+        pi_p, q_p, e = llr_stats.unpack(self._rpref[k % L], p)
+        pi_t, q_t, _ = llr_stats.unpack(P, p)
+        if bool(llr_stats.well_conditioned(pi_p, self._min_exc)):
+            n_p = k - self._c
+            x = np.linalg.solve(pi_p, q_p)
+            if self._noise_var is None:
+                s2 = (float(e) - float(x @ q_p)) / (n_p - p)
+                floor = llr_stats.NOISE_FLOOR_REL * float(e) / n_p + llr_stats.NOISE_FLOOR_ABS
+                s2 = s2 if s2 > floor else floor
+            else:
+                s2 = self._noise_var
+            pi_w = pi_t - pi_p
+            d = np.linalg.solve(pi_t, (q_t - q_p) - pi_w @ x)
+            y = float(d @ pi_p @ d) / s2
+            lam = np.clip(linalg.eigh(pi_w, pi_t, eigvals_only=True), 0.0, 1.0)
+            self._last_y = y
+            lmax = float(lam.max())
+            if lmax > 0.0 and y > 0.0 and not y / (2.0 * lmax) < self._ystar:
+                logp = gchi2_logsf_general(y, lam)[0]
+                if logp < self._logpmin:
+                    self._record(k, logp)
+        else:
+            self._counters['ill_conditioned'] += 1
+        if k > self._kmin + self._kverif and self._logpmin <= self._logr:
+            events.extend(self._declare(j))
+        return events
+
+
+def exact_log_p2(y: float, tr: float, dm: float) -> float:
+    """Return log p_k (eq. (7), Algorithm 2) from ``y = LLR/sigma^2`` and ``M = Pi_T^-1 Pi_W``.
+
+    The weights of Lemma 1 are the eigenvalues of ``I - Pi_P^1/2 Pi_T^-1 Pi_P^1/2``, which
+    are those of ``Pi_T^-1 Pi_W`` (same matrix up to similarity, ``Pi_W = Pi_T - Pi_P``);
+    ``tr`` and ``dm`` are its trace and determinant. Shared by the streaming and the batch
+    path so that both compute the same float.
+    """
+    half = 0.5 * tr
+    disc = half * half - dm
+    lam1 = half + math.sqrt(disc) if disc > 0.0 else half
+    lam2 = dm / lam1 if lam1 > 0.0 else 0.0
+    if lam2 < 0.0:
+        lam2 = 0.0
+    return log_sf2(y, lam1, lam2)
+
+
+def detect_batch(time, speed, friction, *, component: str = 'rw1',
+                 aux: Mapping[str, np.ndarray] | None = None, **params: Any
+                 ) -> list[AnomalyEvent]:
+    """Run Algorithm 1 over whole arrays; same events as streaming (see llr_batch)."""
+    from rwa_monitor.core.llr_batch import detect_batch as run
+    return run(time, speed, friction, component=component, aux=aux, **params)

@@ -1,0 +1,282 @@
+"""Vectorised LLR detector over whole arrays (llr-realtime paper, Algorithm 1).
+
+Gives exactly the events of :class:`rwa_monitor.core.llr.LLRDetector` fed the same samples:
+the prefix sums are accumulated in the same order (``numpy.cumsum`` adds sequentially,
+continuing from the carried last row), the test statistic of every candidate ``k`` uses
+the same float operations, and p_k, the skip rule, the declaration details and the
+revisions use the same scalar functions. Vectorisation: the statistic, its trace and a
+bound of p_k for all ``k`` of a chunk at once; a sample is evaluated exactly (in a Python
+loop) only if its lower bound of p_k can beat the running minimum of the upper bounds, a
+superset of the samples the streaming path evaluates. The only other Python loops run
+over candidates, declarations and revision checkpoints.
+
+Only the paper's two-column model is vectorised; other regressor sets (p > 2, auxiliary
+channels) run the streaming detector sample by sample.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any, Mapping
+
+import numpy as np
+
+from rwa_monitor.core import llr_stats
+from rwa_monitor.core.events import AnomalyEvent
+from rwa_monitor.core.gchi2 import log_lower_bound_array, skip_threshold
+from rwa_monitor.core.llr import (checkpoints, declaration, exact_log_p2, LLRDetector,
+                                  make_event, validate_parameters)
+
+CHUNK = 1 << 16
+
+
+def _arrays(time, speed, friction) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    arrays = []
+    for name, values in (('time', time), ('speed', speed), ('friction', friction)):
+        a = np.asarray(values, dtype=float)
+        if a.ndim != 1:
+            raise ValueError(f'{name} must be a 1-D array, got shape {a.shape}')
+        arrays.append(a)
+    n = {a.size for a in arrays}
+    if len(n) != 1:
+        raise ValueError('time, speed and friction must have the same length, got '
+                         f'{arrays[0].size}, {arrays[1].size}, {arrays[2].size}')
+    return arrays[0], arrays[1], arrays[2]
+
+
+def accepted_mask(t: np.ndarray, w: np.ndarray, f: np.ndarray
+                  ) -> tuple[np.ndarray, dict[str, int]]:
+    """Return the samples the streaming detector accepts, and the rejection counts.
+
+    A sample is accepted if time, speed and friction are finite and its time is after the
+    last accepted time, which equals the running maximum of the finite times before it.
+    """
+    finite = np.isfinite(t) & np.isfinite(w) & np.isfinite(f)
+    tf = np.where(finite, t, -np.inf)
+    prev = np.empty_like(tf)
+    prev[:1] = -np.inf
+    np.maximum.accumulate(tf[:-1], out=prev[1:])
+    accepted = finite & (t > prev)
+    counts = {'nonfinite': int(np.count_nonzero(~finite)),
+              'non_increasing_time': int(np.count_nonzero(finite & ~accepted))}
+    return accepted, counts
+
+
+def _stats(pp: np.ndarray, pt: np.ndarray, n_p: np.ndarray, cfg: Mapping[str, Any]):
+    """Vectorised statistic of the streaming path (same operations, same order)."""
+    A, B, C, U, V, E = (pp[:, i] for i in range(6))
+    At, Bt, Ct, Ut, Vt = (pt[:, i] for i in range(5))
+    ac = A * C
+    det = ac - B * B
+    dett = At * Ct - Bt * Bt
+    ok = (det > cfg['min_excitation'] * ac) & (dett > 0.0)
+    with np.errstate(all='ignore'):
+        x1 = (C * U - B * V) / det
+        x2 = (A * V - B * U) / det
+        if cfg['noise_std'] is None:
+            s2 = (E - (x1 * U + x2 * V)) / (n_p - 2)
+            floor = llr_stats.NOISE_FLOOR_REL * E / n_p + llr_stats.NOISE_FLOOR_ABS
+            s2 = np.where(s2 > floor, s2, floor)
+        else:
+            s2 = cfg['noise_std'] ** 2
+        Aw = At - A
+        Bw = Bt - B
+        Cw = Ct - C
+        g1 = (Ut - U) - (Aw * x1 + Bw * x2)
+        g2 = (Vt - V) - (Bw * x1 + Cw * x2)
+        d1 = (Ct * g1 - Bt * g2) / dett
+        d2 = (At * g2 - Bt * g1) / dett
+        y = (A * d1 * d1 + 2.0 * B * d1 * d2 + C * d2 * d2) / s2
+        tr = (Ct * Aw - 2.0 * Bt * Bw + At * Cw) / dett
+        dm = (Aw * Cw - Bw * Bw) / dett
+        half = 0.5 * tr
+        lam1 = half + np.sqrt(np.maximum(half * half - dm, 0.0))
+        testable = ok & (tr > 0.0) & (y > 0.0)
+        upper = np.where(testable, -y / (2.0 * lam1), 0.0)
+        lower = np.where(testable, log_lower_bound_array(np.where(testable, y / tr, 0.0)),
+                         0.0)
+    return ok, testable, y, tr, dm, upper, lower
+
+
+class _Reference:
+    """Prefix sums of one reference segment, extended chunk by chunk, front trimmed."""
+
+    def __init__(self, terms: np.ndarray, c: int, keep: int):
+        self.terms = terms
+        self.c = c
+        self.pos0 = c
+        self.rows = np.zeros((1, terms.shape[1]))
+        self.keep = keep
+
+    @property
+    def end(self) -> int:
+        """Last position whose prefix is held."""
+        return self.pos0 + self.rows.shape[0] - 1
+
+    def extend(self, last: int) -> None:
+        """Hold prefixes up to position ``last`` (sequential continuation of the sums)."""
+        if last <= self.end:
+            return
+        block = np.vstack([self.rows[-1:], self.terms[self.end:last]])
+        self.rows = np.vstack([self.rows, np.cumsum(block, axis=0)[1:]])
+
+    def trim(self, first: int) -> None:
+        """Drop prefixes of positions before ``first``."""
+        cut = first - self.pos0
+        if cut > 0:
+            self.rows = self.rows[cut:]
+            self.pos0 = first
+
+    def at(self, positions) -> np.ndarray:
+        """Return the prefix rows at ``positions``."""
+        return self.rows[np.asarray(positions) - self.pos0]
+
+
+def _scan(ref: _Reference, k0: int, k1: int, state: dict, cfg: Mapping[str, Any],
+          logr: float) -> int | None:
+    """Run the tests k0..k1 of Algorithm 1; return the declaration k or None."""
+    w, kverif = cfg['window'], cfg['k_verif']
+    c = ref.c
+    ks = np.arange(k0, k1 + 1)
+    ref.extend(k1 + w)
+    ok, testable, y, tr, dm, upper, lower = _stats(ref.at(ks), ref.at(ks + w),
+                                                   (ks - c).astype(float), cfg)
+    bound = np.minimum.accumulate(np.concatenate([[state['bound']], upper]))
+    state['bound'] = float(bound[-1])
+    prev = bound[:-1]
+    margin = 1e-6 * (1.0 + np.abs(prev))
+    cand = np.flatnonzero(testable & (lower <= prev + margin))
+    declared = _candidates(ks, cand, y, tr, dm, state, kverif, logr)
+    last = k1 if declared is None else declared
+    state['ill'] += int(np.count_nonzero(~ok[:last - k0 + 1]))
+    return declared
+
+
+def _candidates(ks, cand, y, tr, dm, state: dict, kverif: int, logr: float) -> int | None:
+    """Algorithm 1 lines 11-18 over the candidate tests of a chunk (exact p_k)."""
+    k1 = int(ks[-1])
+    for i in cand:
+        k = int(ks[i])
+        if state['logp'] <= logr and state['kmin'] + kverif + 1 < k:
+            return state['kmin'] + kverif + 1
+        yv, trv = float(y[i]), float(tr[i])
+        if not yv / trv < state['ystar']:
+            logp = exact_log_p2(yv, trv, float(dm[i]))
+            if logp < state['logp']:
+                state.update(logp=logp, kmin=k, ystar=skip_threshold(logp))
+        if state['logp'] <= logr and k > state['kmin'] + kverif:
+            return k
+    kd = state['kmin'] + kverif + 1
+    if state['logp'] <= logr and kd <= k1:
+        return kd
+    return None
+
+
+def detect_batch(time, speed, friction, *, component: str = 'rw1',
+                 aux: Mapping[str, np.ndarray] | None = None, **params: Any
+                 ) -> list[AnomalyEvent]:
+    """Run Algorithm 1 over whole arrays and return the events of the streaming detector.
+
+    ``time``, ``speed``, ``friction``: 1-D arrays of the same length (one row per sample;
+    event indices are row indices). Keyword parameters as :class:`LLRDetector`.
+    """
+    events, _ = detect_batch_with_counters(time, speed, friction, component=component,
+                                           aux=aux, **params)
+    return events
+
+
+def detect_batch_with_counters(time, speed, friction, *, component: str = 'rw1',
+                               aux: Mapping[str, np.ndarray] | None = None, **params: Any
+                               ) -> tuple[list[AnomalyEvent], dict[str, int]]:
+    """Return ``(events, counters)`` of :func:`detect_batch` (counters as the detector's)."""
+    cfg = validate_parameters(component, **params)
+    t, w, f = _arrays(time, speed, friction)
+    if not cfg['regressors'].is_coulomb_viscous:
+        return _streamed(t, w, f, aux, component, params)
+    accepted, counts = accepted_mask(t, w, f)
+    rows = np.flatnonzero(accepted)
+    tv, wv, fv = t[rows], w[rows], f[rows]
+    h1 = -np.sign(wv)
+    h2 = -wv
+    terms = np.column_stack([h1 * h1, h1 * h2, h2 * h2, h1 * fv, h2 * fv, fv * fv])
+    n_total = rows.size
+    win, kverif = cfg['window'], cfg['k_verif']
+    logr = math.log(cfg['false_alarm_rate'])
+    z_thr = llr_stats.z_threshold(cfg['category_level'])
+    keep = 2 * win + kverif + 2
+    events: list[AnomalyEvent] = []
+    counters = {'nonfinite': counts['nonfinite'],
+                'non_increasing_time': counts['non_increasing_time'],
+                'missing_aux': 0, 'ill_conditioned': 0}
+    state = {'ill': 0}
+    cat: dict[str, Any] | None = None
+    checks: list[int] = []
+
+    def revise(ref: _Reference, upto: int) -> None:
+        while checks and checks[0] <= upto:
+            j = checks.pop(0)
+            ref.extend(j + 1)
+            after = ref.at(j + 1)
+            kind, dx, z, s2 = llr_stats.categorise(
+                cat['before'], cat['n_before'], after, j + 1 - cat['k_min'], 2,
+                None if cfg['noise_std'] is None else cfg['noise_std'] ** 2, z_thr,
+                cfg['min_excitation'])
+            if kind != cat['kind']:
+                cat['kind'] = kind
+                cat['revision'] += 1
+                ev_rows = cat['rows'][:2] + (int(rows[j]),)
+                events.append(make_event(component, kind, ev_rows, (cat['time'], float(tv[j])),
+                                         cat['log_p'], dx, z, s2, cat['revision']))
+
+    c = 0
+    while True:
+        ref = _Reference(terms, c, keep)
+        state.update(logp=0.0, kmin=c, ystar=0.0, bound=0.0)
+        k0 = c + win + 1
+        declared = None
+        while k0 + win - 1 <= n_total - 1:
+            k1 = min(k0 + CHUNK - 1, n_total - win)
+            declared = _scan(ref, k0, k1, state, cfg, logr)
+            revise(ref, (declared if declared is not None else k1) + win - 1)
+            if declared is not None:
+                break
+            ref.trim(k1 + 1 - keep)
+            k0 = k1 + 1
+        if declared is None:
+            revise(ref, n_total - 1)
+            break
+        n = declared + win - 1
+        k_min = state['kmin']
+        first = max(c, k_min - win)
+        ref.extend(n + 1)
+        prefix = ref.at(np.arange(first, n + 2))
+        tau, kind, dx, z, s2 = declaration(prefix, first, c, k_min, n, cfg, z_thr)
+        ev_rows = (int(rows[tau]), int(rows[k_min]), int(rows[n]))
+        times = (float(tv[tau]), float(tv[n]))
+        events.append(make_event(component, kind, ev_rows, times, state['logp'], dx, z, s2,
+                                 0))
+        cat = dict(before=prefix[k_min - first].copy(), n_before=k_min - c, kind=kind,
+                   revision=0, rows=ev_rows, time=times[0], log_p=state['logp'],
+                   k_min=k_min)
+        checks = checkpoints(k_min, n, cfg['category_revisions'])
+        c = k_min
+    counters['ill_conditioned'] = state['ill']
+    return events, counters
+
+
+def _streamed(t: np.ndarray, w: np.ndarray, f: np.ndarray,
+              aux: Mapping[str, np.ndarray] | None, component: str,
+              params: Mapping[str, Any]) -> tuple[list[AnomalyEvent], dict[str, int]]:
+    """Feed the streaming detector row by row (models other than eq. (1))."""
+    det = LLRDetector(component, **params)
+    names = list(aux) if aux else []
+    columns = [np.asarray(aux[name], dtype=float) for name in names] if aux else []
+    for col, name in zip(columns, names):
+        if col.shape != t.shape:
+            raise ValueError(f'aux[{name!r}] must have the length of time ({t.size}), '
+                             f'got {col.size}')
+    events: list[AnomalyEvent] = []
+    for i in range(t.size):
+        row_aux = {name: float(col[i]) for name, col in zip(names, columns)} if aux else None
+        events.extend(det.update(float(t[i]), float(w[i]), float(f[i]), row_aux))
+    return events, det.counters
