@@ -42,7 +42,7 @@ def run_with_summary(tele: Telemetry, config: Mapping[str, Any]
     The summary per wheel holds the number of events, samples, the detector's counters
     of rejected samples and its run time.
     """
-    from rwa_monitor.core.llr import detect_batch
+    from rwa_monitor.core.llr_batch import detect_batch_with_counters
     kwargs = detector_kwargs(config)
     events: list[AnomalyEvent] = []
     summary: dict[str, Any] = {}
@@ -50,9 +50,10 @@ def run_with_summary(tele: Telemetry, config: Mapping[str, Any]
         if wheel.friction is None:
             continue
         start = _time.perf_counter()
-        found = detect_batch(tele.time, wheel.speed, wheel.friction, component=wheel_id,
-                             **kwargs)
+        found, counters = detect_batch_with_counters(
+            tele.time, wheel.speed, wheel.friction, component=wheel_id, **kwargs)
         summary[wheel_id] = {'events': len(found), 'samples': len(tele),
+                             'rejected': dict(counters),
                              'runtime_s': _time.perf_counter() - start}
         events.extend(found)
     return events, summary
