@@ -99,18 +99,15 @@ def wheel_samples(msg: JointState) -> tuple[float, list[tuple[str, float, float]
     """Return ``(time, [(wheel, speed, friction), ...])`` from a ``telemetry/wheels`` message.
 
     Raise BadMessage with reason ``length_mismatch`` when ``velocity`` or ``effort`` do not
-    have one value per name (effort is required: it is the friction measurement), or
-    ``bad_stamp`` for a zero stamp. Entries with an empty or repeated name are dropped
-    here; the caller counts them by comparing lengths (see :func:`wheel_name_problems`).
+    have one value per name (effort is required: it is the friction measurement). Entries
+    with an empty or repeated name are dropped here; the caller counts them by comparing
+    lengths (see :func:`wheel_name_problems`).
     """
     names, speeds, efforts = msg.name, msg.velocity, msg.effort
     if len(speeds) != len(names) or len(efforts) != len(names):
         raise BadMessage('length_mismatch', f'{len(names)} names, {len(speeds)} velocities, '
                          f'{len(efforts)} efforts')
-    stamp = msg.header.stamp
-    if stamp.sec == 0 and stamp.nanosec == 0:
-        raise BadMessage('bad_stamp', 'zero header stamp')
-    seconds = to_seconds(stamp)
+    seconds = to_seconds(msg.header.stamp)
     seen: set[str] = set()
     out = []
     for name, speed, effort in zip(names, speeds, efforts):

@@ -1,0 +1,260 @@
+"""Node ``llr_detector``: one online LLR friction detector per wheel on ``telemetry/wheels``.
+
+Publishes every declared anomaly on ``anomalies`` (one DiagnosticStatus per event, the
+KeyValues of ``AnomalyEvent.fields()``) and each wheel's health on ``/diagnostics``
+every ``diagnostic_period`` s of the node clock: OK until an anomaly, then WARN (dry,
+viscous) or ERROR (both) with the kind and change time; STALE when telemetry stops; with
+the counters of rejected samples. The detector is :class:`rwa_monitor.core.llr.LLRDetector`
+with the keywords of :func:`rwa_monitor.pipelines.llr.detector_kwargs`, so the node, the
+``detect`` command and the benchmarks share one implementation and one parameter meaning.
+
+Bad input (docs/nodes.md): a message whose arrays differ in length is dropped; entries
+with an empty or repeated name are dropped; names outside ``wheels`` (when set) or
+beyond ``max_wheels`` are dropped; a stamp equal to (duplicate) or up to
+``time_jump`` s before (out of order) the wheel's last one is dropped; a stamp more than
+``time_jump`` s before it (a replay loop) restarts that wheel's detector. NaN/Inf values
+go to the detector, which skips and counts them. Each case is counted in diagnostics and
+logged once; none reaches the detector's statistics.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Sequence
+
+from diagnostic_msgs.msg import DiagnosticArray
+from rclpy.node import Node
+from sensor_msgs.msg import JointState
+
+from rwa_monitor.core import keys
+from rwa_monitor.core.events import AnomalyEvent
+from rwa_monitor.exceptions import ConfigError
+from rwa_monitor.nodes import messages
+from rwa_monitor.nodes.common import (declare_parameters, DiagnosticsPublisher, EVENTS_QOS,
+                                      OK, ParamSpec, qos_event_callbacks, run_node,
+                                      telemetry_qos)
+from rwa_monitor.pipelines.llr import detector_kwargs
+
+NODE_NAME = 'llr_detector'
+INPUT_ID = 'telemetry/wheels'
+
+DETECTOR_PARAMETERS = ('window', 'k_verif', 'false_alarm_rate', 'noise_std')
+PARAMETERS = (
+    ParamSpec('window', 500, 'Samples after a candidate change used by the LLR test '
+              '(llr-realtime paper, Algorithm 1, w).', low=2, high=1_000_000),
+    ParamSpec('k_verif', 0, 'Verification samples before a declaration; 0 = window / 2.',
+              low=0, high=1_000_000),
+    ParamSpec('false_alarm_rate', 1.0e-5, 'Declare an anomaly when the nominal p-value is at '
+              'most this (per test).', low=0.0, high=1.0, low_open=True, high_open=True),
+    ParamSpec('noise_std', 0.0, 'Friction noise standard deviation (N m); 0 = estimate it '
+              'from the data.', low=0.0),
+    ParamSpec('wheels', '', 'Comma-separated wheel ids to monitor; empty = every wheel '
+              'seen on telemetry/wheels (up to max_wheels).'),
+    ParamSpec('max_wheels', 16, 'Most wheels monitored at once (bounds memory).', low=1,
+              high=256, read_only=True),
+    ParamSpec('time_jump', 1.0, 'A stamp more than this (s) before the last one restarts '
+              "the wheel's detector (replay loop); smaller steps back are dropped.",
+              low=0.0, low_open=True),
+    ParamSpec('stale_timeout', 3.0, 'Seconds without telemetry before health is STALE.',
+              low=0.0, low_open=True, read_only=True),
+    ParamSpec('diagnostic_period', 1.0, 'Seconds between /diagnostics messages.',
+              low=0.01, high=60.0, read_only=True),
+)
+
+
+class _Wheel:
+    """One monitored wheel: its detector, last stamp, counters and health."""
+
+    def __init__(self, detector: Any) -> None:
+        self.detector = detector
+        self.last_time: float | None = None
+        self.samples = 0
+        self.events = 0
+        self.counters = {'duplicate_stamp': 0, 'out_of_order': 0, 'time_jump_reset': 0}
+        self.earlier_rejects: dict[str, int] = {}
+        self.last_event: AnomalyEvent | None = None
+        self.health: Any = None
+
+    def restart(self) -> None:
+        """Reset the detector, keeping its counters of rejected samples in the totals."""
+        for reason, count in self.detector.counters.items():
+            self.earlier_rejects[reason] = self.earlier_rejects.get(reason, 0) + count
+        self.detector.reset()
+        self.last_time = None
+        self.last_event = None
+
+    def rejected(self) -> dict[str, int]:
+        """Return the detector's rejected samples by reason since the node started."""
+        out = dict(self.earlier_rejects)
+        for reason, count in self.detector.counters.items():
+            out[reason] = out.get(reason, 0) + count
+        return out
+
+
+class LLRDetectorNode(Node):
+    """Run one LLR detector per wheel; see the module docstring."""
+
+    def __init__(self, **kwargs: Any) -> None:
+        """Create the node (``kwargs`` go to rclpy's Node: context, cli_args, ...)."""
+        super().__init__(NODE_NAME, **kwargs)
+        self.params = declare_parameters(self, PARAMETERS, self._on_parameter)
+        try:
+            self._kwargs = detector_kwargs(self._detector_config())
+        except ValueError as err:
+            raise ConfigError(f'parameter {err}') from None
+        from rwa_monitor.core.llr import LLRDetector
+        self._detector_class = LLRDetector
+        self.wheels: dict[str, _Wheel] = {}
+        self.input_counters = {'messages': 0, 'length_mismatch': 0,
+                               'empty_name': 0, 'duplicate_name': 0, 'unknown_wheel': 0,
+                               'too_many_wheels': 0}
+        self.events: list[AnomalyEvent] = []
+        self._logged: set[tuple[str, str]] = set()
+        self._allowed = self._allowed_wheels()
+        self.diagnostics = DiagnosticsPublisher(
+            self, period=self.params['diagnostic_period'],
+            stale_timeout=self.params['stale_timeout'])
+        self.diagnostics.provide(INPUT_ID, 'input', self._input_health)
+        self._anomaly_pub = self.create_publisher(
+            DiagnosticArray, 'anomalies', EVENTS_QOS,
+            event_callbacks=qos_event_callbacks(self, 'anomalies', True))
+        self.create_subscription(
+            JointState, 'telemetry/wheels', self.on_wheels, telemetry_qos(),
+            event_callbacks=qos_event_callbacks(self, 'telemetry/wheels'))
+
+    # ------------------------------------------------------------------- parameters
+    def _detector_config(self) -> dict[str, Any]:
+        return {name: self.params[name] for name in DETECTOR_PARAMETERS}
+
+    def _allowed_wheels(self) -> set[str] | None:
+        names = {n.strip() for n in self.params['wheels'].split(',') if n.strip()}
+        return names or None
+
+    def _on_parameter(self, name: str, value: Any) -> None:
+        if name in DETECTOR_PARAMETERS:
+            self._kwargs = detector_kwargs(self._detector_config())
+            for wheel_id, wheel in self.wheels.items():
+                wheel.restart()
+                wheel.detector = self._new_detector(wheel_id)
+            self.get_logger().info(f'{name} = {value}: every wheel detector restarted')
+        elif name == 'wheels':
+            self._allowed = self._allowed_wheels()
+
+    def _new_detector(self, wheel_id: str) -> Any:
+        return self._detector_class(wheel_id, **self._kwargs)
+
+    # ---------------------------------------------------------------------- input
+    def _log_once(self, reason: str, subject: str, text: str) -> None:
+        if (reason, subject) not in self._logged:
+            self._logged.add((reason, subject))
+            self.get_logger().warning(f'{text} (further cases are only counted)')
+
+    def _reject(self, reason: str, subject: str, text: str, count: int = 1) -> None:
+        self.input_counters[reason] += count
+        self._log_once(reason, subject, text)
+
+    def on_wheels(self, msg: JointState) -> None:
+        """Feed one ``telemetry/wheels`` message to the wheels' detectors."""
+        self.input_counters['messages'] += 1
+        now = self.diagnostics.now()
+        self.diagnostics.mark_input(INPUT_ID, 'input', now)
+        try:
+            seconds, samples = messages.wheel_samples(msg)
+        except messages.BadMessage as err:
+            self._reject(err.reason, '', f'dropped a telemetry/wheels message: {err}')
+            return
+        if len(samples) != len(msg.name):
+            for reason, count in messages.wheel_name_problems(msg).items():
+                if count:
+                    self._reject(reason, '', f'dropped {count} entries: {reason}', count)
+        for wheel_id, speed, friction in samples:
+            wheel = self._wheel(wheel_id)
+            if wheel is not None:
+                wheel.health.last_input = now
+                self._feed(wheel_id, wheel, seconds, speed, friction)
+
+    def _wheel(self, wheel_id: str) -> _Wheel | None:
+        wheel = self.wheels.get(wheel_id)
+        if wheel is not None:
+            return wheel
+        if self._allowed is not None and wheel_id not in self._allowed:
+            self._reject('unknown_wheel', wheel_id,
+                         f'ignoring wheel {wheel_id!r}: not in parameter wheels')
+            return None
+        if len(self.wheels) >= self.params['max_wheels']:
+            self._reject('too_many_wheels', wheel_id,
+                         f'ignoring wheel {wheel_id!r}: max_wheels reached')
+            return None
+        wheel = self.wheels[wheel_id] = _Wheel(self._new_detector(wheel_id))
+        wheel.health = self.diagnostics.component(wheel_id, f'{wheel_id} friction')
+        self.diagnostics.provide(wheel_id, f'{wheel_id} friction',
+                                 lambda: self._wheel_health(wheel))
+        self.get_logger().info(f'monitoring wheel {wheel_id!r}')
+        return wheel
+
+    def _feed(self, wheel_id: str, wheel: _Wheel, seconds: float, speed: float,
+              friction: float) -> None:
+        if wheel.last_time is not None and seconds <= wheel.last_time:
+            back = wheel.last_time - seconds
+            if back > self.params['time_jump']:
+                wheel.counters['time_jump_reset'] += 1
+                self.get_logger().warning(
+                    f'{wheel_id}: time jumped back {back:.3f} s: detector restarted')
+                wheel.restart()
+            else:
+                reason = 'duplicate_stamp' if back == 0 else 'out_of_order'
+                wheel.counters[reason] += 1
+                self._log_once(reason, wheel_id, f'{wheel_id}: dropped a sample: {reason} '
+                               f'(t={seconds!r} after {wheel.last_time!r})')
+                return
+        wheel.last_time = seconds
+        wheel.samples += 1
+        found = wheel.detector.update(seconds, speed, friction)
+        if found:
+            self._publish_events(wheel, found)
+
+    # --------------------------------------------------------------------- output
+    def _publish_events(self, wheel: _Wheel, found: list[AnomalyEvent]) -> None:
+        out = DiagnosticArray()
+        out.header.stamp = messages.to_stamp(found[-1].declared_time)
+        out.status = [messages.event_status(e, self.get_name()) for e in found]
+        self._anomaly_pub.publish(out)
+        for event in found:
+            self.get_logger().warning(
+                f'{event.component}: {event.kind} anomaly, change at t={event.time:.3f} s '
+                f'(declared at t={event.declared_time:.3f} s, p={event.p_value:.3g})')
+        wheel.events += len(found)
+        wheel.last_event = found[-1]
+        self.events.extend(found)
+
+    def _wheel_health(self, wheel: _Wheel) -> tuple[bytes, str, dict[str, Any]]:
+        values: dict[str, Any] = {'samples': wheel.samples, 'events': wheel.events}
+        values.update(wheel.counters)
+        values.update({f'rejected_{k}': v for k, v in wheel.rejected().items()})
+        event = wheel.last_event
+        if event is None:
+            level, message = OK, 'no anomaly'
+            values[keys.KIND] = 'none'
+        else:
+            level = messages.event_level(event.kind)
+            message = f'{event.kind} anomaly since t={event.time:.3f} s'
+            values.update({keys.KIND: event.kind, keys.CHANGE_TIME: event.time,
+                           keys.P_VALUE: event.p_value})
+        noise = getattr(wheel.detector, 'noise_std', None)
+        if noise is not None:
+            values[keys.NOISE_STD] = noise
+        return level, message, values
+
+    def _input_health(self) -> tuple[bytes, str, dict[str, Any]]:
+        rejected = sum(v for k, v in self.input_counters.items() if k != 'messages')
+        message = (f'{len(self.wheels)} wheels' if not rejected
+                   else f'{len(self.wheels)} wheels; {rejected} entries rejected')
+        return OK, message, dict(self.input_counters)
+
+
+def main(args: Sequence[str] | None = None) -> int:
+    """Run the LLR detector node (console script ``rwa-monitor-llr``)."""
+    return run_node(lambda: LLRDetectorNode(), args)
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())
