@@ -4,7 +4,7 @@ VENV ?= .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test bench lint venv clean
+.PHONY: demo test bench lint venv clean test-bsk demo-bus bench-bus
 
 venv: $(STAMP)
 
@@ -29,3 +29,30 @@ lint: $(STAMP)
 
 clean:
 	rm -rf $(VENV) build install log *.egg-info
+
+# The optional spacecraft simulation bus (extra `bsk`) lives in its own environment: the
+# simulator pins matplotlib below requirements.txt's version (see requirements-bsk.txt).
+BSK_VENV ?= .venv-bsk
+BSK_PY := $(BSK_VENV)/bin/python
+BSK_STAMP := $(BSK_VENV)/.installed
+
+$(BSK_STAMP): requirements.txt requirements-bsk.txt setup.py setup.cfg
+	$(PYTHON) -m venv $(BSK_VENV)
+	$(BSK_PY) -m pip install --upgrade --quiet pip
+	$(BSK_PY) -m pip install --quiet -r requirements.txt
+	$(BSK_PY) -m pip install --quiet -r requirements-bsk.txt
+	$(BSK_PY) -m pip install --quiet --no-deps -e .
+	touch $(BSK_STAMP)
+
+test-bsk: $(BSK_STAMP)
+	$(BSK_PY) -m pytest test
+
+demo-bus: $(BSK_STAMP)
+	mkdir -p data/generated
+	$(BSK_VENV)/bin/rwa-monitor simulate basilisk --hours 1 --seed 1 \
+	  --fault friction:rw2:1800:dry=3e-4 --fault gyro:x:2400:drift=1e-6,level=2e-4 \
+	  -o data/generated/bus.csv
+	$(BSK_VENV)/bin/rwa-monitor detect data/generated/bus.csv
+
+bench-bus: $(BSK_STAMP)
+	$(BSK_VENV)/bin/rwa-monitor bench bus
