@@ -150,8 +150,11 @@ class ParamSpec:
         text = self.description
         if self.choices:
             text += f' One of: {", ".join(self.choices)}.'
+        # Typed by check(), so that a value of the wrong type is refused with a reason
+        # naming the parameter (ROS's own type check does not name it) and an integer
+        # written for a float parameter (rate: 40) is accepted as 40.0.
         desc = ParameterDescriptor(name=self.name, description=text,
-                                   read_only=self.read_only)
+                                   read_only=self.read_only, dynamic_typing=True)
         kind = type(self.default)
         if kind is float and (self.low is not None or self.high is not None):
             desc.floating_point_range = [FloatingPointRange(
@@ -183,13 +186,16 @@ class Parameters(Mapping[str, Any]):
 
 
 def declare_parameters(node: Node, specs: Sequence[ParamSpec],
-                       on_change: Callable[[str, Any], None] | None = None) -> Parameters:
+                       on_change: Callable[[str, Any], None] | None = None,
+                       check_all: Callable[[dict[str, Any]], None] | None = None
+                       ) -> Parameters:
     """Declare ``specs`` on ``node``, validate them, and guard every later change.
 
     Start-up values (defaults, ``--params-file``, ``-p``) that break a spec raise
     :class:`ConfigError` naming the parameter. At run time a set request with a bad value
     is rejected with that reason; accepted values update the returned mapping, then
-    ``on_change(name, value)`` is called for each.
+    ``on_change(name, value)`` is called for each. ``check_all(values)`` checks rules
+    between parameters (raise ValueError naming one), at start-up and on every change.
     """
     by_name = {spec.name: spec for spec in specs}
     values: dict[str, Any] = {}
@@ -203,14 +209,25 @@ def declare_parameters(node: Node, specs: Sequence[ParamSpec],
             values[spec.name] = spec.check(param.value)
         except ValueError as err:
             raise ConfigError(f'parameter {err}') from None
+    if check_all is not None:
+        try:
+            check_all(dict(values))
+        except ValueError as err:
+            raise ConfigError(f'parameter {err}') from None
 
     def on_set(params: list[Parameter]) -> SetParametersResult:
+        proposed = dict(values)
         for param in params:
             spec = by_name.get(param.name)
             if spec is None:
                 continue
             try:
-                spec.check(param.value)
+                proposed[param.name] = spec.check(param.value)
+            except ValueError as err:
+                return SetParametersResult(successful=False, reason=str(err))
+        if check_all is not None:
+            try:
+                check_all(proposed)
             except ValueError as err:
                 return SetParametersResult(successful=False, reason=str(err))
         return SetParametersResult(successful=True)

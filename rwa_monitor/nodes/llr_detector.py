@@ -27,7 +27,6 @@ from sensor_msgs.msg import JointState
 
 from rwa_monitor.core import keys
 from rwa_monitor.core.events import AnomalyEvent
-from rwa_monitor.exceptions import ConfigError
 from rwa_monitor.nodes import messages
 from rwa_monitor.nodes.common import (declare_parameters, DiagnosticsPublisher, EVENTS_QOS,
                                       OK, ParamSpec, qos_event_callbacks, run_node,
@@ -96,13 +95,11 @@ class LLRDetectorNode(Node):
     def __init__(self, **kwargs: Any) -> None:
         """Create the node (``kwargs`` go to rclpy's Node: context, cli_args, ...)."""
         super().__init__(NODE_NAME, **kwargs)
-        self.params = declare_parameters(self, PARAMETERS, self._on_parameter)
-        try:
-            self._kwargs = detector_kwargs(self._detector_config())
-        except ValueError as err:
-            raise ConfigError(f'parameter {err}') from None
         from rwa_monitor.core.llr import LLRDetector
         self._detector_class = LLRDetector
+        self.params = declare_parameters(self, PARAMETERS, self._on_parameter,
+                                         self._check_detector)
+        self._kwargs = detector_kwargs(self._detector_config())
         self.wheels: dict[str, _Wheel] = {}
         self.input_counters = {'messages': 0, 'length_mismatch': 0,
                                'empty_name': 0, 'duplicate_name': 0, 'unknown_wheel': 0,
@@ -122,8 +119,13 @@ class LLRDetectorNode(Node):
             event_callbacks=qos_event_callbacks(self, 'telemetry/wheels'))
 
     # ------------------------------------------------------------------- parameters
-    def _detector_config(self) -> dict[str, Any]:
-        return {name: self.params[name] for name in DETECTOR_PARAMETERS}
+    def _detector_config(self, values: Any = None) -> dict[str, Any]:
+        values = self.params if values is None else values
+        return {name: values[name] for name in DETECTOR_PARAMETERS}
+
+    def _check_detector(self, values: dict[str, Any]) -> None:
+        """Build a detector from ``values`` (ValueError naming a parameter if it fails)."""
+        self._detector_class('check', **detector_kwargs(self._detector_config(values)))
 
     def _allowed_wheels(self) -> set[str] | None:
         names = {n.strip() for n in self.params['wheels'].split(',') if n.strip()}
