@@ -39,6 +39,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 
 from rwa_monitor.core.params import check_choice, check_int, check_real
 from rwa_monitor.exceptions import ConfigError
+from rwa_monitor.paths import config_file
 
 # --------------------------------------------------------------------------------- QoS
 
@@ -379,16 +380,34 @@ class DiagnosticsPublisher:
 
 # -------------------------------------------------------------------------------- main
 
+def with_default_params(argv: list[str]) -> list[str]:
+    """Return ``argv`` with the installed config/rwa_monitor.yaml loaded first.
+
+    Only when ``argv`` names no ``--params-file`` of its own; ``-p`` values still win.
+    """
+    if '--params-file' in argv:
+        return argv
+    try:
+        path = config_file()
+    except FileNotFoundError:
+        return argv
+    return [*argv[:1], '--ros-args', '--params-file', str(path), '--', *argv[1:]]
+
+
 def run_node(factory: Callable[[], Node], args: Sequence[str] | None = None,
              executor: str = 'single') -> int:
     """Initialise rclpy with ``args``, create the node, spin it; return an exit code.
+
+    ``args`` (default ``sys.argv``) get the installed parameter file first (see
+    :func:`with_default_params`), so a console script runs with the shipped defaults,
+    ``use_sim_time`` included.
 
     A :class:`ConfigError` at start-up (a bad parameter) is printed and gives 2; Ctrl-C
     and an external shutdown end cleanly with 0. The node may end itself by calling
     ``rclpy.try_shutdown(context=node.context)`` (the replay does when it is done).
     ``executor`` is ``'single'`` or ``'events'`` (rclpy.experimental.EventsExecutor).
     """
-    rclpy.init(args=args)
+    rclpy.init(args=with_default_params(sys.argv if args is None else list(args)))
     node = None
     try:
         node = factory()

@@ -1,0 +1,181 @@
+"""Launch-free tests of the telemetry_replay node."""
+
+from geometry_msgs.msg import QuaternionStamped, Vector3Stamped
+import numpy as np
+import pytest
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from ros_harness import Collector, DomainLease, RosWorld
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import Imu, JointState
+
+from rwa_monitor.exceptions import ConfigError
+from rwa_monitor.nodes import messages
+from rwa_monitor.nodes.common import CLOCK_QOS, telemetry_qos
+from rwa_monitor.nodes.replay import main, TelemetryReplay
+from rwa_monitor.telemetry import read_telemetry, Telemetry, Wheel, write_telemetry
+
+pytestmark = pytest.mark.ros
+
+
+def _telemetry(n=40):
+    rng = np.random.default_rng(5)
+    time = 10.0 + 0.1 * np.arange(n)
+    q = rng.normal(size=(n, 4))
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    return Telemetry(time=time, wheels={'rw1': Wheel(rng.normal(size=n), rng.normal(size=n)),
+                                        'rw2': Wheel(rng.normal(size=n), rng.normal(size=n))},
+                     gyro=rng.normal(size=(n, 3)), attitude=q,
+                     reference_rate=rng.normal(size=(n, 3)))
+
+
+def _replay(world, path, **params):
+    values = {'file': str(path), 'rate': 0.0, 'exit_when_done': False, **params}
+    return world.node(TelemetryReplay, parameter_overrides=[
+        Parameter(k, value=v) for k, v in values.items()])
+
+
+class _Listener:
+    def __init__(self, world):
+        node = world.node(Node, 'listener')
+        qos = telemetry_qos()
+        self.wheels = Collector(node, JointState, 'telemetry/wheels', qos)
+        self.gyro = Collector(node, Imu, 'telemetry/gyro', qos)
+        self.star = Collector(node, QuaternionStamped, 'telemetry/star_tracker', qos)
+        self.ref = Collector(node, Vector3Stamped, 'telemetry/reference_rate', qos)
+        self.clock = Collector(node, Clock, '/clock', CLOCK_QOS)
+
+
+@pytest.mark.parametrize('suffix', ['.csv', '.mcap'])
+def test_every_channel_published_with_telemetry_stamps(tmp_path, suffix):
+    path = tmp_path / f'tele{suffix}'
+    write_telemetry(path, _telemetry())
+    tele = read_telemetry(path)
+    with RosWorld() as world:
+        listen = _Listener(world)
+        replay = _replay(world, path)
+        world.wait_until(lambda: replay.done and len(listen.ref) == len(tele), 20.0,
+                         'every row on every topic')
+        world.wait_until(lambda: listen.clock.messages and messages.to_seconds(
+            listen.clock.messages[-1].clock) == pytest.approx(tele.time[-1]), 5.0, '/clock')
+    n = len(tele)
+    assert len(listen.wheels) == len(listen.gyro) == len(listen.star) == n
+    stamps = [messages.to_seconds(m.header.stamp) for m in listen.wheels.messages]
+    np.testing.assert_allclose(stamps, tele.time, atol=1e-9)
+    first = listen.wheels.messages[0]
+    assert list(first.name) == ['rw1', 'rw2']
+    assert list(first.velocity) == [tele.wheels['rw1'].speed[0], tele.wheels['rw2'].speed[0]]
+    assert list(first.effort) == [tele.wheels['rw1'].friction[0],
+                                  tele.wheels['rw2'].friction[0]]
+    imu = listen.gyro.messages[3]
+    assert [imu.angular_velocity.x, imu.angular_velocity.y, imu.angular_velocity.z] == \
+        tele.gyro[3].tolist()
+    assert imu.orientation_covariance[0] == -1.0 and imu.header.frame_id == 'body'
+    q = listen.star.messages[5].quaternion
+    assert [q.x, q.y, q.z, q.w] == tele.attitude[5].tolist()
+    v = listen.ref.messages[7].vector
+    assert [v.x, v.y, v.z] == tele.reference_rate[7].tolist()
+    assert replay.progress == 1.0 and replay.published == n
+
+
+def test_only_the_channels_the_file_has(tmp_path):
+    tele = Telemetry(time=np.arange(5.0), wheels={'rw1': Wheel(np.ones(5), np.zeros(5))})
+    path = tmp_path / 'w.csv'
+    write_telemetry(path, tele)
+    with RosWorld() as world:
+        replay = _replay(world, path)
+        topics = dict(replay.get_topic_names_and_types())
+    assert '/telemetry/wheels' in topics and '/clock' in topics
+    assert '/telemetry/gyro' not in topics and '/telemetry/star_tracker' not in topics
+
+
+def test_start_offset_and_loop(tmp_path):
+    tele = _telemetry(n=20)
+    path = tmp_path / 'tele.csv'
+    write_telemetry(path, tele)
+    with RosWorld() as world:
+        listen = _Listener(world)
+        replay = _replay(world, path, start_offset=1.0, loop=True)
+        world.wait_until(lambda: len(listen.wheels) >= 25, 20.0, 'more than one pass')
+    stamps = [round(messages.to_seconds(m.header.stamp), 6) for m in listen.wheels.messages]
+    assert stamps[0] == pytest.approx(11.0)
+    assert stamps[9] == pytest.approx(11.9) and stamps[10] == pytest.approx(11.0)
+    assert replay.loops >= 1
+
+
+def test_real_time_factor_keeps_order(tmp_path):
+    tele = _telemetry(n=30)
+    path = tmp_path / 'tele.csv'
+    write_telemetry(path, tele)
+    with RosWorld() as world:
+        listen = _Listener(world)
+        replay = _replay(world, path, rate=200.0)
+        world.wait_until(lambda: replay.done and len(listen.wheels) == 30, 20.0, 'the file')
+    stamps = [messages.to_seconds(m.header.stamp) for m in listen.wheels.messages]
+    assert np.all(np.diff(stamps) > 0)
+
+
+def test_rate_zero_waits_for_a_subscriber(tmp_path):
+    tele = _telemetry(n=10)
+    path = tmp_path / 'tele.csv'
+    write_telemetry(path, tele)
+    with RosWorld() as world:
+        replay = _replay(world, path)
+        world.spin_for(0.3)
+        assert replay.published == 0
+        listen = _Listener(world)
+        world.wait_until(lambda: len(listen.wheels) == 10, 20.0, 'the rows once subscribed')
+
+
+def test_exit_when_done_shuts_the_context_down(tmp_path):
+    tele = _telemetry(n=10)
+    path = tmp_path / 'tele.csv'
+    write_telemetry(path, tele)
+    with RosWorld() as world:
+        _Listener(world)
+        replay = _replay(world, path, exit_when_done=True)
+        world.wait_until(lambda: not world.context.ok(), 20.0, 'the replay to shut down')
+        assert replay.done
+
+
+@pytest.mark.parametrize('params,fragment', [
+    ({}, 'file'),
+    ({'file': '/no/such/file.csv'}, 'file'),
+    ({'rate': -1.0}, 'rate'),
+    ({'start_offset': 99999.0}, 'start_offset'),
+    ({'burst': 0}, 'burst'),
+    ({'loop': 'yes'}, 'loop'),
+])
+def test_bad_parameters_at_start_up(tmp_path, params, fragment):
+    path = tmp_path / 'tele.csv'
+    write_telemetry(path, _telemetry(n=10))
+    values = {'file': str(path), **params}
+    if not params:
+        values.pop('file')
+    with RosWorld() as world:
+        with pytest.raises(ConfigError, match=fragment):
+            world.node(TelemetryReplay, parameter_overrides=[
+                Parameter(k, value=v) for k, v in values.items()])
+
+
+def test_run_time_parameters(tmp_path):
+    path = tmp_path / 'tele.csv'
+    write_telemetry(path, _telemetry(n=10))
+    with RosWorld() as world:
+        replay = _replay(world, path, rate=1.0)
+        result = replay.set_parameters([Parameter('rate', value=-2.0)])[0]
+        assert not result.successful and 'rate' in result.reason
+        assert not replay.set_parameters([Parameter('file', value='x.csv')])[0].successful
+        assert replay.set_parameters([Parameter('rate', value=40)])[0].successful
+        assert replay.params['rate'] == 40.0
+
+
+def test_console_script_reports_a_bad_file(capsys, monkeypatch):
+    lease = DomainLease()
+    monkeypatch.setenv('ROS_DOMAIN_ID', str(lease.domain_id))
+    try:
+        code = main(['rwa-monitor-replay', '--ros-args', '-p', 'file:=/no/such.csv'])
+    finally:
+        lease.release()
+    assert code == 2
+    assert 'file' in capsys.readouterr().err
