@@ -37,10 +37,10 @@ NOMINAL_BASE_DRY = (0.9, 1.1)
 NOMINAL_VISCOUS = (0.9, 1.1)
 NOISE_STD = (0.02, 0.03)       # the paper's Fig. 9: |error| > 0.08 at 1e-3 -> sigma ~ 0.025
 # Anomalies (docs/fss.md explains the magnitudes).
-ANOMALY_BASE_DRY = (2.2, 2.6)
+ANOMALY_BASE_DRY = (2.5, 3.0)
 ANOMALY_VISCOUS = (1.3, 1.6)
 ANOMALY_FSS1_LEVELS = ((0.0, 0.1), (0.42, 0.55))
-ANOMALY_FSS2_LEVELS = ((0.0, 0.2), (0.9, 1.1), (1.8, 2.0))
+ANOMALY_FSS2_LEVELS = ((0.0, 0.2), (1.1, 1.3), (2.2, 2.4))
 
 
 def systems_for(status: str,
@@ -210,7 +210,7 @@ def build_dataset(out_dir: str | os.PathLike, *, per_status: int = 50, seed: int
             name = f'{status}_{j:04d}.npz'
             np.savez(out / name, speed=sig['speed'].astype(np.float32),
                      friction=sig['friction'].astype(np.float32),
-                     jump=sig['jump'].astype(np.int8), levels=sig['levels'].astype(np.float32))
+                     jump=sig['jump'].astype(np.int8))
             entries.append({'file': name, 'status': status, 'seed': [seed, s_idx, j],
                             'base_dry': sig['base_dry'], 'viscous': sig['viscous'],
                             'noise_std': sig['noise_std'],
@@ -239,3 +239,43 @@ def load_window(path: str | os.PathLike, entry: dict) -> tuple[np.ndarray, np.nd
     """Return (speed, friction) of one data-set window, normalised, paper sign."""
     with np.load(pathlib.Path(path) / entry['file']) as data:
         return data['speed'].astype(float), data['friction'].astype(float)
+
+
+def dataset_extractions(path: str | os.PathLike, config=None, *, cache: bool = True,
+                        progress=None) -> list[dict]:
+    """Return stages 1-3 of every window of a data set, cached in ``extractions.json``.
+
+    Each item: ``file``, ``status``, ``features`` (classifier input) and ``stats``
+    (changepoints detected, rejected, DP iterations, exactness, stage times in s). The
+    cache is reused only when it was made with the same diagnoser parameters.
+    """
+    from dataclasses import asdict
+
+    from rwa_monitor.core.fss.pipeline import extract, FssConfig
+    config = FssConfig() if config is None else config
+    path = pathlib.Path(path)
+    manifest = load_manifest(path)
+    signature = json.dumps({k: v for k, v in asdict(config).items() if k != 'systems'},
+                           sort_keys=True) + repr(config.systems)
+    cache_file = path / 'extractions.json'
+    if cache and cache_file.is_file():
+        cached = json.loads(cache_file.read_text())
+        if cached.get('signature') == signature and len(cached['items']) == len(
+                manifest['windows']):
+            return cached['items']
+    items = []
+    for j, entry in enumerate(manifest['windows']):
+        speed, friction = load_window(path, entry)
+        ext = extract(speed, friction, config)
+        items.append({'file': entry['file'], 'status': entry['status'],
+                      'features': ext.features(),
+                      'stats': {'detected': int(ext.detected.size), 'rejected': ext.rejected,
+                                'accepted': int(ext.accepted.size),
+                                'iterations': ext.iterations, 'exact': ext.exact,
+                                'rmse': ext.rmse, 'sigma': ext.sigma,
+                                'timings': ext.timings}})
+        if progress is not None:
+            progress(j + 1, len(manifest['windows']))
+    if cache:
+        cache_file.write_text(json.dumps({'signature': signature, 'items': items}) + '\n')
+    return items

@@ -32,7 +32,7 @@ from typing import Sequence
 
 import numpy as np
 
-from rwa_monitor.core.fss.model import SwitchingSystem
+from rwa_monitor.core.fss.model import LOG_FLOOR, SwitchingSystem
 from rwa_monitor.core.params import check_int
 
 
@@ -45,6 +45,32 @@ class Assignment:
     score: float
     iterations: int           # states expanded, summed over stages
     exact: bool               # no stage was cut by the beam
+
+
+class _Tables:
+    """Per-system look-up arrays for the DP (the same laws as SwitchingSystem)."""
+
+    def __init__(self, system: SwitchingSystem) -> None:
+        res = np.asarray(system.residence, dtype=float)
+        self.lo, self.hi = res[:, 0], res[:, 1]
+        self.log_r = -np.log(self.hi - self.lo + 1.0)
+        self.r = self.hi - self.lo + 1.0
+        self.top = system.n_config - 1
+        qs = np.arange(system.n_config)
+        self.log_up = system.log_pq(qs, np.ones_like(qs))
+        self.log_down = system.log_pq(qs, -np.ones_like(qs))
+
+    def gain(self, q, last, t, d, sign) -> np.ndarray:
+        """Return the score of a jump of this system (-inf if q leaves its range)."""
+        lo, hi = self.lo[q], self.hi[q]
+        first = np.where(t <= hi, -np.log(np.maximum(np.minimum(t, self.r[q]), 1.0)),
+                         LOG_FLOOR)
+        later = np.where((d >= lo) & (d <= hi), self.log_r[q], LOG_FLOOR)
+        out = np.where(last == 0, first, later)
+        out += self.log_up[q] if sign > 0 else self.log_down[q]
+        new = q + sign
+        out[(new < 0) | (new > self.top)] = -np.inf
+        return out
 
 
 def _initial(systems: Sequence[SwitchingSystem]) -> np.ndarray:
@@ -79,51 +105,40 @@ def assign_changepoints(times: np.ndarray, signs: np.ndarray, reject_cost: np.nd
     n_sys = len(systems)
     times_ext = np.concatenate(([-1], times))
     radix = np.array([s.n_config * (m + 1) for s in systems], dtype=np.int64)
+    tables = [_Tables(system) for system in systems]
     q = _initial(systems)
     last = np.zeros_like(q)
     score = np.zeros(q.shape[0])
     parents, inputs_hist = [], []
     iterations, exact = 0, True
     for i in range(m):
-        iterations += q.shape[0]
-        cand_q, cand_last, cand_score = [q], [last], [score - reject_cost[i]]
-        cand_parent = [np.arange(q.shape[0])]
-        cand_input = [np.zeros(q.shape[0], dtype=np.int64)]
-        for s, system in enumerate(systems):
-            new = q[:, s] + signs[i]
-            ok = (new >= 0) & (new < system.n_config)
-            if not ok.any():
-                continue
-            idx = np.flatnonzero(ok)
-            qs, ls = q[idx, s], last[idx, s]
-            d = times[i] - times_ext[ls]
-            gain = np.where(ls == 0, system.log_first(qs, times[i]),
-                            system.log_pmf(qs, d)) + system.log_pq(qs, signs[i])
-            nq, nl = q[idx].copy(), last[idx].copy()
-            nq[:, s] = new[idx]
-            nl[:, s] = i + 1
-            cand_q.append(nq)
-            cand_last.append(nl)
-            cand_score.append(score[idx] + gain)
-            cand_parent.append(idx)
-            cand_input.append(np.full(idx.size, s + 1, dtype=np.int64))
-        q = np.concatenate(cand_q)
-        last = np.concatenate(cand_last)
-        score = np.concatenate(cand_score)
-        parent = np.concatenate(cand_parent)
-        inp = np.concatenate(cand_input)
-        key = np.zeros(q.shape[0], dtype=np.int64)
+        n_st = q.shape[0]
+        iterations += n_st
+        nq = np.tile(q, (n_sys + 1, 1))
+        nl = np.tile(last, (n_sys + 1, 1))
+        sc = np.tile(score, n_sys + 1)
+        sc[:n_st] -= reject_cost[i]
+        for s, tab in enumerate(tables):
+            rows = slice((s + 1) * n_st, (s + 2) * n_st)
+            qs, ls = q[:, s], last[:, s]
+            gain = tab.gain(qs, ls, times[i], times[i] - times_ext[ls], signs[i])
+            nq[rows, s] = qs + signs[i]
+            nl[rows, s] = i + 1
+            sc[rows] += gain
+        ok = np.isfinite(sc)
+        idx = np.flatnonzero(ok)
+        key = np.zeros(idx.size, dtype=np.int64)
         for s in range(n_sys):
-            key = key * radix[s] + q[:, s] * (m + 1) + last[:, s]
-        order = np.lexsort((-score, key))
+            key = key * radix[s] + nq[idx, s] * (m + 1) + nl[idx, s]
+        order = np.lexsort((-sc[idx], key))
         ks = key[order]
-        keep = order[np.concatenate(([True], ks[1:] != ks[:-1]))]
+        keep = idx[order[np.concatenate(([True], ks[1:] != ks[:-1]))]]
         if keep.size > beam:
             exact = False
-            keep = keep[np.argpartition(-score[keep], beam - 1)[:beam]]
-        q, last, score = q[keep], last[keep], score[keep]
-        parents.append(parent[keep])
-        inputs_hist.append(inp[keep])
+            keep = keep[np.argpartition(-sc[keep], beam - 1)[:beam]]
+        q, last, score = nq[keep], nl[keep], sc[keep]
+        parents.append(keep % n_st)
+        inputs_hist.append(keep // n_st)
     iterations += q.shape[0]
     final = score + _end_scores(systems, q, last, times_ext, n)
     best = int(np.argmax(final))

@@ -16,6 +16,8 @@ statistic 2 log LR. Departures from the paper, on purpose (docs/fss.md):
   sigma^2 * chi2.isf(p, 1) keeps the false-positive probability per sample <= p;
 * a ridge of 1e-9 w is added to W_b so that constant speed (f^d and f^v not separable)
   gives a defined statistic instead of a singular system;
+* a run maximum closer than w to a larger one is dropped: near a zero crossing or a
+  large jump the statistic has side lobes above the threshold that are the same jump;
 * samples with a non-finite value are left out of every sum; a window with fewer than
   w / 2 usable samples on either side gets wGLR = 0 (no decision).
 
@@ -55,10 +57,6 @@ def estimate_sigma(y: np.ndarray, x: np.ndarray, viscous_prior: float) -> float:
     return float(1.4826 * np.median(np.abs(r - np.median(r))) / np.sqrt(2.0))
 
 
-def _windowed(p: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
-    return p[hi] - p[lo]
-
-
 def wglr(y: np.ndarray, x: np.ndarray, *, window: int, w_bias: float,
          viscous_prior: float) -> np.ndarray:
     """Return wGLR_k for every k (0 where the window does not fit), eq. (10)-(11)."""
@@ -80,13 +78,19 @@ def wglr(y: np.ndarray, x: np.ndarray, *, window: int, w_bias: float,
     p_a, p_b, p_xx = prefix(s * s), prefix(s * xv), prefix(xv * xv)
     p_y, p_xy = prefix(s * yv), prefix(xv * yv)
     k = np.arange(window, n - window + 1)
-    left, mid, right = k - window, k, k + window
-    a1, a2 = _windowed(p_a, left, mid), _windowed(p_a, mid, right)
-    b1, b2 = _windowed(p_b, left, mid), _windowed(p_b, mid, right)
-    y1, y2 = _windowed(p_y, left, mid), _windowed(p_y, mid, right)
+    w2 = 2 * window
+
+    def left(p: np.ndarray) -> np.ndarray:
+        return p[window:n - window + 1] - p[:n - w2 + 1]
+
+    def right(p: np.ndarray) -> np.ndarray:
+        return p[w2:] - p[window:n - window + 1]
+    a1, a2 = left(p_a), right(p_a)
+    b1, b2 = left(p_b), right(p_b)
+    y1, y2 = left(p_y), right(p_y)
     ridge = w_bias + 1e-9 * window
-    c = _windowed(p_xx, left, right) + ridge
-    r = _windowed(p_xy, left, right) + ridge * viscous_prior
+    c = p_xx[w2:] - p_xx[:n - w2 + 1] + ridge
+    r = p_xy[w2:] - p_xy[:n - w2 + 1] + ridge * viscous_prior
     usable = (a1 >= window / 2) & (a2 >= window / 2)
     a1, a2 = np.where(usable, a1, 1.0), np.where(usable, a2, 1.0)
     # Jump: eliminate the two dry levels, solve for the shared viscous coefficient.
@@ -102,24 +106,37 @@ def wglr(y: np.ndarray, x: np.ndarray, *, window: int, w_bias: float,
     return out
 
 
-def run_maxima(glr: np.ndarray, threshold: float) -> np.ndarray:
-    """Return the arg max of each run of contiguous samples above ``threshold``."""
+def run_maxima(glr: np.ndarray, threshold: float, separation: int = 0) -> np.ndarray:
+    """Return the arg max of each run of contiguous samples above ``threshold``.
+
+    With ``separation`` > 0, a maximum closer than ``separation`` samples to a larger
+    one is dropped (a side lobe of the same jump, docs/fss.md).
+    """
     above = glr > threshold
     if not above.any():
         return np.empty(0, dtype=int)
     edges = np.diff(np.concatenate(([0], above.astype(np.int8), [0])))
     starts, stops = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
-    return np.array([a + int(np.argmax(glr[a:b])) for a, b in zip(starts, stops)], dtype=int)
+    peaks = np.array([a + int(np.argmax(glr[a:b])) for a, b in zip(starts, stops)],
+                     dtype=int)
+    if separation <= 0 or peaks.size < 2:
+        return peaks
+    kept: list[int] = []
+    for k in peaks[np.argsort(-glr[peaks], kind='stable')]:
+        if all(abs(k - j) >= separation for j in kept):
+            kept.append(int(k))
+    return np.sort(np.array(kept, dtype=int))
 
 
 def detect_changepoints(y: np.ndarray, x: np.ndarray, *, window: int = 20,
                         w_bias: float = 1e-4, viscous_prior: float = 1.0,
-                        p_false: float = 1e-9, sigma: float | None = None
-                        ) -> ChangepointResult:
+                        p_false: float = 1e-9, sigma: float | None = None,
+                        suppress: bool = True) -> ChangepointResult:
     """Run stage 1 (section IV-A): wGLR, chi-square threshold, one changepoint per run.
 
     ``p_false`` is the false-positive probability per sample (Wilks: wGLR / sigma^2 ~
-    chi2(1)); ``sigma`` is estimated from the data when not given.
+    chi2(1)); ``sigma`` is estimated from the data when not given. ``suppress`` drops a
+    run maximum within ``window`` samples of a larger one (departure, docs/fss.md).
     """
     p_false = check_real('p_false', p_false, 0.0, 1.0, low_open=True, high_open=True)
     if sigma is None:
@@ -128,4 +145,5 @@ def detect_changepoints(y: np.ndarray, x: np.ndarray, *, window: int = 20,
     if not np.isfinite(sigma) or sigma <= 0.0:
         return ChangepointResult(glr, float('inf'), float(sigma), np.empty(0, dtype=int))
     threshold = float(sigma ** 2 * stats.chi2.isf(p_false, 1))
-    return ChangepointResult(glr, threshold, float(sigma), run_maxima(glr, threshold))
+    return ChangepointResult(glr, threshold, float(sigma),
+                             run_maxima(glr, threshold, window if suppress else 0))

@@ -1,0 +1,154 @@
+"""Stage 4: one linear SVM per anomaly, eq. (24)-(27).
+
+``dry`` and ``viscous`` classify one number each (the base dry friction, the viscous
+coefficient: a learned threshold, section IV-D1); ``fss<s>`` classifies normalised
+histograms (eq. 27) of system s: of its levels (``use='levels'``, the paper, all
+configurations, section IV-D2), of its jump sizes |F_s[j] - F_s[j-1]| (``'jumps'``), or
+both concatenated (``'both'``, the default). Jump sizes are a departure: one changepoint
+assigned to the wrong system shifts every later level of Algorithm 1's running sum, but
+only one jump size (docs/fss.md has the measured effect). Inputs
+that are single numbers are standardised with the training mean and std before the
+SVM; histograms (fractions in [0, 1]) are used as they are. Departures
+(docs/fss.md): the histogram range [r_min, r_max] is the range of the training levels,
+and a level outside it counts in the nearest end bin (eq. 27 would drop it). A trained
+model is plain JSON (weights, bias, standardisation, bins): inference is
+sign(w^T z + b) (eq. 26) without scikit-learn.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from typing import Sequence
+
+import numpy as np
+
+from rwa_monitor.core.params import check_choice, check_int, check_real
+
+MODEL_KIND = 'rwa-monitor-fss-model'
+USES = ('levels', 'jumps', 'both')
+
+
+def histogram(levels: Sequence[float], bins: int, lo: float, hi: float) -> np.ndarray:
+    """Return the normalised histogram of eq. (27): fraction of levels per bin."""
+    z = np.zeros(bins)
+    values = np.asarray(levels, dtype=float)
+    values = values[np.isfinite(values)]
+    if values.size == 0 or hi <= lo:
+        return z
+    idx = np.clip(((values - lo) / (hi - lo) * bins).astype(int), 0, bins - 1)
+    np.add.at(z, idx, 1.0)
+    return z / values.size
+
+
+def anomaly_names(n_systems: int) -> tuple[str, ...]:
+    """Return the anomaly names: dry, viscous, fss1 .. fssS."""
+    return ('dry', 'viscous') + tuple(f'fss{s + 1}' for s in range(n_systems))
+
+
+def _vector(features: dict, name: str, spec: dict) -> np.ndarray:
+    if name == 'dry':
+        return np.array([features['base_dry']])
+    if name == 'viscous':
+        return np.array([features['viscous']])
+    s = int(name[3:]) - 1
+    parts = []
+    if spec.get('use', 'both') in ('levels', 'both'):
+        parts.append(histogram(features['levels'][s], spec['bins'], *spec['range']))
+    if spec.get('use', 'both') in ('jumps', 'both'):
+        parts.append(histogram(jumps(features['levels'][s]), spec['bins'],
+                               *spec['jump_range']))
+    return np.concatenate(parts)
+
+
+def jumps(levels: Sequence[float]) -> np.ndarray:
+    """Return the jump sizes |F_s[j] - F_s[j-1]| of one FSS's level sequence."""
+    return np.abs(np.diff(np.asarray(levels, dtype=float)))
+
+
+class WindowClassifier:
+    """The trained SVMs of every anomaly; ``predict`` gives one boolean per anomaly."""
+
+    def __init__(self, spec: dict) -> None:
+        if spec.get('kind') != MODEL_KIND:
+            raise ValueError('not an FSS model: kind must be ' + MODEL_KIND)
+        self.spec = spec
+        self.names = tuple(spec['anomalies'])
+
+    @classmethod
+    def fit(cls, features: Sequence[dict], labels: Sequence[str], *, bins: int = 20,
+            c: float = 1.0, n_systems: int = 2, seed: int = 0,
+            use: str = 'both') -> 'WindowClassifier':
+        """Train one linear SVM per anomaly on window features and status labels.
+
+        ``features``: per window {'base_dry', 'viscous', 'levels': [[...] per system]};
+        ``labels``: the window's status ('nominal' or an anomaly name).
+        """
+        from sklearn.svm import LinearSVC
+        bins = check_int('bins', bins, 1, 10_000)
+        c = check_real('c', c, 0.0, low_open=True)
+        check_choice('use', use, USES)
+        labels = list(labels)
+        if len(labels) != len(features) or not labels:
+            raise ValueError('features and labels must be non-empty and of equal length')
+        names = anomaly_names(n_systems)
+        spec = {'kind': MODEL_KIND, 'version': 1, 'anomalies': list(names), 'models': {},
+                'bins': bins, 'c': c, 'n_train': len(labels)}
+        for name in names:
+            y = np.array([lab == name for lab in labels])
+            if y.all() or not y.any():
+                raise ValueError(f'training labels must include windows with and without '
+                                 f'the {name} anomaly')
+            entry: dict = {'bins': bins, 'use': use}
+            if name.startswith('fss'):
+                s = int(name[3:]) - 1
+                values = np.concatenate([np.asarray(f['levels'][s], dtype=float)
+                                         for f in features])
+                values = values[np.isfinite(values)]
+                entry['range'] = [float(values.min()), float(values.max())]
+                steps = np.concatenate([jumps(f['levels'][s]) for f in features])
+                steps = steps[np.isfinite(steps)]
+                entry['jump_range'] = [0.0, float(steps.max()) if steps.size else 1.0]
+            z = np.array([_vector(f, name, entry) for f in features])
+            if name.startswith('fss'):  # fractions already in [0, 1]
+                mean, scale = np.zeros(z.shape[1]), np.ones(z.shape[1])
+            else:
+                mean, scale = z.mean(axis=0), z.std(axis=0)
+                scale = np.where(scale > 1e-12, scale, 1.0)
+            svm = LinearSVC(C=c, class_weight='balanced', random_state=seed, max_iter=20000,
+                            dual='auto')
+            svm.fit((z - mean) / scale, y)
+            entry.update(mean=mean.tolist(), scale=scale.tolist(),
+                         coef=svm.coef_[0].tolist(), intercept=float(svm.intercept_[0]))
+            spec['models'][name] = entry
+        return cls(spec)
+
+    def decision(self, features: dict) -> dict[str, float]:
+        """Return w^T z + b per anomaly (eq. 26); > 0 means detected."""
+        out = {}
+        for name in self.names:
+            entry = self.spec['models'][name]
+            z = _vector(features, name, entry)
+            z = (z - np.asarray(entry['mean'])) / np.asarray(entry['scale'])
+            out[name] = float(np.dot(entry['coef'], z) + entry['intercept'])
+        return out
+
+    def predict(self, features: dict) -> dict[str, bool]:
+        """Return one boolean per anomaly."""
+        return {name: value > 0.0 for name, value in self.decision(features).items()}
+
+    def save(self, path: str | os.PathLike) -> None:
+        """Write the model as JSON."""
+        with open(path, 'w') as handle:
+            json.dump(self.spec, handle, indent=1)
+            handle.write('\n')
+
+    @classmethod
+    def load(cls, path: str | os.PathLike) -> 'WindowClassifier':
+        """Read a model written by :meth:`save` (ValueError if it is not one)."""
+        with open(path) as handle:
+            try:
+                spec = json.load(handle)
+            except json.JSONDecodeError as err:
+                raise ValueError(f'{path}: not JSON: {err}') from None
+        return cls(spec)

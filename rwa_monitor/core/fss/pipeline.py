@@ -1,0 +1,243 @@
+"""The four stages chained on one window, and a bounded sliding window for streams.
+
+:func:`extract` runs stages 1-3 (changepoints, interval LS, DP assignment, Algorithm 1)
+on normalised, paper-sign signals; :func:`diagnose` converts a wheel's SI telemetry
+(project sign: friction = -f^d sign(w) - f^v w), extracts, classifies, and returns the
+per-wheel JSON object of DESIGN.md. :class:`SlidingWindow` keeps the last ``length``
+samples of one wheel for the node.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+import pathlib
+import time as _time
+from typing import Any, Sequence
+
+import numpy as np
+
+from rwa_monitor.core.fss.assign import assign_changepoints, friction_levels
+from rwa_monitor.core.fss.classify import WindowClassifier
+from rwa_monitor.core.fss.model import DEFAULT_SYSTEMS, SwitchingSystem
+from rwa_monitor.core.fss.segments import fit_intervals
+from rwa_monitor.core.fss.wglr import detect_changepoints
+from rwa_monitor.core.params import check_int, check_real
+
+DEFAULT_MODEL = pathlib.Path(__file__).resolve().parents[2] / 'data' / 'fss_model.json'
+
+
+@dataclass(frozen=True)
+class FssConfig:
+    """Parameters of the window diagnoser (config/rwa_monitor.yaml, fss_diagnoser)."""
+
+    window: int = 20                  # wGLR half-window w (samples)
+    w_bias: float = 1.0e-4            # W_b, weight of the viscous prior, eq. (11b)
+    viscous_prior: float = 1.0        # f~v, normalised
+    p_false: float = 1.0e-9           # false-positive probability per sample, stage 1
+    dk_error: int = 10                # samples dropped each side of a changepoint (w / 2)
+    beam: int = 256                   # DP states kept per stage
+    torque_scale_nm: float = 2.0e-4   # one normalised torque unit (N m)
+    speed_scale_rad_s: float = 400.0  # one normalised speed unit (rad/s)
+    systems: tuple[SwitchingSystem, ...] = DEFAULT_SYSTEMS
+
+    def __post_init__(self) -> None:
+        check_int('window', self.window, 2, 100_000)
+        check_real('w_bias', self.w_bias, 0.0)
+        check_real('viscous_prior', self.viscous_prior)
+        check_real('p_false', self.p_false, 0.0, 1.0, low_open=True, high_open=True)
+        check_int('dk_error', self.dk_error, 0, 100_000)
+        check_int('beam', self.beam, 1, 1_000_000)
+        check_real('torque_scale_nm', self.torque_scale_nm, 0.0, low_open=True)
+        check_real('speed_scale_rad_s', self.speed_scale_rad_s, 0.0, low_open=True)
+
+    @classmethod
+    def from_dict(cls, params: dict[str, Any] | None) -> 'FssConfig':
+        """Build from a parameter block, ignoring names that are not diagnoser parameters."""
+        names = {'window', 'w_bias', 'viscous_prior', 'p_false', 'dk_error', 'beam',
+                 'torque_scale_nm', 'speed_scale_rad_s'}
+        return cls(**{k: v for k, v in (params or {}).items() if k in names})
+
+
+@dataclass
+class Extraction:
+    """Stages 1-3 of one window (normalised units, paper sign)."""
+
+    detected: np.ndarray          # stage-1 changepoints
+    accepted: np.ndarray          # changepoints kept by the assignment
+    systems_of: np.ndarray        # FSS (1-based) of each accepted changepoint
+    deltas: np.ndarray            # dry-friction jump at each accepted changepoint
+    base_dry: float
+    viscous: float
+    levels: list[list[float]]
+    configs: list[list[int]]
+    sigma: float
+    rmse: float
+    rejected: int
+    iterations: int
+    exact: bool
+    identifiable: bool
+    timings: dict[str, float] = field(default_factory=dict)
+
+    def features(self) -> dict:
+        """Return the classifier input: base dry, viscous and levels per FSS."""
+        return {'base_dry': self.base_dry, 'viscous': self.viscous, 'levels': self.levels}
+
+
+def extract(speed: np.ndarray, friction: np.ndarray, config: FssConfig = FssConfig()
+            ) -> Extraction:
+    """Run stages 1-3 on one window of normalised, paper-sign signals.
+
+    The noise variance is estimated twice: robustly from differences for the stage-1
+    threshold, then from the stage-2 residuals for the rejection costs (c_i / 2 sigma^2).
+    After the assignment the intervals are refitted without the rejected changepoints,
+    so that Algorithm 1 sees the merged intervals' coefficients.
+    """
+    speed = np.asarray(speed, dtype=float)
+    friction = np.asarray(friction, dtype=float)
+    if speed.shape != friction.shape or speed.ndim != 1:
+        raise ValueError('speed and friction must be 1-D arrays of the same length')
+    n = speed.size
+    timings = {}
+    t0 = _time.perf_counter()
+    cps = detect_changepoints(friction, speed, window=config.window, w_bias=config.w_bias,
+                              viscous_prior=config.viscous_prior, p_false=config.p_false)
+    t1 = _time.perf_counter()
+    fit = fit_intervals(friction, speed, cps.changepoints, dk_error=config.dk_error,
+                        viscous_prior=config.viscous_prior)
+    t2 = _time.perf_counter()
+    sigma2 = fit.sigma2 if np.isfinite(fit.sigma2) and fit.sigma2 > 0 else 1.0
+    signs = np.where(np.diff(fit.dry) >= 0, 1, -1)
+    assignment = assign_changepoints(fit.changepoints, signs,
+                                     fit.rejection_cost / (2.0 * sigma2), n,
+                                     config.systems, beam=config.beam)
+    keep = assignment.inputs > 0
+    accepted = fit.changepoints[keep]
+    refit = fit_intervals(friction, speed, accepted, dk_error=config.dk_error,
+                          viscous_prior=config.viscous_prior)
+    if refit.changepoints.size != accepted.size:  # an interval emptied by the merge
+        keep = np.isin(fit.changepoints, refit.changepoints) & keep
+        accepted = refit.changepoints
+    inputs = assignment.inputs[keep]
+    configs = np.vstack([assignment.configs[0], assignment.configs[1:][keep]])
+    base, levels, qs = friction_levels(refit.dry, inputs, configs, len(config.systems))
+    t3 = _time.perf_counter()
+    timings.update(changepoints=t1 - t0, least_squares=t2 - t1, assignment=t3 - t2)
+    return Extraction(detected=cps.changepoints, accepted=accepted, systems_of=inputs,
+                      deltas=np.diff(refit.dry), base_dry=base, viscous=refit.viscous,
+                      levels=levels, configs=qs, sigma=float(np.sqrt(refit.sigma2)),
+                      rmse=refit.rmse, rejected=int(np.sum(assignment.inputs == 0)),
+                      iterations=assignment.iterations, exact=assignment.exact,
+                      identifiable=refit.identifiable, timings=timings)
+
+
+def load_model(path: str | pathlib.Path | None = None) -> WindowClassifier:
+    """Return the classifier at ``path`` or the shipped default model."""
+    path = DEFAULT_MODEL if path is None else pathlib.Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f'FSS model not found: {path} (train one with '
+                                f'`rwa-monitor fss train DATASET -o MODEL`)')
+    return WindowClassifier.load(path)
+
+
+def normalise(speed_rad_s: np.ndarray, friction_nm: np.ndarray, config: FssConfig
+              ) -> tuple[np.ndarray, np.ndarray]:
+    """Return (speed, friction) in normalised units and paper sign from SI telemetry."""
+    return (np.asarray(speed_rad_s, dtype=float) / config.speed_scale_rad_s,
+            -np.asarray(friction_nm, dtype=float) / config.torque_scale_nm)
+
+
+def diagnose(speed_rad_s: np.ndarray, friction_nm: np.ndarray, time_s: np.ndarray,
+             classifier: WindowClassifier, config: FssConfig = FssConfig()) -> dict:
+    """Return one wheel's window diagnosis (DESIGN.md "Window diagnosis"), SI units.
+
+    ``anomalies``: one boolean per anomaly; ``estimates``: base dry (N m), viscous
+    (N m s/rad), noise std (N m), levels per FSS (N m); ``changepoints``: time, index,
+    FSS and dry jump (N m) of each accepted changepoint.
+    """
+    speed, friction = normalise(speed_rad_s, friction_nm, config)
+    time_s = np.asarray(time_s, dtype=float)
+    ext = extract(speed, friction, config)
+    t0 = _time.perf_counter()
+    flags = classifier.predict(ext.features())
+    ext.timings['classification'] = _time.perf_counter() - t0
+    if not ext.identifiable:
+        flags['viscous'] = False
+    tq = config.torque_scale_nm
+    estimates = {
+        'base_dry_nm': ext.base_dry * tq,
+        'viscous_nms': ext.viscous * tq / config.speed_scale_rad_s,
+        'noise_std_nm': ext.sigma * tq,
+        'viscous_identifiable': ext.identifiable,
+        'changepoints_detected': int(ext.detected.size),
+        'changepoints_rejected': ext.rejected,
+        'assignment_exact': ext.exact,
+    }
+    for s, system in enumerate(config.systems):
+        estimates[f'{system.name}_levels_nm'] = [v * tq for v in ext.levels[s]]
+        estimates[f'{system.name}_configurations'] = ext.configs[s]
+    changepoints = [{'index': int(k), 'time': float(time_s[k]),
+                     'fss': config.systems[int(u) - 1].name, 'delta_dry_nm': float(d) * tq}
+                    for k, u, d in zip(ext.accepted, ext.systems_of, ext.deltas)]
+    return {'anomalies': {k: bool(v) for k, v in flags.items()},
+            'estimates': estimates, 'changepoints': changepoints,
+            'timings_s': dict(ext.timings)}
+
+
+class SlidingWindow:
+    """The last ``length`` samples of one wheel; a diagnosis is due every ``period``.
+
+    ``update(t, speed, friction)`` per sample; a stamp not after the previous one is
+    dropped and counted (``out_of_order``); non-finite values are kept (the stages skip
+    them) and counted (``non_finite``). Memory: three arrays of ``length``.
+    """
+
+    def __init__(self, *, length: int = 80_000, period: int = 20_000) -> None:
+        self.length = check_int('length', length, 100, 10**8)
+        self.period = check_int('period', period, 1, 10**8)
+        self._t = np.empty(self.length)
+        self._w = np.empty(self.length)
+        self._f = np.empty(self.length)
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget every sample and counter."""
+        self._count = 0
+        self._since = 0
+        self._last_t = -np.inf
+        self.out_of_order = 0
+        self.non_finite = 0
+
+    @property
+    def size(self) -> int:
+        """Samples held (at most ``length``)."""
+        return min(self._count, self.length)
+
+    def update(self, t: float, speed: float, friction: float) -> bool:
+        """Add one sample; return True when a diagnosis is due."""
+        if not np.isfinite(t) or t <= self._last_t:
+            self.out_of_order += 1
+            return False
+        if not (np.isfinite(speed) and np.isfinite(friction)):
+            self.non_finite += 1
+        i = self._count % self.length
+        self._t[i], self._w[i], self._f[i] = t, speed, friction
+        self._count += 1
+        self._since += 1
+        self._last_t = t
+        if self._count >= self.length and self._since >= self.period:
+            self._since = 0
+            return True
+        return False
+
+    def snapshot(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Return copies of (time, speed, friction), oldest first."""
+        n = self.size
+        start = self._count % self.length if self._count >= self.length else 0
+        order = (np.arange(n) + start) % self.length
+        return self._t[order], self._w[order], self._f[order]
+
+
+def window_features(windows: Sequence[tuple[np.ndarray, np.ndarray]],
+                    config: FssConfig = FssConfig()) -> list[Extraction]:
+    """Return the extraction of each (speed, friction) window (normalised)."""
+    return [extract(w, f, config) for w, f in windows]
