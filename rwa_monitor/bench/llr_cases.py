@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import os
-import resource
 import time
 from typing import Any, Sequence
 
@@ -92,17 +90,21 @@ def peer_false_task(task: dict[str, Any]) -> dict[str, Any]:
     return {'alarms': len(bkps), 'samples': len(t), 'seconds': time.perf_counter() - start}
 
 
-def _rss_kb() -> int:
-    with open('/proc/self/statm') as handle:
-        return int(handle.read().split()[1]) * os.sysconf('SC_PAGE_SIZE') // 1024
+def _status_kb(field: str) -> int:
+    """Return a memory field of /proc/self/status (VmRSS, VmHWM) in kB."""
+    with open('/proc/self/status') as handle:
+        for line in handle:
+            if line.startswith(field + ':'):
+                return int(line.split()[1])
+    raise KeyError(field)
 
 
 def memory_probe(n: int, params: dict[str, Any], chunk: int = 100_000) -> dict[str, Any]:
     """Stream ``n`` fig5 samples through one streaming detector; return RSS facts (kB).
 
     Run in a fresh process: the input is generated chunk by chunk, so what grows with
-    ``n`` is the detector's state. ``rss_after_first_chunk`` is the baseline; the peak
-    (ru_maxrss) and the final RSS are compared with it.
+    ``n`` is the detector's state. ``rss_after_first_chunk`` is the baseline; the final
+    RSS is compared with it, and the peak (VmHWM, this process image) across ``n``.
     """
     from rwa_monitor.core.llr import LLRDetector
     detector = LLRDetector(WHEEL, **params)
@@ -117,7 +119,7 @@ def memory_probe(n: int, params: dict[str, Any], chunk: int = 100_000) -> dict[s
         for t_k, w_k, f_k in zip(k.tolist(), speed.tolist(), friction.tolist()):
             events += len(detector.update(t_k, w_k, f_k))
         if baseline is None:
-            baseline = _rss_kb()
-    return {'n': n, 'rss_after_first_chunk_kb': baseline, 'rss_final_kb': _rss_kb(),
-            'peak_rss_kb': resource.getrusage(resource.RUSAGE_SELF).ru_maxrss,
-            'seconds': time.perf_counter() - start, 'events': events}
+            baseline = _status_kb('VmRSS')
+    return {'n': n, 'rss_after_first_chunk_kb': baseline, 'rss_final_kb': _status_kb('VmRSS'),
+            'peak_rss_kb': _status_kb('VmHWM'), 'seconds': time.perf_counter() - start,
+            'events': events}

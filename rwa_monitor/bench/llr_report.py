@@ -112,6 +112,15 @@ def markdown(r: dict[str, Any]) -> str:
                       'of them)', 'LLR loc. error median [IQR]', 'LLR delay median [IQR]',
                       'LLR false/run', 'peer miss', 'peer loc. error median [IQR]',
                       'peer false/run'], rows))
+    rows = []
+    for size in ('0.3', '0.5'):
+        est = r['fig3'][size]['llr_noise_estimated']
+        rows.append([f'+{size}', _pct(est['miss_rate']), _q(est['error']), _q(est['delay']),
+                     f'{est["false_per_run"]:.2f}'])
+    out += ['', 'Same runs, LLR with the noise variance estimated from the reference '
+            'segment (`noise_std` unset, as on real telemetry):', '',
+            table(['dry step', 'miss', 'loc. error median [IQR]', 'delay median [IQR]',
+                   'false/run'], rows)]
     out += ['', '### Fig. 4: detection probability vs dry change (w_k = 20 + 5cos(pi k/1000), '
             f'w = 500, {r["fig4"]["runs_per_point"]} runs per point)', '']
     curves = r['fig4']['curves']
@@ -176,8 +185,8 @@ def markdown(r: dict[str, Any]) -> str:
     out += ['', '### Memory of one streaming detector (fresh process, RSS)', '']
     rows = [[f'{m["n"]:.0e}', m['rss_after_first_chunk_kb'], m['peak_rss_kb'],
              m['growth_kb'], f'{m["seconds"]:.0f}'] for m in r['memory']['rows']]
-    out.append(table(['samples', 'RSS after 1e5 (kB)', 'peak RSS (kB)', 'growth (kB)',
-                      'seconds'], rows))
+    out.append(table(['samples', 'RSS after 1e5 (kB)', 'peak RSS VmHWM (kB)',
+                      'final RSS - RSS after 1e5 (kB)', 'seconds'], rows))
     if r['memory'].get('skipped'):
         out += ['', 'Not run (over the %.0f s budget at the measured streaming rate): %s '
                 'samples.' % (r['memory']['budget_s'],
