@@ -101,8 +101,9 @@ def render(board: Board, *, title: str = 'rwa_monitor', progress: str | None = N
 class Screen:
     """Redraw a block of text in place on a terminal; print sparingly otherwise."""
 
-    def __init__(self, out: TextIO = sys.stdout, interval: float = 0.25,
+    def __init__(self, out: TextIO | None = None, interval: float = 0.25,
                  plain_interval: float = 10.0) -> None:
+        out = sys.stdout if out is None else out
         self.out = out
         self.tty = hasattr(out, 'isatty') and out.isatty() and os.environ.get('TERM') != 'dumb'
         self.interval = interval if self.tty else plain_interval

@@ -130,7 +130,7 @@ def _progress(replay: Any, started: float, width: int = 30) -> str:
 
 
 def run_demo(path: pathlib.Path, *, domain_id: int = 0, executor: str = 'events',
-             out: TextIO = sys.stdout, live: bool = True,
+             out: TextIO | None = None, live: bool = True,
              modules: tuple[str, ...] = DETECTOR_NODES) -> DemoResult:
     """Replay ``path`` through every detector node in one process; return the result."""
     import rclpy
@@ -143,6 +143,7 @@ def run_demo(path: pathlib.Path, *, domain_id: int = 0, executor: str = 'events'
     from rwa_monitor.nodes.replay import TelemetryReplay
     from rwa_monitor.paths import config_file
     os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    out = sys.stdout if out is None else out
     classes, notes = node_classes(modules)
     for note in notes:
         print(f'note: {note}', file=out)
