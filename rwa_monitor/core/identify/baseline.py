@@ -31,6 +31,7 @@ from rwa_monitor.core.identify.data import IdentData
 from rwa_monitor.exceptions import NotIdentifiableError
 
 RIDGE = 1e-9
+FLEX_ROWS = 20000  # the flexible background is fitted on at most about this many rows
 
 
 def baseline_columns(speed: np.ndarray) -> np.ndarray:
@@ -99,7 +100,8 @@ def flexible_residual(data: IdentData, spacing: int,
     eye = np.eye(len(knots))
     hats = np.column_stack([np.interp(w, knots, eye[j]) for j in range(len(knots))])
     n = len(w)
-    tknots = np.unique(np.linspace(0, n - 1, max(2, n // spacing + 1)).astype(int))
+    count = int(np.clip(n // spacing + 1, 2, 17))
+    tknots = np.unique(np.linspace(0, n - 1, count).astype(int))
     teye = np.eye(len(tknots))
     thats = np.column_stack([np.interp(np.arange(n), tknots, teye[j])
                              for j in range(len(tknots))])
@@ -108,25 +110,52 @@ def flexible_residual(data: IdentData, spacing: int,
                   + ([] if extra is None else [extra.reshape(n, -1)]))
     X = X / data.noise_std[:, None]
     y = data.friction / data.noise_std
-    coef = np.linalg.lstsq(X, y, rcond=1e-10)[0]
-    return (y - X @ coef) * data.noise_std
+    scale = 1.0 / np.maximum(np.sqrt(np.sum(X * X, axis=0)), 1e-300)
+    Xs = X * scale
+    rows = slice(None, None, max(1, n // FLEX_ROWS))
+    gram = Xs[rows].T @ Xs[rows] + RIDGE * np.eye(X.shape[1])
+    coef = np.linalg.solve(gram, Xs[rows].T @ y[rows])
+    return (y - Xs @ coef) * data.noise_std
 
 
-def _step_gain(data: IdentData, resid: np.ndarray, k: int, window: int) -> float:
-    """Return the chi^2(2) gain of a coefficient step at k over a smooth background."""
-    sl = slice(k - window, k + window)
-    s = data.noise_std[sl]
-    h = baseline_columns(data.speed[sl])
-    tau = np.linspace(-1.0, 1.0, 2 * window)[:, None]
-    poly = np.hstack([np.ones_like(tau), tau, tau ** 2])
-    smooth = np.hstack([h[:, :1] * poly, h[:, 1:] * poly, poly]) / s[:, None]
-    step = h * (np.arange(2 * window) >= window)[:, None] / s[:, None]
-    y = resid[sl] / s
+def _solve_rss(gram: np.ndarray, xy: np.ndarray, yy: np.ndarray) -> np.ndarray:
+    """Return the least-squares RSS of a batch of normal equations (scaled, ridged)."""
+    d = np.sqrt(np.maximum(np.einsum('...ii->...i', gram), 1e-300))
+    g = gram / d[..., :, None] / d[..., None, :]
+    g = g + RIDGE * np.eye(g.shape[-1])
+    b = xy / d
+    coef = np.linalg.solve(g, b[..., None])[..., 0]
+    return yy - np.sum(coef * b, axis=-1)
 
-    def rss(X):
-        coef = np.linalg.lstsq(X, y, rcond=1e-10)[0]
-        return float(np.sum((y - X @ coef) ** 2))
-    return rss(smooth) - rss(np.hstack([smooth, step]))
+
+def step_gains(data: IdentData, resid: np.ndarray, ks: np.ndarray, window: int,
+               chunk: int = 64) -> np.ndarray:
+    """Return the chi^2(2) gain of a coefficient step at each k over a smooth background.
+
+    Normal equations of all windows at once (batches of ``chunk`` windows).
+    """
+    n2 = 2 * window
+    tau = np.linspace(-1.0, 1.0, n2)
+    poly = np.stack([np.ones(n2), tau, tau ** 2], axis=1)
+    after = (np.arange(n2) >= window).astype(float)
+    out = np.empty(len(ks))
+    for start in range(0, len(ks), chunk):
+        kk = ks[start:start + chunk]
+        idx = kk[:, None] - window + np.arange(n2)[None, :]
+        s = data.noise_std[idx]
+        w = data.speed[idx]
+        h = np.stack([-np.sign(w), -w], axis=-1)
+        smooth = np.concatenate([h[..., :1] * poly, h[..., 1:] * poly,
+                                 np.broadcast_to(poly, h.shape[:2] + (3,))], axis=-1)
+        X = np.concatenate([smooth, h * after[None, :, None]], axis=-1) / s[..., None]
+        y = resid[idx] / s
+        gram = np.einsum('kij,kil->kjl', X, X)
+        xy = np.einsum('kij,ki->kj', X, y)
+        yy = np.einsum('ki,ki->k', y, y)
+        full = _solve_rss(gram, xy, yy)
+        reduced = _solve_rss(gram[:, :9, :9], xy[:, :9], yy)
+        out[start:start + chunk] = reduced - full
+    return out
 
 
 def find_jumps(data: IdentData, window: int | None = None, alpha: float = 1e-3,
@@ -140,9 +169,9 @@ def find_jumps(data: IdentData, window: int | None = None, alpha: float = 1e-3,
         return segments
     resid = flexible_residual(data, 4 * window, extra)
     threshold = float(stats.chi2.isf(alpha * window / n, 2))
-    stride = max(1, window // 10)
+    stride = max(1, window // 5)
     coarse = np.arange(window, n - window + 1, stride)
-    gains = np.array([_step_gain(data, resid, k, window) for k in coarse])
+    gains = step_gains(data, resid, coarse, window)
     found: list[int] = []
     order = np.argsort(gains)[::-1]
     for i in order:
@@ -152,7 +181,7 @@ def find_jumps(data: IdentData, window: int | None = None, alpha: float = 1e-3,
         if any(abs(k0 - k) < window for k in found):
             continue
         fine = np.arange(max(window, k0 - stride), min(n - window, k0 + stride) + 1)
-        fine_gains = [_step_gain(data, resid, k, window) for k in fine]
+        fine_gains = step_gains(data, resid, fine, window)
         k = int(fine[int(np.argmax(fine_gains))])
         found.append(k)
         segments.evidence.append({'index': k, 'time': float(data.time[k]),
