@@ -30,6 +30,7 @@ ARL_RATES = (1e-2, 1e-3, 1e-4, 1e-5)
 ARL_WINDOWS = (100, 250, 500)
 MEMORY_BUDGET_S = 240.0
 CATEGORIES = {'dry': (0.5, 0.0), 'viscous': (0.0, 0.025), 'both': (0.5, 0.025)}
+CATEGORY_SCALES = (1, 2)
 GOALS = {'streaming_per_s': 300_000, 'batch_per_s': 3_000_000, 'miss_rate_0.3': 0.02,
          'categorisation': 0.95}
 
@@ -170,25 +171,34 @@ def fig5(pool, s: dict) -> dict[str, Any]:
 
 
 def categorisation(pool, s: dict) -> dict[str, Any]:
-    """Categorise dry-only, viscous-only and both changes at k = 1500, profile fig3, r = 1e-5."""
+    """Categorise dry, viscous and both changes at k = 1500, profile fig3, r = 1e-5.
+
+    Two magnitudes: the base one (dry 0.5, viscous 0.025, also run through the peer)
+    and twice that (key ``<kind> x2``).
+    """
     out = {}
-    for name, (dry, visc) in CATEGORIES.items():
-        tasks = [{'profile': 'fig3', 'n': N_RUN, 'seed': 30_000 + seed, 'dry': dry,
-                  'viscous': visc, 'change': CHANGE, 'tol': TOL, 'llr': [_params()],
-                  'peer': True} for seed in range(s['cat_runs'])]
-        res = _pool_map(pool, llr_cases.scenario_task, tasks, f'categorise {name}')
-        llr = [r['llr'][0] for r in res]
-        hits = [o for o in llr if o['detected']]
-        out[name] = {'delta_dry': dry, 'delta_viscous': visc,
-                     'llr': {k: v for k, v in _llr_stats(llr).items() if k != 'errors'},
-                     'peer': {k: v for k, v in _peer_stats([r['peer'] for r in res]).items()
-                              if k != 'errors'},
-                     'first_kind_accuracy': (sum(o['kind'] == name for o in hits) / len(hits)
-                                             if hits else math.nan),
-                     'final_kind_accuracy': (sum(o['final_kind'] == name for o in hits)
-                                             / len(hits) if hits else math.nan),
-                     'kinds': {k: sum(o['final_kind'] == k for o in hits)
-                               for k in CATEGORIES}}
+    for scale in CATEGORY_SCALES:
+        for name, (dry, visc) in CATEGORIES.items():
+            key = name if scale == 1 else f'{name} x{scale:g}'
+            tasks = [{'profile': 'fig3', 'n': N_RUN, 'seed': 30_000 + seed,
+                      'dry': scale * dry, 'viscous': scale * visc, 'change': CHANGE,
+                      'tol': TOL, 'llr': [_params()], 'peer': scale == 1}
+                     for seed in range(s['cat_runs'])]
+            res = _pool_map(pool, llr_cases.scenario_task, tasks, f'categorise {key}')
+            llr = [r['llr'][0] for r in res]
+            hits = [o for o in llr if o['detected']]
+            out[key] = {'kind': name, 'delta_dry': scale * dry, 'delta_viscous': scale * visc,
+                        'llr': {k: v for k, v in _llr_stats(llr).items() if k != 'errors'},
+                        'first_kind_accuracy': (sum(o['kind'] == name for o in hits)
+                                                / len(hits) if hits else math.nan),
+                        'final_kind_accuracy': (sum(o['final_kind'] == name for o in hits)
+                                                / len(hits) if hits else math.nan),
+                        'kinds': {k: sum(o['final_kind'] == k for o in hits)
+                                  for k in CATEGORIES}}
+            if scale == 1:
+                out[key]['peer'] = {k: v for k, v in
+                                    _peer_stats([r['peer'] for r in res]).items()
+                                    if k != 'errors'}
     return out
 
 
@@ -290,7 +300,7 @@ def goals(r: dict[str, Any]) -> list[dict[str, Any]]:
     miss = r['fig3']['0.3']['llr']['miss_rate']
     iqr_llr = r['fig3']['0.5']['llr']['error']['iqr']
     iqr_peer = r['fig3']['0.5']['peer']['error']['iqr']
-    cat = min(c['final_kind_accuracy'] for c in r['categorisation'].values())
+    cat = min(r['categorisation'][name]['final_kind_accuracy'] for name in CATEGORIES)
     mem = r['memory']['rows']
     peaks = [row['peak_rss_kb'] for row in mem]
     growth = max(max(row['growth_kb'] for row in mem), max(peaks) - min(peaks))
@@ -304,7 +314,8 @@ def goals(r: dict[str, Any]) -> list[dict[str, Any]]:
          'met': miss <= GOALS['miss_rate_0.3']},
         {'goal': 'localisation IQR on +0.5 <= offline peer', 'value': [iqr_llr, iqr_peer],
          'met': iqr_llr <= iqr_peer},
-        {'goal': 'categorisation >= 95 % once confirmed', 'value': cat,
+        {'goal': 'categorisation >= 95 % once confirmed (worst of dry 0.5, viscous 0.025, '
+                 'both)', 'value': cat,
          'met': cat >= GOALS['categorisation']},
         {'goal': f'memory flat (growth < 10 MB, kB shown, 1e5 to {mem[-1]["n"]:.0e} samples)',
          'value': growth, 'met': flat},

@@ -154,14 +154,17 @@ def markdown(r: dict[str, Any]) -> str:
             'viscous step 0.025 = a 0.5 torque step at 20 rad/s)', '']
     rows = []
     for name, c in r['categorisation'].items():
-        rows.append([name, _pct(c['llr']['detection_rate']), _pct(c['first_kind_accuracy']),
+        peer = c.get('peer')
+        rows.append([name, f'{c["delta_dry"]:g} / {c["delta_viscous"]:g}',
+                     _pct(c['llr']['detection_rate']), _pct(c['first_kind_accuracy']),
                      _pct(c['final_kind_accuracy']),
                      ', '.join(f'{k} {v}' for k, v in c['kinds'].items()),
-                     _q(c['llr']['error']), _pct(c['peer']['detection_rate']),
-                     _q(c['peer']['error'])])
-    out.append(table(['change', 'LLR detected', 'kind at declaration', 'kind once confirmed',
-                      'confirmed kinds', 'LLR loc. error', 'peer detected',
-                      'peer loc. error'], rows))
+                     _q(c['llr']['error']),
+                     '-' if peer is None else _pct(peer['detection_rate']),
+                     '-' if peer is None else _q(peer['error'])])
+    out.append(table(['change', 'dry / viscous step', 'LLR detected', 'kind at declaration',
+                      'kind once confirmed', 'confirmed kinds', 'LLR loc. error',
+                      'peer detected', 'peer loc. error'], rows))
     fa = r['peer_false_alarms']
     llr_cell = next((c for c in r['fig5']['cells']
                      if c['window'] == 500 and c['rate'] == 1e-5), None)
