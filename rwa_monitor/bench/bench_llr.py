@@ -40,7 +40,7 @@ def _settings(quick: bool) -> dict[str, Any]:
         return {'fig3_runs': 20, 'fig4_runs': 10, 'cat_runs': 10, 'arl_runs': 2,
                 'arl_n': 20_000, 'peer_fa_runs': 2, 'peer_fa_n': 5000,
                 'throughput_n': (88_000,), 'memory_n': (10**5, 3 * 10**5)}
-    return {'fig3_runs': 200, 'fig4_runs': 100, 'cat_runs': 100, 'arl_runs': 10,
+    return {'fig3_runs': 200, 'fig4_runs': 100, 'cat_runs': 100, 'arl_runs': 30,
             'arl_n': 100_000, 'peer_fa_runs': 20, 'peer_fa_n': 5000,
             'throughput_n': (88_000, 1_000_000), 'memory_n': (10**5, 10**6, 10**7)}
 

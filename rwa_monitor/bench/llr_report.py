@@ -49,8 +49,11 @@ def plots(out_dir: pathlib.Path, r: dict[str, Any]) -> None:
     cells = r['fig5']['cells']
     for window in sorted({c['window'] for c in cells}):
         row = [c for c in cells if c['window'] == window]
-        ax.plot([c['rate'] for c in row], [c['arl_lower_95'] for c in row], '-o',
-                label=f'w = {window} (95 % lower bound of ARL)')
+        seen = [c for c in row if c['alarms']]
+        line, = ax.plot([c['rate'] for c in seen], [c['arl'] for c in seen], '-o',
+                        label=f'w = {window}: ARL (cells with alarms)')
+        ax.plot([c['rate'] for c in row], [c['arl_lower_95'] for c in row], ':^',
+                color=line.get_color(), label=f'w = {window}: 95 % lower bound')
     rates = sorted({c['rate'] for c in cells})
     ax.plot(rates, [1 / x for x in rates], 'k--', label='1/r')
     ax.set_xscale('log')
