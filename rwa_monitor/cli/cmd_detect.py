@@ -1,4 +1,13 @@
-"""``rwa-monitor detect FILE``: run every detector whose input columns the file has."""
+"""``rwa-monitor detect FILE``: run every detector whose input columns the file has.
+
+Each module of :mod:`rwa_monitor.pipelines` whose ``applies(tele)`` is true runs with the
+parameters of its node: the ``/**`` block of the YAML file overlaid with the module's
+``NODE`` block (``<name>_detector`` if the module names none), ``ros__parameters`` in both,
+so one file configures the nodes and the command line alike. A pipeline with
+``run_with_summary`` also reports per-component facts (samples, rejected-sample counters,
+run time); events are sorted by estimated change time. A bad parameter value is a
+ConfigError naming the pipeline and the parameter (exit code 2).
+"""
 
 from __future__ import annotations
 
