@@ -40,8 +40,8 @@ import numpy as np
 from numpy.polynomial.legendre import leggauss
 from scipy import integrate, optimize, special
 
-CUT = 50.0
-_GL_ORDER = 48
+CUT = 40.0
+_GL_ORDER = 32
 _x, _w = leggauss(_GL_ORDER)
 _NODES = [float(v) for v in (_x + 1.0) / 2.0]
 _WEIGHTS = [float(v) for v in _w / 2.0]
@@ -68,10 +68,8 @@ def log_sf2(x: float, w1: float, w2: float) -> float:
     b = x / (2.0 * w1)
     rho = w2 / w1 if w2 > 0.0 else 0.0
     a = b * (1.0 - rho)
-    if a > CUT:
-        end = math.asin(math.sqrt(CUT / a))
-    else:
-        end = _HALF_PI
+    excess = a - CUT * rho
+    end = math.atan(math.sqrt(CUT / excess)) if excess > 0.0 else _HALF_PI
     total = 0.0
     sin = math.sin
     cos = math.cos
@@ -96,7 +94,8 @@ def _log_sf2_array(x: np.ndarray, w1: float, w2: float) -> np.ndarray:
     b = xp / (2.0 * w1)
     rho = w2 / w1
     a = b * (1.0 - rho)
-    end = np.where(a > CUT, np.arcsin(np.sqrt(np.minimum(1.0, CUT / np.maximum(a, CUT)))),
+    excess = a - CUT * rho
+    end = np.where(excess > 0.0, np.arctan(np.sqrt(CUT / np.where(excess > 0.0, excess, 1.0))),
                    _HALF_PI)
     psi = end[:, None] * _NODES_ARR[None, :]
     s2 = np.sin(psi) ** 2
@@ -125,24 +124,26 @@ def log_lower_bound_array(b: np.ndarray) -> np.ndarray:
 def skip_threshold(log_p: float) -> float:
     """Return ``y`` >= 0 such that ``b < y`` implies ``log_lower_bound(b) > log_p``.
 
-    :func:`log_lower_bound` is decreasing; the root is found by bisection and the
-    returned value is on the safe (smaller) side. ``log_p >= log_lower_bound(0)`` gives 0
-    (nothing can be skipped).
+    :func:`log_lower_bound` is decreasing and convex; Newton's method from the left
+    converges monotonically to the root, and the returned value is moved to the safe
+    (smaller) side. ``log_p >= log_lower_bound(0)`` gives 0 (nothing can be skipped).
     """
     if not log_p < log_lower_bound(0.0):
         return 0.0
-    lo, hi = 0.0, max(1.0, -log_p)
-    while log_lower_bound(hi) > log_p:
-        hi *= 2.0
-    for _ in range(100):
-        mid = 0.5 * (lo + hi)
-        if log_lower_bound(mid) > log_p:
-            lo = mid
-        else:
-            hi = mid
-        if hi - lo <= 1e-12 * hi:
+    # Start left of the root: y* <= -log_p, hence y* >= -log_p + log(2/sqrt(pi)) -
+    # log(2 sqrt(2 - log_p)).
+    y = max(1e-300, -log_p + _LOG_2_OVER_SQRT_PI - math.log(2.0 * math.sqrt(2.0 - log_p)))
+    for _ in range(60):
+        g = log_lower_bound(y) - log_p
+        if g <= 0.0:
             break
-    return lo
+        step = g / (1.0 + 0.5 / math.sqrt(y * (y + 2.0)))
+        y += step
+        if step <= 1e-13 * y:
+            break
+    while y > 0.0 and not log_lower_bound(y) > log_p:
+        y = max(0.0, y - 1e-12 * (1.0 + y))
+    return y
 
 
 def _cgf(s: complex, w: np.ndarray, m2: np.ndarray) -> complex:
@@ -186,17 +187,17 @@ def gchi2_logsf_general(x: float, weights: Sequence[float],
     d2 = float(np.sum(2.0 * w ** 2 / one ** 2 + 4.0 * m2 * w ** 2 / one ** 3)) + 1.0 / c ** 2
     scale = 1.0 / math.sqrt(d2)
 
-    def amplitude(t: float) -> complex:
-        s = complex(c, t)
+    def amplitude(u: float) -> complex:
+        s = complex(c, u * scale)
         return np.exp(_cgf(s, w, m2) - c * x - np.log(s) - k0)
 
-    tol = 1e-11 * scale
-    cos_part, err_c = integrate.quad(lambda t: amplitude(t).real, 0.0, np.inf, weight='cos',
-                                     wvar=x, epsabs=tol, limlst=200)
-    sin_part, err_s = integrate.quad(lambda t: amplitude(t).imag, 0.0, np.inf, weight='sin',
-                                     wvar=x, epsabs=tol, limlst=200)
-    val = (cos_part + sin_part) / math.pi
-    err = (err_c + err_s) / math.pi
+    freq = x * scale
+    cos_part, err_c = integrate.quad(lambda u: amplitude(u).real, 0.0, np.inf, weight='cos',
+                                     wvar=freq, epsabs=1e-11, limlst=200)
+    sin_part, err_s = integrate.quad(lambda u: amplitude(u).imag, 0.0, np.inf, weight='sin',
+                                     wvar=freq, epsabs=1e-11, limlst=200)
+    val = (cos_part + sin_part) * scale / math.pi
+    err = (err_c + err_s) * scale / math.pi
     if not val > 0.0:
         return -math.inf, math.inf
     return k0 + math.log(val), err / val

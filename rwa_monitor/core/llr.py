@@ -19,7 +19,8 @@ from scipy import linalg
 from rwa_monitor.core import keys, llr_stats
 from rwa_monitor.core.events import AnomalyEvent
 from rwa_monitor.core.friction import coulomb_viscous, RegressorSet
-from rwa_monitor.core.gchi2 import gchi2_logsf_general, log_sf2, skip_threshold
+from rwa_monitor.core.gchi2 import (gchi2_logsf_general, log_lower_bound, log_sf2,
+                                    skip_threshold)
 from rwa_monitor.core.params import check_int, check_real
 
 COUNTER_NAMES = ('nonfinite', 'non_increasing_time', 'missing_aux', 'ill_conditioned')
@@ -326,8 +327,8 @@ class LLRDetector:
             self._last_y = y
             if tr > 0.0 and y > 0.0 and not y / tr < self._ystar:
                 dm = (Aw * Cw - Bw * Bw) / dett
-                logp = exact_log_p2(y, tr, dm)
-                if logp < self._logpmin:
+                logp = candidate_log_p2(y, tr, dm, self._logpmin)
+                if logp is not None and logp < self._logpmin:
                     self._record(k, logp)
         else:
             self._counters['ill_conditioned'] += 1
@@ -461,20 +462,27 @@ class LLRDetector:
         return events
 
 
-def exact_log_p2(y: float, tr: float, dm: float) -> float:
-    """Return log p_k (eq. (7), Algorithm 2) from ``y = LLR/sigma^2`` and ``M = Pi_T^-1 Pi_W``.
+def candidate_log_p2(y: float, tr: float, dm: float, log_p_min: float) -> float | None:
+    """Return log p_k (eq. (7), Algorithm 2) if it may be below ``log_p_min``, else None.
 
-    The weights of Lemma 1 are the eigenvalues of ``I - Pi_P^1/2 Pi_T^-1 Pi_P^1/2``, which
-    are those of ``Pi_T^-1 Pi_W`` (same matrix up to similarity, ``Pi_W = Pi_T - Pi_P``);
-    ``tr`` and ``dm`` are its trace and determinant. Shared by the streaming and the batch
-    path so that both compute the same float.
+    ``y = LLR_k / sigma^2``; ``tr`` and ``dm`` are the trace and determinant of ``Pi_T^-1
+    Pi_W`` (``Pi_W = Pi_T - Pi_P``), whose eigenvalues are those of Lemma 1's ``I -
+    Pi_P^1/2 Pi_T^-1 Pi_P^1/2`` (similar matrices). With ``b = y / (2 l1)``, ``rho = l2 /
+    l1`` and ``a = b (1 - rho)``, ``p_k >= exp(-b rho) erfc(sqrt(a))`` (drop ``rho sin^2`` in
+    the integral of :mod:`rwa_monitor.core.gchi2`); when that bound already exceeds
+    ``p_min`` the sample cannot be a new minimum and the exact tail is not computed.
+    Shared by the streaming and the batch path (same floats, same decision).
     """
     half = 0.5 * tr
     disc = half * half - dm
     lam1 = half + math.sqrt(disc) if disc > 0.0 else half
-    lam2 = dm / lam1 if lam1 > 0.0 else 0.0
+    lam2 = dm / lam1
     if lam2 < 0.0:
         lam2 = 0.0
+    b = y / (2.0 * lam1)
+    rho = lam2 / lam1
+    if -b * rho + log_lower_bound(b * (1.0 - rho)) > log_p_min + 1e-9 * (1.0 - log_p_min):
+        return None
     return log_sf2(y, lam1, lam2)
 
 

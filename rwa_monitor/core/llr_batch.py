@@ -20,11 +20,12 @@ import math
 from typing import Any, Mapping
 
 import numpy as np
+from scipy import special
 
 from rwa_monitor.core import llr_stats
 from rwa_monitor.core.events import AnomalyEvent
 from rwa_monitor.core.gchi2 import log_lower_bound_array, skip_threshold
-from rwa_monitor.core.llr import (checkpoints, declaration, exact_log_p2, LLRDetector,
+from rwa_monitor.core.llr import (candidate_log_p2, checkpoints, declaration, LLRDetector,
                                   make_event, validate_parameters)
 
 CHUNK = 1 << 16
@@ -92,9 +93,13 @@ def _stats(pp: np.ndarray, pt: np.ndarray, n_p: np.ndarray, cfg: Mapping[str, An
         half = 0.5 * tr
         lam1 = half + np.sqrt(np.maximum(half * half - dm, 0.0))
         testable = ok & (tr > 0.0) & (y > 0.0)
-        upper = np.where(testable, -y / (2.0 * lam1), 0.0)
-        lower = np.where(testable, log_lower_bound_array(np.where(testable, y / tr, 0.0)),
-                         0.0)
+        lam1 = np.where(testable, lam1, 1.0)
+        b = np.where(testable, y / (2.0 * lam1), 0.0)
+        rho = np.clip(dm / lam1, 0.0, None) / lam1
+        a = np.maximum(b * (1.0 - rho), 0.0)
+        # Bounds of log p_k: see candidate_log_p2 (lower) and gchi2 (upper: J <= i0e(a/2)).
+        upper = np.where(testable, -b + np.log(special.i0e(0.5 * a)), 0.0)
+        lower = np.where(testable, -b * rho + log_lower_bound_array(a), 0.0)
     return ok, testable, y, tr, dm, upper, lower
 
 
@@ -161,8 +166,8 @@ def _candidates(ks, cand, y, tr, dm, state: dict, kverif: int, logr: float) -> i
             return state['kmin'] + kverif + 1
         yv, trv = float(y[i]), float(tr[i])
         if not yv / trv < state['ystar']:
-            logp = exact_log_p2(yv, trv, float(dm[i]))
-            if logp < state['logp']:
+            logp = candidate_log_p2(yv, trv, float(dm[i]), state['logp'])
+            if logp is not None and logp < state['logp']:
                 state.update(logp=logp, kmin=k, ystar=skip_threshold(logp))
         if state['logp'] <= logr and k > state['kmin'] + kverif:
             return k
