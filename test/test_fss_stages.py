@@ -149,6 +149,9 @@ def test_dp_optimum_equals_enumeration(seed):
     res = assign_changepoints(times, signs, cost, 300, SMALL, beam=100_000)
     assert res.exact
     assert res.score == pytest.approx(best, abs=1e-9)
+    # The dominance pruning is exact: the same optimum without it.
+    plain = assign_changepoints(times, signs, cost, 300, SMALL, beam=100_000, dominance=False)
+    assert plain.score == pytest.approx(best, abs=1e-9)
     q0 = res.configs[0]
     assert score_assignment(times, signs, cost, 300, SMALL, q0, res.inputs) == \
         pytest.approx(best, abs=1e-9)

@@ -255,8 +255,13 @@ def dataset_extractions(path: str | os.PathLike, config=None, *, cache: bool = T
     config = FssConfig() if config is None else config
     path = pathlib.Path(path)
     manifest = load_manifest(path)
+    import hashlib
+
+    from rwa_monitor.core import fss as core_fss
+    code = hashlib.sha256(b''.join(p.read_bytes() for p in sorted(
+        pathlib.Path(core_fss.__file__).parent.glob('*.py')))).hexdigest()
     signature = json.dumps({k: v for k, v in asdict(config).items() if k != 'systems'},
-                           sort_keys=True) + repr(config.systems)
+                           sort_keys=True) + repr(config.systems) + code
     cache_file = path / 'extractions.json'
     if cache and cache_file.is_file():
         cached = json.loads(cache_file.read_text())

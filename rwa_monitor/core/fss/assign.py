@@ -57,20 +57,17 @@ class _Tables:
         self.r = self.hi - self.lo + 1.0
         self.top = system.n_config - 1
         qs = np.arange(system.n_config)
-        self.log_up = system.log_pq(qs, np.ones_like(qs))
-        self.log_down = system.log_pq(qs, -np.ones_like(qs))
+        # log P^q of a move up / down, -inf where it leaves the range.
+        self.move_up = np.where(qs < self.top, system.log_pq(qs, np.ones_like(qs)), -np.inf)
+        self.move_down = np.where(qs > 0, system.log_pq(qs, -np.ones_like(qs)), -np.inf)
 
     def gain(self, q, last, t, d, sign) -> np.ndarray:
         """Return the score of a jump of this system (-inf if q leaves its range)."""
-        lo, hi = self.lo[q], self.hi[q]
-        first = np.where(t <= hi, -np.log(np.maximum(np.minimum(t, self.r[q]), 1.0)),
+        first = np.where(t <= self.hi, -np.log(np.maximum(np.minimum(t, self.r), 1.0)),
                          LOG_FLOOR)
-        later = np.where((d >= lo) & (d <= hi), self.log_r[q], LOG_FLOOR)
-        out = np.where(last == 0, first, later)
-        out += self.log_up[q] if sign > 0 else self.log_down[q]
-        new = q + sign
-        out[(new < 0) | (new > self.top)] = -np.inf
-        return out
+        move = self.move_up if sign > 0 else self.move_down
+        later = np.where((d >= self.lo[q]) & (d <= self.hi[q]), self.log_r[q], LOG_FLOOR)
+        return np.where(last == 0, first[q], later) + move[q]
 
 
 def _initial(systems: Sequence[SwitchingSystem]) -> np.ndarray:
@@ -88,7 +85,7 @@ def _end_scores(systems, q, last, times_ext, n) -> np.ndarray:
 
 def assign_changepoints(times: np.ndarray, signs: np.ndarray, reject_cost: np.ndarray,
                         n: int, systems: Sequence[SwitchingSystem], *,
-                        beam: int = 256) -> Assignment:
+                        beam: int = 256, dominance: bool = True) -> Assignment:
     """Solve eq. (18) with the reject input, by DP with merged states and a beam.
 
     ``times``: changepoint steps (sorted, in 1 .. n - 1); ``signs``: sign of the dry
@@ -114,9 +111,9 @@ def assign_changepoints(times: np.ndarray, signs: np.ndarray, reject_cost: np.nd
     for i in range(m):
         n_st = q.shape[0]
         iterations += n_st
-        nq = np.tile(q, (n_sys + 1, 1))
-        nl = np.tile(last, (n_sys + 1, 1))
-        sc = np.tile(score, n_sys + 1)
+        nq = np.concatenate((q,) * (n_sys + 1))
+        nl = np.concatenate((last,) * (n_sys + 1))
+        sc = np.concatenate((score,) * (n_sys + 1))
         sc[:n_st] -= reject_cost[i]
         for s, tab in enumerate(tables):
             rows = slice((s + 1) * n_st, (s + 2) * n_st)
@@ -133,6 +130,16 @@ def assign_changepoints(times: np.ndarray, signs: np.ndarray, reject_cost: np.nd
         order = np.lexsort((-sc[idx], key))
         ks = key[order]
         keep = idx[order[np.concatenate(([True], ks[1:] != ks[:-1]))]]
+        if dominance:
+            # Exact pruning: a state with the same configurations and a score higher by
+            # more than the bound can mimic every future of this one and lose at most
+            # -LOG_FLOOR per system (each system's next sojourn-closing term).
+            qkey = np.zeros(keep.size, dtype=np.int64)
+            for s, system in enumerate(systems):
+                qkey = qkey * system.n_config + nq[keep, s]
+            best = np.full(int(np.prod([s.n_config for s in systems])), -np.inf)
+            np.maximum.at(best, qkey, sc[keep])
+            keep = keep[sc[keep] >= best[qkey] + n_sys * LOG_FLOOR]
         if keep.size > beam:
             exact = False
             keep = keep[np.argpartition(-sc[keep], beam - 1)[:beam]]

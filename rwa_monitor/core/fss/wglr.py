@@ -21,7 +21,10 @@ statistic 2 log LR. Departures from the paper, on purpose (docs/fss.md):
 * samples with a non-finite value are left out of every sum; a window with fewer than
   w / 2 usable samples on either side gets wGLR = 0 (no decision).
 
-Everything is vectorised with prefix sums: O(n) for the whole window.
+Everything is vectorised with prefix sums: O(n) for the whole window. The jump model is
+the no-jump model plus one regressor (s_k on the right half), so wGLR is computed as the
+squared projection of the no-jump residual on it (:func:`wglr`), which equals the
+difference of the two penalised minima.
 """
 
 from __future__ import annotations
@@ -69,40 +72,33 @@ def wglr(y: np.ndarray, x: np.ndarray, *, window: int, w_bias: float,
     if n < 2 * window:
         return out
     ok = np.isfinite(y) & np.isfinite(x)
-    s = np.where(ok, np.sign(np.where(ok, x, 0.0)), 0.0)
-    xv = np.where(ok, x, 0.0)
-    yv = np.where(ok, y, 0.0)
-
-    def prefix(v: np.ndarray) -> np.ndarray:
-        return np.concatenate(([0.0], np.cumsum(v)))
-    p_a, p_b, p_xx = prefix(s * s), prefix(s * xv), prefix(xv * xv)
-    p_y, p_xy = prefix(s * yv), prefix(xv * yv)
-    k = np.arange(window, n - window + 1)
+    if ok.all():
+        s, xv, yv = np.sign(x), x, y
+    else:
+        xv, yv = np.where(ok, x, 0.0), np.where(ok, y, 0.0)
+        s = np.sign(xv)
+    prefix = np.zeros((5, n + 1))
+    np.cumsum(np.stack((s * s, s * xv, xv * xv, s * yv, xv * yv)), axis=1, out=prefix[:, 1:])
     w2 = 2 * window
-
-    def left(p: np.ndarray) -> np.ndarray:
-        return p[window:n - window + 1] - p[:n - w2 + 1]
-
-    def right(p: np.ndarray) -> np.ndarray:
-        return p[w2:] - p[window:n - window + 1]
-    a1, a2 = left(p_a), right(p_a)
-    b1, b2 = left(p_b), right(p_b)
-    y1, y2 = left(p_y), right(p_y)
+    lo, mid, hi = prefix[:, :n - w2 + 1], prefix[:, window:n - window + 1], prefix[:, w2:]
+    a2, b2, y2 = hi[0] - mid[0], hi[1] - mid[1], hi[3] - mid[3]
+    a, b, yy = hi[0] - lo[0], hi[1] - lo[1], hi[3] - lo[3]
     ridge = w_bias + 1e-9 * window
-    c = p_xx[w2:] - p_xx[:n - w2 + 1] + ridge
-    r = p_xy[w2:] - p_xy[:n - w2 + 1] + ridge * viscous_prior
-    usable = (a1 >= window / 2) & (a2 >= window / 2)
-    a1, a2 = np.where(usable, a1, 1.0), np.where(usable, a2, 1.0)
-    # Jump: eliminate the two dry levels, solve for the shared viscous coefficient.
-    d1 = c - b1 * b1 / a1 - b2 * b2 / a2
-    v1 = (r - b1 * y1 / a1 - b2 * y2 / a2) / d1
-    fit1 = (y1 - b1 * v1) * y1 / a1 + (y2 - b2 * v1) * y2 / a2 + v1 * r
-    # No jump: one dry level.
-    a, b, yy = a1 + a2, b1 + b2, y1 + y2
-    d0 = c - b * b / a
-    v0 = (r - b * yy / a) / d0
-    fit0 = (yy - b * v0) * yy / a + v0 * r
-    out[k] = np.where(usable, np.maximum(fit1 - fit0, 0.0), 0.0)
+    c = hi[2] - lo[2] + ridge
+    r = hi[4] - lo[4] + ridge * viscous_prior
+    usable = (a - a2 >= window / 2) & (a2 >= window / 2)
+    # The jump adds one regressor z = s_k on the right half to the no-jump model
+    # [s_k, w_k] (+ prior): wGLR = (z' e0)^2 / (z' M0 z), e0 the no-jump residual and M0
+    # its residual maker; with the 2 x 2 Gram matrix G0 = [[a, b], [b, c]].
+    det = a * c - b * b
+    det = np.where(det > 0, det, np.inf)
+    dry0 = (c * yy - b * r) / det
+    visc0 = (a * r - b * yy) / det
+    num = y2 - dry0 * a2 - visc0 * b2
+    den = a2 - (c * a2 * a2 - 2.0 * b * a2 * b2 + a * b2 * b2) / det
+    den = np.where(den > 0, den, np.inf)
+    k = slice(window, n - window + 1)
+    out[k] = np.where(usable, num * num / den, 0.0)
     return out
 
 
@@ -112,20 +108,24 @@ def run_maxima(glr: np.ndarray, threshold: float, separation: int = 0) -> np.nda
     With ``separation`` > 0, a maximum closer than ``separation`` samples to a larger
     one is dropped (a side lobe of the same jump, docs/fss.md).
     """
-    above = glr > threshold
-    if not above.any():
+    idx = np.flatnonzero(glr > threshold)
+    if idx.size == 0:
         return np.empty(0, dtype=int)
-    edges = np.diff(np.concatenate(([0], above.astype(np.int8), [0])))
-    starts, stops = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
-    peaks = np.array([a + int(np.argmax(glr[a:b])) for a, b in zip(starts, stops)],
-                     dtype=int)
+    run = np.cumsum(np.concatenate(([True], np.diff(idx) > 1))) - 1
+    order = np.lexsort((glr[idx], run))            # by run, then by value
+    last = np.concatenate((run[order][1:] != run[order][:-1], [True]))
+    peaks = idx[order[last]]                       # the largest of each run, in order
     if separation <= 0 or peaks.size < 2:
         return peaks
-    kept: list[int] = []
-    for k in peaks[np.argsort(-glr[peaks], kind='stable')]:
-        if all(abs(k - j) >= separation for j in kept):
-            kept.append(int(k))
-    return np.sort(np.array(kept, dtype=int))
+    suppressed = np.zeros(peaks.size, dtype=bool)
+    for j in np.argsort(-glr[peaks], kind='stable'):
+        if suppressed[j]:
+            continue
+        lo = np.searchsorted(peaks, peaks[j] - separation, side='right')
+        hi = np.searchsorted(peaks, peaks[j] + separation, side='left')
+        suppressed[lo:hi] = True
+        suppressed[j] = False
+    return peaks[~suppressed]
 
 
 def detect_changepoints(y: np.ndarray, x: np.ndarray, *, window: int = 20,
