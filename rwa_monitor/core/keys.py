@@ -34,3 +34,10 @@ Z_DRY = 'z_dry'
 Z_VISCOUS = 'z_viscous'
 ARGMIN_INDEX = 'argmin_index'
 LOG10_P_VALUE = 'log10_p_value'
+
+# FSS window diagnoser (physics-informed FSS paper): window and extracted components.
+WINDOW_START = 'window_start_s'
+WINDOW_END = 'window_end_s'
+BASE_DRY = 'base_dry_nm'
+VISCOUS = 'viscous_nms'
+SVM_DECISION = 'svm_decision'
