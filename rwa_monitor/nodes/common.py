@@ -39,21 +39,23 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 
 from rwa_monitor.core.params import check_choice, check_int, check_real
 from rwa_monitor.exceptions import ConfigError
-from rwa_monitor.paths import config_file
 
 # --------------------------------------------------------------------------------- QoS
 
-# History depth of the telemetry topics on both ends (messages a subscriber may lag).
+# History depth of the telemetry topics when kept KEEP_LAST.
 TELEMETRY_DEPTH = 1000
 
 
-def telemetry_qos(depth: int = TELEMETRY_DEPTH) -> QoSProfile:
-    """Return the telemetry QoS: RELIABLE, VOLATILE, KEEP_LAST ``depth``.
+def telemetry_qos(depth: int = TELEMETRY_DEPTH, keep_all: bool = True) -> QoSProfile:
+    """Return the telemetry QoS: RELIABLE, VOLATILE, KEEP_ALL (or KEEP_LAST ``depth``).
 
-    Reliable so that a replay at ``rate`` 0 loses nothing; a reliable publisher also serves
-    best-effort (sensor-data) subscribers.
+    Reliable and keep-all so that no sample is lost: a subscriber that lags keeps every
+    sample until its history is full, then the publisher's ``publish`` fails and the replay
+    offers the sample again later (docs/nodes.md). A reliable publisher also serves
+    best-effort (sensor-data) subscribers; history does not affect compatibility.
     """
-    return QoSProfile(depth=depth, history=HistoryPolicy.KEEP_LAST,
+    return QoSProfile(depth=depth,
+                      history=HistoryPolicy.KEEP_ALL if keep_all else HistoryPolicy.KEEP_LAST,
                       reliability=ReliabilityPolicy.RELIABLE,
                       durability=DurabilityPolicy.VOLATILE)
 
@@ -380,34 +382,29 @@ class DiagnosticsPublisher:
 
 # -------------------------------------------------------------------------------- main
 
-def with_default_params(argv: list[str]) -> list[str]:
-    """Return ``argv`` with the installed config/rwa_monitor.yaml loaded first.
+def with_sim_time(argv: list[str]) -> list[str]:
+    """Return ``argv`` with ``use_sim_time`` true by default (the nodes run on /clock).
 
-    Only when ``argv`` names no ``--params-file`` of its own; ``-p`` values still win.
+    Placed before the user's own arguments, so a later ``-p use_sim_time:=false`` or a
+    parameter file's node block still decides. (The shipped parameter file is not loaded
+    by default: its node blocks would beat the user's ``-p`` values.)
     """
-    if '--params-file' in argv:
-        return argv
-    try:
-        path = config_file()
-    except FileNotFoundError:
-        return argv
-    return [*argv[:1], '--ros-args', '--params-file', str(path), '--', *argv[1:]]
+    return [*argv[:1], '--ros-args', '-p', 'use_sim_time:=true', '--', *argv[1:]]
 
 
 def run_node(factory: Callable[[], Node], args: Sequence[str] | None = None,
              executor: str = 'single') -> int:
     """Initialise rclpy with ``args``, create the node, spin it; return an exit code.
 
-    ``args`` (default ``sys.argv``) get the installed parameter file first (see
-    :func:`with_default_params`), so a console script runs with the shipped defaults,
-    ``use_sim_time`` included.
+    ``args`` (default ``sys.argv``) get ``use_sim_time`` true as a default (see
+    :func:`with_sim_time`).
 
     A :class:`ConfigError` at start-up (a bad parameter) is printed and gives 2; Ctrl-C
     and an external shutdown end cleanly with 0. The node may end itself by calling
     ``rclpy.try_shutdown(context=node.context)`` (the replay does when it is done).
     ``executor`` is ``'single'`` or ``'events'`` (rclpy.experimental.EventsExecutor).
     """
-    rclpy.init(args=with_default_params(sys.argv if args is None else list(args)))
+    rclpy.init(args=with_sim_time(sys.argv if args is None else list(args)))
     node = None
     try:
         node = factory()

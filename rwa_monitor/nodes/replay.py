@@ -23,6 +23,7 @@ import numpy as np
 import rclpy
 from rclpy.clock import Clock
 from rclpy.clock_type import ClockType
+from rclpy.impl.implementation_singleton import rclpy_implementation
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import Imu, JointState
@@ -55,6 +56,7 @@ PARAMETERS = (
               'messages.', read_only=True),
 )
 
+RCLError = rclpy_implementation.RCLError
 _TICK = 0.005  # s of steady time between publishing turns at rate > 0
 _MAX_ROWS_PER_TICK = 2000
 
@@ -88,6 +90,8 @@ class TelemetryReplay(Node):
         self.loops = 0
         self.done = False
         self.exit_code = 0
+        self.back_pressure = 0
+        self._pending: list[tuple[Any, Any]] = []
         self._started = False
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
         self._anchor: tuple[float, float] | None = None
@@ -152,13 +156,15 @@ class TelemetryReplay(Node):
             if not self._ready_to_start():
                 return
             self._started = True
+        if self._pending and not self._flush_pending():
+            return
         if self.params['rate'] == 0.0:
             end = min(self.next_row + self.params['burst'], len(self._time))
         else:
             end = self._due_row()
         if end > self.next_row:
             self._publish_rows(self.next_row, end)
-        if self.next_row >= len(self._time):
+        if self.next_row >= len(self._time) and not self._pending:
             self._end_of_file()
 
     def _due_row(self) -> int:
@@ -170,26 +176,50 @@ class TelemetryReplay(Node):
         due = int(np.searchsorted(self._time, t_due, side='right'))
         return min(due, self.next_row + _MAX_ROWS_PER_TICK)
 
+    def _row_messages(self, i: int) -> list[tuple[Any, Any]]:
+        t = float(self._time[i])
+        rows, frame = self._rows, self.params['frame_id']
+        out = []
+        if self._wheels_pub is not None:
+            out.append((self._wheels_pub, rows.wheels(i, t)))
+        if self._gyro_pub is not None:
+            out.append((self._gyro_pub, messages.imu(t, rows.gyro[i], frame)))
+        if self._star_pub is not None:
+            out.append((self._star_pub, messages.quaternion(t, rows.attitude[i], frame)))
+        if self._ref_pub is not None:
+            out.append((self._ref_pub, messages.vector3(t, rows.reference[i], frame)))
+        return out
+
+    def _flush_pending(self) -> bool:
+        """Publish what a full subscriber refused before; return True when all went out.
+
+        Telemetry topics keep all samples (common.telemetry_qos): when a subscriber lags so
+        far that the history is full, publish fails after the middleware's blocking time,
+        and the message is kept here and offered again on the next turn (back-pressure:
+        nothing is dropped).
+        """
+        while self._pending:
+            pub, msg = self._pending[0]
+            try:
+                pub.publish(msg)
+            except RCLError:
+                self.back_pressure += 1
+                return False
+            self._pending.pop(0)
+        return True
+
     def _publish_rows(self, start: int, end: int) -> None:
-        rows = self._rows
         for i in range(start, end):
-            t = float(self._time[i])
-            if self._wheels_pub is not None:
-                self._wheels_pub.publish(rows.wheels(i, t))
-            if self._gyro_pub is not None:
-                self._gyro_pub.publish(messages.imu(t, rows.gyro[i], self.params['frame_id']))
-            if self._star_pub is not None:
-                self._star_pub.publish(messages.quaternion(t, rows.attitude[i],
-                                                           self.params['frame_id']))
-            if self._ref_pub is not None:
-                self._ref_pub.publish(messages.vector3(t, rows.reference[i],
-                                                       self.params['frame_id']))
-        self._clock_pub.publish(messages.clock(float(self._time[end - 1])))
-        self.published += end - start
-        self.next_row = end
+            self._pending = self._row_messages(i)
+            self.next_row = i + 1
+            self.published += 1
+            if not self._flush_pending():
+                break
+        last = self.next_row - 1
+        self._clock_pub.publish(messages.clock(float(self._time[last])))
         if self.progress >= self._next_progress:
             self.get_logger().info(f'replay {100 * self.progress:.0f}% '
-                                   f'(t={self._time[end - 1]:.1f} s, loop {self.loops})')
+                                   f'(t={self._time[last]:.1f} s, loop {self.loops})')
             self._next_progress = np.floor(self.progress * 10 + 1) / 10
         self._update_health()
 
@@ -215,7 +245,8 @@ class TelemetryReplay(Node):
         state = 'done' if self.done else ('replaying' if self._started else 'waiting')
         self.diagnostics.mark_input('replay', 'replay')
         self.diagnostics.set('replay', 'replay', OK, state, progress_percent=round(
-            100 * self.progress, 2), rows_published=self.published, loops=self.loops)
+            100 * self.progress, 2), rows_published=self.published, loops=self.loops,
+            back_pressure_waits=self.back_pressure)
 
 
 class _Rows:
