@@ -106,3 +106,13 @@ def test_cli_rejects_bad_arguments_before_simulating(tmp_path, capsys):
     assert 'at least one sample' in capsys.readouterr().err
     assert main(['simulate', 'basilisk', '--rate', '-4', '-o', out]) == 2
     assert 'rate_hz' in capsys.readouterr().err
+
+
+def test_bus_node_without_the_simulator_is_a_config_error(monkeypatch):
+    from ros_harness import RosWorld
+
+    from rwa_monitor.nodes import basilisk_bus
+    monkeypatch.setattr(basilisk_bus, 'available', lambda: False)
+    with RosWorld() as world:
+        with pytest.raises(ConfigError, match='optional extra'):
+            world.node(basilisk_bus.BasiliskBusNode)
