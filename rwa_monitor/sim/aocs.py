@@ -93,8 +93,8 @@ class AocsConfig:
     gyro_thermal: float = 1.0e-6          # rad/s amplitude of the orbital thermal bias
     orbit_period_s: float = 5800.0
     st_noise_arcsec: float = 5.0          # 1-sigma per axis
-    st_dropouts_per_hour: float = 4.0
-    st_dropout_max_s: float = 20.0
+    st_dropouts_per_hour: float = 2.0
+    st_dropout_max_s: float = 5.0
     st_sign_flip_probability: float = 0.0  # chance a sample is output as -q
     wheel_torque_max: float = 0.05        # N m per wheel
     disturbance_torque: float = 2.0e-6    # N m, constant per axis ~ N(0, value^2)
