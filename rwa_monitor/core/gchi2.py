@@ -33,6 +33,7 @@ it (``b_hi < skip_threshold(log_p_min)`` implies ``P > p_min``).
 
 from __future__ import annotations
 
+import cmath
 import math
 from typing import Sequence
 
@@ -146,9 +147,13 @@ def skip_threshold(log_p: float) -> float:
     return y
 
 
-def _cgf(s: complex, w: np.ndarray, m2: np.ndarray) -> complex:
-    one = 1.0 - 2.0 * w * s
-    return complex(np.sum(-0.5 * np.log(one) + m2 * w * s / one))
+def _cgf(s: complex, w: Sequence[float], m2: Sequence[float]) -> complex:
+    """Cumulant generating function ``sum_i -log(1 - 2 w_i s)/2 + m_i^2 w_i s/(1 - 2 w_i s)``."""
+    total = 0j
+    for wi, mi in zip(w, m2):
+        one = 1.0 - 2.0 * wi * s
+        total += -0.5 * cmath.log(one) + mi * wi * s / one
+    return total
 
 
 def gchi2_logsf_general(x: float, weights: Sequence[float],
@@ -182,14 +187,16 @@ def gchi2_logsf_general(x: float, weights: Sequence[float],
         c = hi
     else:
         c = optimize.brentq(dphi, lo, hi, xtol=1e-300, rtol=1e-14, maxiter=500)
-    k0 = _cgf(c, w, m2).real - c * x - math.log(c)
+    k0 = _cgf(c, w.tolist(), m2.tolist()).real - c * x - math.log(c)
     one = 1.0 - 2.0 * w * c
     d2 = float(np.sum(2.0 * w ** 2 / one ** 2 + 4.0 * m2 * w ** 2 / one ** 3)) + 1.0 / c ** 2
     scale = 1.0 / math.sqrt(d2)
 
+    wl, ml = w.tolist(), m2.tolist()
+
     def amplitude(u: float) -> complex:
         s = complex(c, u * scale)
-        return np.exp(_cgf(s, w, m2) - c * x - np.log(s) - k0)
+        return cmath.exp(_cgf(s, wl, ml) - c * x - cmath.log(s) - k0)
 
     freq = x * scale
     cos_part, err_c = integrate.quad(lambda u: amplitude(u).real, 0.0, np.inf, weight='cos',

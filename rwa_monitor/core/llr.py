@@ -84,33 +84,33 @@ def declaration(prefix: np.ndarray, first: int, c: int, k_min: int, n: int,
     """Return ``(change position, kind, dx, z, sigma^2)`` at a declaration.
 
     ``prefix[i]`` is the prefix-sum row (reference start ``c``) at position ``first + i``,
-    covering ``[max(c, k_min - window), n + 1]``. Categorisation: before = the reference
-    ``[c, k_min)``, after = ``[k_min, n]`` (:func:`llr_stats.categorise`). Change position:
-    the ML refinement (:func:`llr_stats.refine_change`) over ``k_min +- window`` if
-    enabled, else ``k_min`` (the argmin of p_k, Algorithm 1 line 15).
+    covering ``[max(c, k_min - window), n + 1]``. Change position ``tau``: the ML refinement
+    (:func:`llr_stats.refine_change`) over ``k_min +- window`` if enabled, else ``k_min``
+    (the argmin of p_k, Algorithm 1 line 15). Categorisation: before = ``[c, tau)``, after
+    = ``[tau, n]`` (:func:`llr_stats.categorise`). The new reference starts at ``tau``.
     """
     p = cfg['regressors'].p
     noise_var = None if cfg['noise_std'] is None else cfg['noise_std'] ** 2
-    before = prefix[k_min - first]
-    after = prefix[n + 1 - first] - before
-    kind, dx, z, s2 = llr_stats.categorise(before, k_min - c, after, n + 1 - k_min, p,
-                                           noise_var, z_thr, cfg['min_excitation'])
     tau = k_min
     if cfg['refine_change']:
         w = cfg['window']
         tau = llr_stats.refine_change(prefix, first, c, n, k_min - w, k_min + w, p,
                                       cfg['min_excitation'], k_min)
+    before = prefix[tau - first]
+    after = prefix[n + 1 - first] - before
+    kind, dx, z, s2 = llr_stats.categorise(before, tau - c, after, n + 1 - tau, p,
+                                           noise_var, z_thr, cfg['min_excitation'])
     return tau, kind, dx, z, s2
 
 
-def checkpoints(k_min: int, n: int, count: int) -> list[int]:
+def checkpoints(start: int, n: int, count: int) -> list[int]:
     """Return the positions where the kind of a change declared at ``n`` is re-checked.
 
-    The after-segment ``[k_min, n]`` holds ``L0 = n - k_min + 1`` samples at declaration;
+    The after-segment ``[start, n]`` holds ``L0 = n - start + 1`` samples at declaration;
     the kind is re-evaluated when it holds ``2 L0, 4 L0, ...`` (``count`` checks).
     """
-    length = n - k_min + 1
-    return [k_min + length * 2 ** i - 1 for i in range(1, count + 1)]
+    length = n - start + 1
+    return [start + length * 2 ** i - 1 for i in range(1, count + 1)]
 
 
 class LLRDetector:
@@ -182,9 +182,7 @@ class LLRDetector:
     @property
     def reference_start_index(self) -> int:
         """Row index where the current reference segment starts (-1 if no sample yet)."""
-        if self._pos <= self._c:
-            return -1
-        return self._rrow[self._c % self._L]
+        return self._c_row
 
     def _reference_row(self) -> tuple[Any, int]:
         if self._last_k > self._c:
@@ -226,6 +224,7 @@ class LLRDetector:
         self._pos = 0
         self._last_t = -math.inf
         self._c = 0
+        self._c_row = -1
         self._pref = zero
         self._rterm = [None] * self._L
         self._rpref = [None] * self._L
@@ -288,6 +287,8 @@ class LLRDetector:
         self._pref = P
         j = self._pos
         self._pos = j + 1
+        if j == 0:
+            self._c_row = row
         L = self._L
         s = j % L
         self._rterm[s] = (ta, tb, tc, tu, tv, te)
@@ -296,10 +297,20 @@ class LLRDetector:
         self._rpref[(j + 1) % L] = P
         events = self._revise(j) if j == self._checkpoint else []
         k = j - self._w + 1
-        if k <= self._c + self._w:
-            return events
+        if k > self._c + self._w and self._test2(k, P):
+            events.extend(self._declare(j))
+        return events
+
+    def _test2(self, k: int, P: tuple) -> bool:
+        """Algorithm 1 lines 9-18 at candidate ``k`` (p = 2); return True to declare.
+
+        ``P`` is the prefix row at ``k + w`` (T_k), the one at ``k`` (P_k) is in the ring.
+        Statistic: eq. (5) as ``d^T Pi_P d / sigma^2`` with ``d = x_T - x_P = Pi_T^-1 (q_W -
+        Pi_W x_P)`` (the window's residual against the reference fit: no difference of
+        two nearly equal estimates). Skips (counted) when ``Pi_P`` is ill-conditioned.
+        """
         self._last_k = k
-        A, B, C, U, V, E = self._rpref[k % L]
+        A, B, C, U, V, E = self._rpref[k % self._L]
         At, Bt, Ct, Ut, Vt, _ = P
         ac = A * C
         det = ac - B * B
@@ -332,16 +343,14 @@ class LLRDetector:
                     self._record(k, logp)
         else:
             self._counters['ill_conditioned'] += 1
-        if k > self._kmin + self._kverif and self._logpmin <= self._logr:
-            events.extend(self._declare(j))
-        return events
+        return k > self._kmin + self._kverif and self._logpmin <= self._logr
 
     def _row(self, t: float, w: float, aux: Mapping[str, float] | None):
         if aux is not None:
             aux = {name: np.asarray([value], dtype=float) for name, value in aux.items()}
         try:
             h = self._regressors.matrix(np.asarray([w]), np.asarray([t]), aux)[0]
-        except KeyError:
+        except (KeyError, TypeError):
             self._counters['missing_aux'] += 1
             return None
         if not np.all(np.isfinite(h)):
@@ -360,7 +369,13 @@ class LLRDetector:
         return np.asarray([self._rpref[i % L] for i in range(first, last + 1)], dtype=float)
 
     def _declare(self, n: int) -> list[AnomalyEvent]:
-        """Algorithm 1 lines 18-21: declare the change at k_min and restart there."""
+        """Algorithm 1 lines 18-21: declare the change and restart the reference.
+
+        The paper restarts at ``k_min``; here at the refined change position ``tau``
+        (``k_min`` when refinement is off), so that the new reference holds post-change
+        samples only. Tests of the new reference whose window is already complete run at
+        once (possible when ``tau`` is well before ``k_min``; they cannot declare).
+        """
         L = self._L
         c, k_min = self._c, self._kmin
         first = max(c, k_min - self._w)
@@ -369,18 +384,24 @@ class LLRDetector:
         rows = (self._rrow[tau % L], self._rrow[k_min % L], self._rrow[n % L])
         times = (self._rtime[tau % L], self._rtime[n % L])
         event = make_event(self._component, kind, rows, times, self._logpmin, dx, z, s2, 0)
-        self._cat = dict(before=prefix[k_min - first].copy(), n_before=k_min - c, kind=kind,
+        self._cat = dict(before=prefix[tau - first].copy(), n_before=tau - c, kind=kind,
                          revision=0, rows=rows, time=times[0], log_p=self._logpmin,
-                         k_min=k_min)
-        self._checks = checkpoints(k_min, n, self._cfg['category_revisions'])
+                         start=tau)
+        self._checks = checkpoints(tau, n, self._cfg['category_revisions'])
         self._checkpoint = self._checks.pop(0) if self._checks else -1
-        self._restart(k_min, n)
-        return [event]
+        self._restart(tau, n)
+        events = [event]
+        test = self._test2 if self._p == 2 else self._test_general
+        for k in range(tau + self._w + 1, n - self._w + 2):
+            if test(k, self._rpref[(k + self._w) % L]):
+                events.extend(self._declare(n))
+        return events
 
     def _restart(self, c: int, n: int) -> None:
         """Start the new reference at position ``c`` and rebuild its prefix sums."""
         L = self._L
         self._c = c
+        self._c_row = self._rrow[c % L]
         P = self._zero
         self._rpref[c % L] = P
         for j in range(c, n + 1):
@@ -403,7 +424,7 @@ class LLRDetector:
         self._checkpoint = self._checks.pop(0) if self._checks else -1
         after = np.asarray(self._pref, dtype=float)
         kind, dx, z, s2 = llr_stats.categorise(cat['before'], cat['n_before'], after,
-                                               j + 1 - cat['k_min'], self._p, self._noise_var,
+                                               j + 1 - cat['start'], self._p, self._noise_var,
                                                self._z_thr, self._min_exc)
         if kind == cat['kind']:
             return []
@@ -417,12 +438,13 @@ class LLRDetector:
     # -- general model (p > 2): numpy per sample -------------------------------------
     def _update_general(self, row: int, t: float, f: float, h: np.ndarray
                         ) -> list[AnomalyEvent]:
-        p = self._p
         term = np.concatenate([np.outer(h, h).ravel(), h * f, [f * f]])
         P = self._pref + term
         self._pref = P
         j = self._pos
         self._pos = j + 1
+        if j == 0:
+            self._c_row = row
         L = self._L
         s = j % L
         self._rterm[s] = term
@@ -431,10 +453,15 @@ class LLRDetector:
         self._rpref[(j + 1) % L] = P
         events = self._revise(j) if j == self._checkpoint else []
         k = j - self._w + 1
-        if k <= self._c + self._w:
-            return events
+        if k > self._c + self._w and self._test_general(k, P):
+            events.extend(self._declare(j))
+        return events
+
+    def _test_general(self, k: int, P: np.ndarray) -> bool:
+        """:meth:`_test2` for p > 2 (numpy; weights from the generalised eigenproblem)."""
+        p = self._p
         self._last_k = k
-        pi_p, q_p, e = llr_stats.unpack(self._rpref[k % L], p)
+        pi_p, q_p, e = llr_stats.unpack(self._rpref[k % self._L], p)
         pi_t, q_t, _ = llr_stats.unpack(P, p)
         if bool(llr_stats.well_conditioned(pi_p, self._min_exc)):
             n_p = k - self._c
@@ -446,20 +473,22 @@ class LLRDetector:
             else:
                 s2 = self._noise_var
             pi_w = pi_t - pi_p
-            d = np.linalg.solve(pi_t, (q_t - q_p) - pi_w @ x)
+            m = np.linalg.solve(pi_t, np.column_stack([(q_t - q_p) - pi_w @ x, pi_w]))
+            d = m[:, 0]
             y = float(d @ pi_p @ d) / s2
-            lam = np.clip(linalg.eigh(pi_w, pi_t, eigvals_only=True), 0.0, 1.0)
+            tr = float(np.trace(m[:, 1:]))
             self._last_y = y
-            lmax = float(lam.max())
-            if lmax > 0.0 and y > 0.0 and not y / (2.0 * lmax) < self._ystar:
-                logp = gchi2_logsf_general(y, lam)[0]
-                if logp < self._logpmin:
-                    self._record(k, logp)
+            # lambda_max >= tr / p, so b = y / (2 lambda_max) <= p y / (2 tr).
+            if tr > 0.0 and y > 0.0 and not p * y / (2.0 * tr) < self._ystar:
+                lam = np.sort(np.clip(linalg.eigh(pi_w, pi_t, eigvals_only=True), 0.0, 1.0))
+                # Dropping all but the two largest terms gives a lower bound of the tail.
+                if not log_sf2(y, lam[-1], lam[-2]) > self._logpmin + 1e-9:
+                    logp = gchi2_logsf_general(y, lam)[0]
+                    if logp < self._logpmin:
+                        self._record(k, logp)
         else:
             self._counters['ill_conditioned'] += 1
-        if k > self._kmin + self._kverif and self._logpmin <= self._logr:
-            events.extend(self._declare(j))
-        return events
+        return k > self._kmin + self._kverif and self._logpmin <= self._logr
 
 
 def candidate_log_p2(y: float, tr: float, dm: float, log_p_min: float) -> float | None:

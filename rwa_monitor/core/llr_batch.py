@@ -223,7 +223,7 @@ def detect_batch_with_counters(time, speed, friction, *, component: str = 'rw1',
             ref.extend(j + 1)
             after = ref.at(j + 1)
             kind, dx, z, s2 = llr_stats.categorise(
-                cat['before'], cat['n_before'], after, j + 1 - cat['k_min'], 2,
+                cat['before'], cat['n_before'], after, j + 1 - cat['start'], 2,
                 None if cfg['noise_std'] is None else cfg['noise_std'] ** 2, z_thr,
                 cfg['min_excitation'])
             if kind != cat['kind']:
@@ -260,11 +260,10 @@ def detect_batch_with_counters(time, speed, friction, *, component: str = 'rw1',
         times = (float(tv[tau]), float(tv[n]))
         events.append(make_event(component, kind, ev_rows, times, state['logp'], dx, z, s2,
                                  0))
-        cat = dict(before=prefix[k_min - first].copy(), n_before=k_min - c, kind=kind,
-                   revision=0, rows=ev_rows, time=times[0], log_p=state['logp'],
-                   k_min=k_min)
-        checks = checkpoints(k_min, n, cfg['category_revisions'])
-        c = k_min
+        cat = dict(before=prefix[tau - first].copy(), n_before=tau - c, kind=kind,
+                   revision=0, rows=ev_rows, time=times[0], log_p=state['logp'], start=tau)
+        checks = checkpoints(tau, n, cfg['category_revisions'])
+        c = tau
     counters['ill_conditioned'] = state['ill']
     return events, counters
 

@@ -1,0 +1,359 @@
+"""Tests of the online LLR friction detector (llr-realtime paper, Algorithm 1, Lemma 1)."""
+
+import math
+
+import numpy as np
+import pytest
+
+from rwa_monitor.core import keys
+from rwa_monitor.core.friction import dry_column, RegressorSet, viscous_column
+from rwa_monitor.core.gchi2 import gchi2_isf
+from rwa_monitor.core.llr import LLRDetector
+from rwa_monitor.core.llr_batch import _stats, detect_batch, detect_batch_with_counters
+
+
+def paper_speed(n: int, profile: str = 'fig3') -> np.ndarray:
+    """Spin-rate profiles of the paper (Fig. 3 and Figs. 6-7) and one with zero crossings."""
+    k = np.arange(n, dtype=float)
+    if profile == 'fig3':
+        return 20.0 - 10.0 * np.cos(np.pi * k / 1200.0)
+    if profile == 'ramp':
+        return 100.0 - k / 1250.0
+    if profile == 'crossing':
+        return 15.0 * np.sin(2.0 * np.pi * k / 3000.0) + 2.0
+    raise ValueError(profile)
+
+
+def friction_signal(n: int, seed: int, changes=(), profile: str = 'fig3', noise: float = 1.0,
+                    x0=(1.0, 0.05)) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Return (time, speed, friction) of eq. (1) with step changes (index, d_dry, d_visc)."""
+    rng = np.random.default_rng(seed)
+    w = paper_speed(n, profile)
+    fc = np.full(n, x0[0])
+    fv = np.full(n, x0[1])
+    for at, d_dry, d_visc in changes:
+        fc[at:] += d_dry
+        fv[at:] += d_visc
+    f = -fc * np.sign(w) - fv * w + noise * rng.standard_normal(n)
+    return np.arange(n, dtype=float) * 0.5, w, f
+
+
+def stream(det: LLRDetector, t, w, f) -> list:
+    events = []
+    for a, b, c in zip(list(t), list(w), list(f)):
+        events.extend(det.update(a, b, c))
+    return events
+
+
+def firsts(events) -> list[tuple[str, int, int]]:
+    return [(e.kind, e.index, e.declared_index) for e in events if e.revision == 0]
+
+
+# -- Lemma 1 -------------------------------------------------------------------------------
+def test_lemma1_nominal_statistic_follows_the_generalised_chi_square():
+    """Empirical tail of LLR_k (known sigma) at fixed k vs Lemma 1, binomial bounds."""
+    rng = np.random.default_rng(11)
+    k, w, runs = 300, 100, 20_000
+    speed = paper_speed(k + w)
+    speed[::5] *= -1.0
+    h1, h2 = -np.sign(speed), -speed
+    f = (np.column_stack([h1, h2]) @ np.array([1.0, 0.05]))[None, :] \
+        + rng.standard_normal((runs, k + w))
+
+    def sums(m):
+        a, b, c = h1[:m] @ h1[:m], h1[:m] @ h2[:m], h2[:m] @ h2[:m]
+        u, v, e = f[:, :m] @ h1[:m], f[:, :m] @ h2[:m], np.einsum('ij,ij->i', f[:, :m],
+                                                                     f[:, :m])
+        return np.column_stack([np.full(runs, a), np.full(runs, b), np.full(runs, c), u, v, e])
+
+    cfg = {'min_excitation': 1e-6, 'noise_std': 1.0}
+    ok, testable, y, tr, dm, _, _ = _stats(sums(k), sums(k + w), np.full(runs, float(k)), cfg)
+    assert np.all(ok)
+    half = 0.5 * tr[0]
+    disc = math.sqrt(half * half - dm[0])
+    weights = [half + disc, half - disc]
+    # Cross-check the eigenvalues against Lemma 1's I - Pi_P^1/2 Pi_T^-1 Pi_P^1/2.
+    hp, ht = np.column_stack([h1[:k], h2[:k]]), np.column_stack([h1, h2])
+    pi_p, pi_t = hp.T @ hp, ht.T @ ht
+    vals, vecs = np.linalg.eigh(pi_p)
+    root = vecs @ np.diag(np.sqrt(vals)) @ vecs.T
+    lemma = np.linalg.eigvalsh(np.eye(2) - root @ np.linalg.inv(pi_t) @ root)
+    np.testing.assert_allclose(sorted(weights), sorted(lemma), rtol=1e-9)
+    for level in (0.1, 0.01, 0.001):
+        count = np.count_nonzero(y > gchi2_isf(level, weights))
+        # Binomial(runs, level): 4.5 standard deviations (false failure ~7e-6 per level).
+        assert abs(count - runs * level) <= 4.5 * math.sqrt(runs * level * (1.0 - level))
+
+
+# -- streaming == batch --------------------------------------------------------------------
+def _scenario(name: str):
+    if name == 'three_changes_nan':
+        t, w, f = friction_signal(20_000, 1, ((3000, 0.5, 0.0), (9000, 0.0, 0.03),
+                                              (15000, 0.4, 0.02)))
+        rng = np.random.default_rng(5)
+        f[rng.random(f.size) < 0.01] = np.nan
+        w[rng.random(w.size) < 0.002] = np.inf
+        return t, w, f, {}
+    if name == 'zero_crossings_rest':
+        t, w, f = friction_signal(16_000, 2, ((7000, 0.6, 0.0),), profile='crossing')
+        w[2000:2600] = 0.0
+        f[2000:2600] = np.random.default_rng(6).standard_normal(600)
+        return t, w, f, {}
+    if name == 'bad_times':
+        t, w, f = friction_signal(9000, 3, ((4000, 0.0, 0.04),))
+        t[100] = t[99]
+        t[2000:2010] = t[1990]
+        t[5000] = np.nan
+        return t, w, f, {'window': 300, 'k_verif': 0, 'refine_change': False}
+    if name == 'known_noise_no_revisions':
+        t, w, f = friction_signal(12_000, 4, ((3000, 0.5, 0.0), (8000, -0.5, 0.0)),
+                                  profile='ramp')
+        return t, w, f, {'noise_std': 1.0, 'category_revisions': 0, 'window': 400}
+    if name == 'constant_then_moving':
+        t, w, f = friction_signal(9000, 5, ((6000, 0.8, 0.0),))
+        w[:2500] = 12.0
+        return t, w, f, {'false_alarm_rate': 1e-3, 'k_verif': 299}
+    if name == 'scaled_units':
+        t, w, f = friction_signal(10_000, 7, ((5000, 0.5, 0.02),))
+        return t, w, f * 1e-4, {'window': 250}
+    raise ValueError(name)
+
+
+SCENARIOS = ('three_changes_nan', 'zero_crossings_rest', 'bad_times',
+             'known_noise_no_revisions', 'constant_then_moving', 'scaled_units')
+
+
+@pytest.mark.parametrize('name', SCENARIOS)
+def test_streaming_and_batch_give_identical_events(name):
+    t, w, f, params = _scenario(name)
+    det = LLRDetector('rw2', **params)
+    streamed = stream(det, t, w, f)
+    batch, counters = detect_batch_with_counters(t, w, f, component='rw2', **params)
+    assert streamed == batch
+    assert counters == det.counters
+    assert det.n_samples == t.size
+    assert streamed, 'every scenario has at least one change to declare'
+
+
+REGRESSION = {
+    'three_changes_nan': [('viscous', 3003, 3843), ('viscous', 8994, 9755),
+                          ('viscous', 14985, 15929)],
+}
+
+
+def test_regression_detection_indices():
+    t, w, f, params = _scenario('three_changes_nan')
+    events = detect_batch(t, w, f, **params)
+    got = firsts(events)
+    truth = (3000, 9000, 15000)
+    assert [abs(i - c) <= 30 for (_, i, _), c in zip(got, truth)] == [True] * 3
+    assert got == REGRESSION['three_changes_nan']
+
+
+# -- detection, categorisation, false alarms ----------------------------------------------
+@pytest.mark.slow
+def test_categorisation_accuracy_on_seeded_changes():
+    """Final kind of 40 seeded runs per class (dry +0.5, viscous +0.03, both): >= 95 %."""
+    results = {}
+    for kind, d_dry, d_visc in (('dry', 0.5, 0.0), ('viscous', 0.0, 0.03),
+                                ('both', 0.5, 0.03)):
+        correct = detected = 0
+        for seed in range(40):
+            t, w, f = friction_signal(8000, 100 + seed, ((3000, d_dry, d_visc),))
+            events = detect_batch(t, w, f)
+            near = [e for e in events if e.revision == 0 and abs(e.index - 3000) <= 300]
+            assert len([e for e in events if e.revision == 0]) == len(near)
+            if near:
+                detected += 1
+                final = max((e for e in events if e.index == near[0].index),
+                            key=lambda e: e.revision)
+                correct += final.kind == kind
+        results[kind] = (detected, correct)
+    for kind, (detected, correct) in results.items():
+        assert detected >= 38, (kind, results)
+        assert correct >= 0.95 * detected, (kind, results)
+
+
+def test_change_time_refinement_reduces_the_localisation_error():
+    errors = {True: [], False: []}
+    for seed in range(12):
+        t, w, f = friction_signal(6000, 200 + seed, ((2500, 0.5, 0.0),))
+        for refine in (True, False):
+            events = detect_batch(t, w, f, refine_change=refine)
+            assert len(firsts(events)) == 1
+            errors[refine].append(abs(events[0].index - 2500))
+            assert events[0].details[keys.ARGMIN_INDEX] == (
+                events[0].index if not refine else events[0].details[keys.ARGMIN_INDEX])
+    assert np.mean(errors[True]) < np.mean(errors[False])
+
+
+def test_no_false_alarm_on_nominal_data():
+    # Union bound: P(any declaration) <= n * r per run (p_k uniform under H0), here
+    # 3e4 * 1e-7 = 3e-3, times a small factor for the estimated noise variance.
+    for seed in range(3):
+        t, w, f = friction_signal(30_000, 300 + seed)
+        assert detect_batch(t, w, f, false_alarm_rate=1e-7) == []
+
+
+def test_event_fields_and_estimates():
+    t, w, f = friction_signal(7000, 8, ((3000, 0.5, 0.0),), noise=0.5)
+    det = LLRDetector('rw3')
+    events = stream(det, t, w, f)
+    ev = events[0]
+    assert ev.detector == 'llr' and ev.component == 'rw3' and ev.kind == 'dry'
+    assert ev.time == t[ev.index] and ev.declared_time == t[ev.declared_index]
+    assert ev.declared_index - ev.details[keys.ARGMIN_INDEX] == 500 + 250
+    assert ev.p_value <= 1e-5 and ev.p_value == pytest.approx(
+        10.0 ** ev.details[keys.LOG10_P_VALUE])
+    assert ev.details[keys.DELTA_DRY] == pytest.approx(0.5, abs=0.15)
+    assert ev.details[keys.NOISE_STD] == pytest.approx(0.5, rel=0.1)
+    assert set(ev.to_json()) >= {'detector', 'component', 'kind', 'time', 'index',
+                                 'declared_time', 'declared_index', 'p_value'}
+    assert np.all(np.abs(det.estimate - [1.5, 0.05]) < [0.2, 0.01])
+    assert det.noise_std == pytest.approx(0.5, rel=0.1)
+    assert det.reference_start_index == ev.index
+    assert 0.0 < det.p_min <= 1.0 and det.n_samples == 7000
+
+
+@pytest.mark.slow
+def test_more_regressors_use_the_general_path():
+    def power(speed, time, aux):
+        return -np.sign(speed) * np.sqrt(np.abs(speed))
+
+    reg = RegressorSet(('dry', 'viscous', 'sqrt'), (dry_column, viscous_column, power))
+    t, w, f = friction_signal(3000, 9, ((1500, 2.0, 0.0),), profile='crossing')
+    params = {'window': 150, 'regressors': reg}
+    det = LLRDetector('rw1', **params)
+    events = stream(det, t, w, f)
+    assert [e.kind for e in events if e.revision == 0] == ['dry']
+    assert abs(events[0].index - 1500) <= 30
+    assert det.estimate.shape == (3,)
+    assert detect_batch(t, w, f, **params) == events
+
+
+def test_auxiliary_channel_missing_is_counted():
+    def temp(speed, time, aux):
+        return -np.sign(speed) * aux['temperature']
+
+    reg = RegressorSet(('dry', 'viscous', 'temp'), (dry_column, viscous_column, temp))
+    det = LLRDetector('rw1', regressors=reg, window=20)
+    assert det.update(0.0, 10.0, -1.0) == []
+    assert det.update(1.0, 10.0, -1.0, {'temperature': 20.0}) == []
+    assert det.counters['missing_aux'] == 1 and det.n_samples == 2
+
+
+# -- defined behaviour on bad input --------------------------------------------------------
+def _state(det: LLRDetector):
+    return (det.estimate.tolist(), det.noise_std, det.log_p_min, det.last_statistic)
+
+
+def test_nonfinite_samples_are_dropped_counted_and_harmless():
+    t, w, f = friction_signal(3000, 10, ((1500, 0.5, 0.0),))
+    clean = LLRDetector('rw1', window=200)
+    dirty = LLRDetector('rw1', window=200)
+    for i, (a, b, c) in enumerate(zip(t, w, f)):
+        clean.update(a, b, c)
+        dirty.update(a, b, c)
+        if i % 97 == 0:
+            before = _state(dirty)
+            assert dirty.update(a + 0.1, math.nan, c) == []
+            assert dirty.update(a + 0.2, b, math.inf) == []
+            assert dirty.update(math.nan, b, c) == []
+            assert dirty.update(a + 0.3, None, c) == []
+            np.testing.assert_equal(_state(dirty), before)
+    assert dirty.counters['nonfinite'] == 4 * len(range(0, 3000, 97))
+    np.testing.assert_equal(_state(dirty), _state(clean))
+
+
+def test_non_increasing_time_is_dropped_and_counted():
+    det = LLRDetector('rw1', window=10)
+    det.update(1.0, 5.0, -1.0)
+    before = _state(det)
+    assert det.update(1.0, 5.0, -1.0) == [] and det.update(0.5, 5.0, -1.0) == []
+    np.testing.assert_equal(_state(det), before)
+    assert det.counters['non_increasing_time'] == 2 and det.n_samples == 3
+
+
+def test_constant_speed_is_not_separable_and_raises_no_alarm():
+    rng = np.random.default_rng(12)
+    n = 5000
+    f = -1.0 - 0.05 * 15.0 + rng.standard_normal(n)
+    f[2500:] -= 3.0  # a big change that dry and viscous cannot tell apart
+    w = np.full(n, 15.0)
+    t = np.arange(n, dtype=float)
+    det = LLRDetector('rw1', window=300)
+    assert stream(det, t, w, f) == []
+    assert det.counters['ill_conditioned'] == n - 2 * 300
+    assert np.all(np.isnan(det.estimate))
+    assert detect_batch(t, w, f, window=300) == []
+
+
+def test_wheel_at_rest_carries_no_information():
+    n = 4000
+    t = np.arange(n, dtype=float)
+    w = np.zeros(n)
+    f = np.random.default_rng(13).standard_normal(n)
+    det = LLRDetector('rw1', window=100)
+    assert stream(det, t, w, f) == []
+    assert det.counters['ill_conditioned'] == n - 200
+    assert det.p_min == 1.0
+
+
+def test_zero_crossings_detects_a_dry_change():
+    t, w, f = friction_signal(16_000, 14, ((7000, 0.6, 0.0),), profile='crossing')
+    events = detect_batch(t, w, f)
+    assert [(e.kind, abs(e.index - 7000) <= 100) for e in events if e.revision == 0] == [
+        ('dry', True)]
+
+
+def test_reset_restores_the_constructed_state():
+    t, w, f = friction_signal(5000, 15, ((2000, 0.5, 0.0),))
+    det = LLRDetector('rw1', window=200)
+    first = stream(det, t, w, f)
+    det.update(math.nan, 0.0, 0.0)
+    det.reset()
+    assert det.n_samples == 0 and det.counters['nonfinite'] == 0 and det.p_min == 1.0
+    assert stream(det, t, w, f) == first
+
+
+def test_memory_is_bounded_by_the_windows():
+    t, w, f = friction_signal(6000, 16, ((3000, 0.5, 0.0),))
+    det = LLRDetector('rw1', window=100, k_verif=30)
+    stream(det, t, w, f)
+    sizes = [len(det._rpref), len(det._rterm), len(det._rrow), len(det._rtime)]
+    assert sizes == [2 * 100 + 30 + 2] * 4
+
+
+# -- parameter validation ------------------------------------------------------------------
+@pytest.mark.parametrize('params, name', [
+    ({'window': 0}, 'window'), ({'window': 9}, 'window'), ({'window': 50.5}, 'window'),
+    ({'k_verif': -1}, 'k_verif'), ({'window': 100, 'k_verif': 100}, 'k_verif'),
+    ({'false_alarm_rate': 0.0}, 'false_alarm_rate'),
+    ({'false_alarm_rate': 1.0}, 'false_alarm_rate'),
+    ({'false_alarm_rate': math.nan}, 'false_alarm_rate'),
+    ({'noise_std': 0.0}, 'noise_std'), ({'noise_std': -1.0}, 'noise_std'),
+    ({'min_excitation': 1.0}, 'min_excitation'), ({'min_excitation': -0.1}, 'min_excitation'),
+    ({'category_level': 0.0}, 'category_level'),
+    ({'category_revisions': -1}, 'category_revisions'),
+    ({'refine_change': 'yes'}, 'refine_change'), ({'regressors': 'cv'}, 'regressors'),
+])
+def test_invalid_parameters_raise_naming_the_parameter(params, name):
+    with pytest.raises(ValueError, match=name):
+        LLRDetector('rw1', **params)
+    with pytest.raises(ValueError, match=name):
+        detect_batch([0.0], [1.0], [1.0], **params)
+
+
+def test_invalid_component_and_unknown_parameter():
+    with pytest.raises(ValueError, match='component'):
+        LLRDetector('')
+    with pytest.raises(TypeError):
+        LLRDetector('rw1', windw=100)
+
+
+def test_batch_input_shapes_are_checked():
+    with pytest.raises(ValueError, match='same length'):
+        detect_batch([0.0, 1.0], [1.0], [1.0, 2.0])
+    with pytest.raises(ValueError, match='1-D'):
+        detect_batch(np.zeros((2, 2)), np.zeros(4), np.zeros(4))
+    assert detect_batch([], [], []) == []
