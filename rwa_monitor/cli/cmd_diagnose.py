@@ -46,15 +46,19 @@ def load_params(path: str | None) -> dict:
     except (OSError, yaml.YAMLError) as err:
         raise ConfigError(f'{file}: {err}') from None
     block = data.get(NODE_BLOCK, {}) if isinstance(data, dict) else {}
-    return dict((block or {}).get('ros__parameters', {}))
+    params = dict((block or {}).get('ros__parameters', {}))
+    if 'wglr_window' in params:  # the node's name for the wGLR half-window
+        params['window'] = params.pop('wglr_window')
+    return params
 
 
 def run(args: argparse.Namespace) -> int:
     """Diagnose each wheel and write the JSON."""
     from rwa_monitor.core.fss.pipeline import diagnose, FssConfig, load_model
     try:
-        config = FssConfig.from_dict(load_params(args.params_file))
-        model = load_model(args.model)
+        params = load_params(args.params_file)
+        config = FssConfig.from_dict(params)
+        model = load_model(args.model or params.get('model') or None)
     except (ValueError, OSError) as err:
         raise ConfigError(str(err)) from None
     tele = read_telemetry(args.file)

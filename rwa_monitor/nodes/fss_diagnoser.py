@@ -1,0 +1,310 @@
+"""Node ``fss_diagnoser``: the FSS window diagnosis of every wheel on ``telemetry/wheels``.
+
+Each wheel keeps a :class:`rwa_monitor.core.fss.pipeline.SlidingWindow` of the last
+``window_length`` samples; every ``window_period`` samples (once the window is full) a
+copy of it goes to one worker thread, which runs the four stages
+(:func:`rwa_monitor.core.fss.pipeline.diagnose`, the same code as ``rwa-monitor
+diagnose``). The subscription callback only appends samples, so telemetry is never
+dropped while a diagnosis runs; results are published from a timer of the node.
+Memory: per wheel the window (3 x window_length floats) and at most one copy in flight;
+a window that falls due while the wheel's previous one is still running is skipped and
+counted (``skipped_busy``).
+
+Outputs: each anomaly that a diagnosis flags and the previous one did not is published
+on ``anomalies`` (AnomalyEvent, detector ``fss``, kind ``dry``/``viscous``/``fss1``/
+``fss2``; ``time``/``index`` = the window's first sample, the declaration = its last,
+with the window bounds and the extracted base dry and viscous friction); each wheel's
+health on ``/diagnostics`` (OK, or WARN listing the anomalies of the last window, STALE
+when telemetry stops), with the counters of bad input. Bad input: as the llr_detector
+node for messages; per wheel, a stamp not after the last one is dropped and counted,
+NaN/Inf samples are kept in the window (the stages skip them) and counted.
+"""
+
+from __future__ import annotations
+
+import concurrent.futures
+import queue
+from typing import Any, Sequence
+
+from diagnostic_msgs.msg import DiagnosticArray
+from rclpy.clock import Clock
+from rclpy.clock_type import ClockType
+from rclpy.node import Node
+from sensor_msgs.msg import JointState
+
+from rwa_monitor.core import keys
+from rwa_monitor.core.events import AnomalyEvent
+from rwa_monitor.core.fss.pipeline import diagnose, FssConfig, load_model, SlidingWindow
+from rwa_monitor.exceptions import ConfigError
+from rwa_monitor.nodes import messages
+from rwa_monitor.nodes.common import (declare_parameters, DiagnosticsPublisher, EVENTS_QOS,
+                                      OK, ParamSpec, qos_event_callbacks, run_node,
+                                      telemetry_qos, WARN)
+
+NODE_NAME = 'fss_diagnoser'
+INPUT_ID = 'telemetry/wheels'
+DETECTOR = 'fss'
+
+# Node parameter -> FssConfig field.
+CONFIG_NAMES = {'wglr_window': 'window', 'w_bias': 'w_bias', 'viscous_prior': 'viscous_prior',
+                'p_false': 'p_false', 'dk_error': 'dk_error', 'beam': 'beam',
+                'torque_scale_nm': 'torque_scale_nm', 'speed_scale_rad_s': 'speed_scale_rad_s'}
+PARAMETERS = (
+    ParamSpec('window_length', 80_000, 'Samples per diagnosed window (the paper: ~80,000, a '
+              'few hours).', low=200, high=10_000_000, read_only=True),
+    ParamSpec('window_period', 20_000, 'Samples between two diagnoses of a wheel.', low=1,
+              high=10_000_000),
+    ParamSpec('wglr_window', 20, 'Half-window w of the changepoint statistic (samples).',
+              low=2, high=100_000),
+    ParamSpec('w_bias', 1.0e-4, 'Weight W_b of the viscous prior, eq. (11b).', low=0.0),
+    ParamSpec('viscous_prior', 1.0, 'Prior viscous coefficient f~v (normalised units).'),
+    ParamSpec('p_false', 1.0e-9, 'False-positive probability per sample of the changepoint '
+              'threshold.', low=0.0, high=1.0, low_open=True, high_open=True),
+    ParamSpec('dk_error', 10, 'Samples left out each side of a changepoint in the least '
+              'squares.', low=0, high=100_000),
+    ParamSpec('beam', 256, 'Most DP states kept per changepoint (assignment bound).', low=1,
+              high=1_000_000),
+    ParamSpec('torque_scale_nm', 2.0e-4, 'One normalised torque unit (N m).', low=0.0,
+              low_open=True),
+    ParamSpec('speed_scale_rad_s', 400.0, 'One normalised speed unit (rad/s).', low=0.0,
+              low_open=True),
+    ParamSpec('model', '', 'Classifier model file (JSON from `rwa-monitor fss train`); '
+              'empty = the shipped model.', read_only=True),
+    ParamSpec('wheels', '', 'Comma-separated wheel ids to monitor; empty = every wheel '
+              'seen (up to max_wheels).'),
+    ParamSpec('max_wheels', 16, 'Most wheels monitored at once (bounds memory).', low=1,
+              high=256, read_only=True),
+    ParamSpec('stale_timeout', 3.0, 'Seconds without telemetry before health is STALE.',
+              low=0.0, low_open=True, read_only=True),
+    ParamSpec('diagnostic_period', 1.0, 'Seconds between /diagnostics messages.',
+              low=0.01, high=60.0, read_only=True),
+)
+
+
+class _Wheel:
+    """One monitored wheel: window, stream index, last diagnosis and counters."""
+
+    def __init__(self, length: int, period: int) -> None:
+        self.window = SlidingWindow(length=length, period=period)
+        self.samples = 0
+        self.diagnoses = 0
+        self.skipped_busy = 0
+        self.busy = False
+        self.flags: dict[str, bool] = {}
+        self.result: dict | None = None
+        self.window_bounds: tuple[float, float] | None = None
+        self.health: Any = None
+
+
+class FssDiagnoserNode(Node):
+    """Diagnose each wheel's sliding window in a worker thread; see the module docstring."""
+
+    def __init__(self, **kwargs: Any) -> None:
+        """Create the node (``kwargs`` go to rclpy's Node: context, cli_args, ...)."""
+        super().__init__(NODE_NAME, **kwargs)
+        self.params = declare_parameters(self, PARAMETERS, self._on_parameter,
+                                         self._check_config)
+        self._config = self._make_config(self.params)
+        try:
+            self._model = load_model(self.params['model'] or None)
+        except (OSError, ValueError) as err:
+            raise ConfigError(f'parameter model: {err}') from None
+        self.wheels: dict[str, _Wheel] = {}
+        self.events: list[AnomalyEvent] = []
+        self.input_counters = {'messages': 0, 'length_mismatch': 0, 'empty_name': 0,
+                               'duplicate_name': 0, 'unknown_wheel': 0, 'too_many_wheels': 0,
+                               'out_of_order': 0, 'diagnosis_failed': 0}
+        self._logged: set[tuple[str, str]] = set()
+        self._allowed = self._allowed_wheels()
+        self._worker = concurrent.futures.ThreadPoolExecutor(
+            max_workers=1, thread_name_prefix='fss_diagnoser')
+        self._done: queue.Queue = queue.Queue()
+        self.diagnostics = DiagnosticsPublisher(
+            self, period=self.params['diagnostic_period'],
+            stale_timeout=self.params['stale_timeout'])
+        self.diagnostics.provide(INPUT_ID, 'input', self._input_health)
+        self._anomaly_pub = self.create_publisher(
+            DiagnosticArray, 'anomalies', EVENTS_QOS,
+            event_callbacks=qos_event_callbacks(self, 'anomalies', True))
+        self.create_subscription(
+            JointState, 'telemetry/wheels', self.on_wheels, telemetry_qos(),
+            event_callbacks=qos_event_callbacks(self, 'telemetry/wheels'))
+        self._result_timer = self.create_timer(
+            0.05, self.publish_results, clock=Clock(clock_type=ClockType.STEADY_TIME))
+
+    # ------------------------------------------------------------------- parameters
+    @staticmethod
+    def _make_config(values: Any) -> FssConfig:
+        return FssConfig(**{field: values[name] for name, field in CONFIG_NAMES.items()})
+
+    def _check_config(self, values: dict[str, Any]) -> None:
+        self._make_config(values)
+
+    def _allowed_wheels(self) -> set[str] | None:
+        names = {n.strip() for n in self.params['wheels'].split(',') if n.strip()}
+        return names or None
+
+    def _on_parameter(self, name: str, value: Any) -> None:
+        if name in CONFIG_NAMES:
+            self._config = self._make_config(self.params)
+        elif name == 'wheels':
+            self._allowed = self._allowed_wheels()
+        elif name == 'window_period':
+            for wheel in self.wheels.values():
+                wheel.window.period = int(value)
+
+    # ---------------------------------------------------------------------- input
+    def _count(self, reason: str, subject: str, text: str, count: int = 1) -> None:
+        self.input_counters[reason] += count
+        if (reason, subject) not in self._logged:
+            self._logged.add((reason, subject))
+            self.get_logger().warning(f'{text} (further cases are only counted)')
+
+    def on_wheels(self, msg: JointState) -> None:
+        """Append one ``telemetry/wheels`` message to the wheels' windows."""
+        self.input_counters['messages'] += 1
+        now = self.diagnostics.now()
+        self.diagnostics.mark_input(INPUT_ID, 'input', now)
+        try:
+            seconds, samples = messages.wheel_samples(msg)
+        except messages.BadMessage as err:
+            self._count(err.reason, '', f'dropped a telemetry/wheels message: {err}')
+            return
+        if len(samples) != len(msg.name):
+            for reason, count in messages.wheel_name_problems(msg).items():
+                if count:
+                    self._count(reason, '', f'dropped {count} entries: {reason}', count)
+        for wheel_id, speed, friction in samples:
+            wheel = self._wheel(wheel_id)
+            if wheel is None:
+                continue
+            wheel.health.last_input = now
+            before = wheel.window.out_of_order
+            due = wheel.window.update(seconds, speed, friction)
+            if wheel.window.out_of_order != before:
+                self._count('out_of_order', wheel_id, f'{wheel_id}: dropped a sample whose '
+                            f'stamp is not after the last one (t={seconds!r})')
+                continue
+            wheel.samples += 1
+            if due:
+                self._submit(wheel_id, wheel)
+
+    def _wheel(self, wheel_id: str) -> _Wheel | None:
+        wheel = self.wheels.get(wheel_id)
+        if wheel is not None:
+            return wheel
+        if self._allowed is not None and wheel_id not in self._allowed:
+            self._count('unknown_wheel', wheel_id,
+                        f'ignoring wheel {wheel_id!r}: not in parameter wheels')
+            return None
+        if len(self.wheels) >= self.params['max_wheels']:
+            self._count('too_many_wheels', wheel_id,
+                        f'ignoring wheel {wheel_id!r}: max_wheels reached')
+            return None
+        wheel = self.wheels[wheel_id] = _Wheel(self.params['window_length'],
+                                               self.params['window_period'])
+        check = f'{wheel_id} window diagnosis'
+        wheel.health = self.diagnostics.component(wheel_id, check)
+        self.diagnostics.provide(wheel_id, check, lambda: self._wheel_health(wheel))
+        self.get_logger().info(f'monitoring wheel {wheel_id!r}')
+        return wheel
+
+    # --------------------------------------------------------------------- worker
+    def _submit(self, wheel_id: str, wheel: _Wheel) -> None:
+        if wheel.busy:
+            wheel.skipped_busy += 1
+            return
+        wheel.busy = True
+        time_s, speed, friction = wheel.window.snapshot()
+        first_index = wheel.samples - time_s.size
+        future = self._worker.submit(diagnose, speed, friction, time_s, self._model,
+                                     self._config)
+        future.add_done_callback(
+            lambda f: self._done.put((wheel_id, first_index, time_s[0], time_s[-1], f)))
+
+    def publish_results(self) -> None:
+        """Publish the diagnoses that the worker finished (timer callback)."""
+        while True:
+            try:
+                wheel_id, first, start, end, future = self._done.get_nowait()
+            except queue.Empty:
+                return
+            wheel = self.wheels[wheel_id]
+            wheel.busy = False
+            try:
+                result = future.result()
+            except Exception as err:  # noqa: BLE001 - a failed window never stops the node
+                self._count('diagnosis_failed', wheel_id,
+                            f'{wheel_id}: diagnosis failed: {err!r}')
+                continue
+            self._record(wheel_id, wheel, result, first, start, end)
+
+    def _record(self, wheel_id: str, wheel: _Wheel, result: dict, first: int,
+                start: float, end: float) -> None:
+        wheel.diagnoses += 1
+        wheel.result = result
+        wheel.window_bounds = (start, end)
+        new = [k for k, v in result['anomalies'].items() if v and not wheel.flags.get(k)]
+        wheel.flags = dict(result['anomalies'])
+        if not new:
+            return
+        est = result['estimates']
+        last = first + wheel.window.length - 1
+        found = [AnomalyEvent(
+            detector=DETECTOR, component=wheel_id, kind=kind, time=float(start),
+            index=int(first), declared_time=float(end), declared_index=int(last),
+            details={keys.WINDOW_START: float(start), keys.WINDOW_END: float(end),
+                     keys.BASE_DRY: est['base_dry_nm'], keys.VISCOUS: est['viscous_nms'],
+                     keys.NOISE_STD: est['noise_std_nm']}) for kind in new]
+        out = DiagnosticArray()
+        out.header.stamp = messages.to_stamp(float(end))
+        out.status = [messages.event_status(e, self.get_name()) for e in found]
+        self._anomaly_pub.publish(out)
+        for event in found:
+            self.get_logger().warning(f'{wheel_id}: {event.kind} anomaly in the window '
+                                      f't={start:.1f}..{end:.1f} s')
+        self.events.extend(found)
+
+    # --------------------------------------------------------------------- health
+    def _wheel_health(self, wheel: _Wheel) -> tuple[bytes, str, dict[str, Any]]:
+        values: dict[str, Any] = {'samples': wheel.samples, 'diagnoses': wheel.diagnoses,
+                                  'window_samples': wheel.window.size,
+                                  'non_finite': wheel.window.non_finite,
+                                  'skipped_busy': wheel.skipped_busy}
+        if wheel.result is None:
+            return OK, f'waiting for a full window ({wheel.window.size}/' \
+                f'{wheel.window.length} samples)', values
+        start, end = wheel.window_bounds
+        est = wheel.result['estimates']
+        values.update({keys.WINDOW_START: start, keys.WINDOW_END: end,
+                       keys.BASE_DRY: est['base_dry_nm'], keys.VISCOUS: est['viscous_nms'],
+                       keys.NOISE_STD: est['noise_std_nm'],
+                       'changepoints': len(wheel.result['changepoints'])})
+        values.update({f'anomaly_{k}': v for k, v in wheel.flags.items()})
+        found = [k for k, v in wheel.flags.items() if v]
+        if found:
+            return WARN, f'anomalies {", ".join(found)} in t={start:.1f}..{end:.1f} s', values
+        return OK, f'no anomaly in t={start:.1f}..{end:.1f} s', values
+
+    def _input_health(self) -> tuple[bytes, str, dict[str, Any]]:
+        rejected = sum(v for k, v in self.input_counters.items() if k != 'messages')
+        message = (f'{len(self.wheels)} wheels' if not rejected
+                   else f'{len(self.wheels)} wheels; {rejected} entries rejected')
+        return OK, message, dict(self.input_counters)
+
+    def destroy_node(self) -> None:
+        """Stop the worker (waiting for a running diagnosis), then destroy the node."""
+        self._worker.shutdown(wait=True, cancel_futures=True)
+        super().destroy_node()
+
+
+NODE_CLASS = FssDiagnoserNode
+
+
+def main(args: Sequence[str] | None = None) -> int:
+    """Run the FSS window diagnoser node (console script ``rwa-monitor-fss``)."""
+    return run_node(lambda: FssDiagnoserNode(), args)
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())

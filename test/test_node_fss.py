@@ -1,0 +1,141 @@
+"""The fss_diagnoser node in process: windows, worker thread, events, health, bad input."""
+
+import threading
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+import numpy as np
+import pytest
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from ros_harness import Collector, RosWorld
+from sensor_msgs.msg import JointState
+
+from rwa_monitor.core.fss.pipeline import diagnose, FssConfig, load_model
+from rwa_monitor.exceptions import ConfigError
+from rwa_monitor.nodes import fss_diagnoser, messages
+from rwa_monitor.nodes.common import DIAGNOSTICS_QOS, EVENTS_QOS
+from rwa_monitor.nodes.fss_diagnoser import FssDiagnoserNode
+from rwa_monitor.sim.fss import simulate_fss
+
+pytestmark = pytest.mark.ros
+
+LENGTH, PERIOD = 20_000, 10_000
+
+
+def _node(world, **params):
+    values = {'window_length': LENGTH, 'window_period': PERIOD, 'diagnostic_period': 0.2,
+              **params}
+    return world.node(FssDiagnoserNode, parameter_overrides=[
+        Parameter(k, value=v) for k, v in values.items()])
+
+
+def _feed(node, tele, rows):
+    names = list(tele.wheels)
+    for k in rows:
+        node.on_wheels(messages.joint_state(
+            float(tele.time[k]), names, [float(tele.wheels[w].speed[k]) for w in names],
+            [float(tele.wheels[w].friction[k]) for w in names]))
+
+
+@pytest.fixture(scope='module')
+def tele():
+    return simulate_fss(statuses=('nominal', 'dry'), n_samples=LENGTH + PERIOD, seed=21)
+
+
+def test_events_equal_the_pipeline_on_the_same_window(tele):
+    model = load_model()
+    expected = {}
+    for wheel_id, wheel in tele.wheels.items():
+        out = diagnose(wheel.speed[:LENGTH], wheel.friction[:LENGTH], tele.time[:LENGTH],
+                       model, FssConfig())
+        expected[wheel_id] = {k for k, v in out['anomalies'].items() if v}
+    assert 'dry' in expected['rw2'], 'the seeded dry wheel must be flagged'
+    with RosWorld() as world:
+        node = _node(world)
+        sink = world.node(Node, 'sink')
+        anomalies = Collector(sink, DiagnosticArray, 'anomalies', EVENTS_QOS)
+        health = Collector(sink, DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
+        _feed(node, tele, range(LENGTH))
+        world.wait_until(lambda: all(w.diagnoses == 1 for w in node.wheels.values()), 60.0,
+                         'one diagnosis per wheel')
+        world.wait_until(lambda: sum(len(m.status) for m in anomalies.messages)
+                         >= sum(map(len, expected.values())), 10.0, 'the events')
+
+        def rw2_levels():
+            return [s.level for m in health.messages for s in m.status
+                    if s.hardware_id == 'rw2']
+        world.wait_until(lambda: DiagnosticStatus.WARN in rw2_levels(), 10.0, 'rw2 WARN')
+    events = [messages.status_event(s) for m in anomalies.messages for s in m.status]
+    got = {w: {e.kind for e in events if e.component == w} for w in tele.wheels}
+    assert got == expected
+    for event in events:
+        assert event.detector == 'fss'
+        assert event.time == pytest.approx(tele.time[0])
+        assert event.declared_time == pytest.approx(tele.time[LENGTH - 1])
+        assert event.index == 0 and event.declared_index == LENGTH - 1
+
+
+def test_callbacks_never_wait_for_the_worker(tele, monkeypatch):
+    release = threading.Event()
+    calls = []
+
+    def slow(*args, **kwargs):
+        calls.append(args[2][0])
+        release.wait(30.0)
+        return {'anomalies': {'dry': False, 'viscous': False, 'fss1': False, 'fss2': False},
+                'estimates': {'base_dry_nm': 0.0, 'viscous_nms': 0.0, 'noise_std_nm': 0.0},
+                'changepoints': []}
+    monkeypatch.setattr(fss_diagnoser, 'diagnose', slow)
+    with RosWorld() as world:
+        node = _node(world, window_period=2000)
+        _feed(node, tele, range(LENGTH + 4000))
+        # Every sample was appended while the first diagnosis was still blocked.
+        assert all(w.samples == LENGTH + 4000 for w in node.wheels.values())
+        assert all(w.skipped_busy == 2 for w in node.wheels.values())
+        # One worker thread: the first wheel's diagnosis runs, the second one waits.
+        assert len(calls) == 1 and all(w.window.size == LENGTH for w in node.wheels.values())
+        release.set()
+        world.wait_until(lambda: all(w.diagnoses == 1 for w in node.wheels.values()), 30.0,
+                         'the released diagnoses')
+
+
+def test_bad_input_is_counted(tele):
+    with RosWorld() as world:
+        node = _node(world, wheels='rw1,rw2')
+        node.on_wheels(JointState(name=['rw1', 'rw2'], velocity=[1.0], effort=[0.0, 0.0]))
+        node.on_wheels(messages.joint_state(5.0, ['rw1', 'rw3', ''], [1.0, 1.0, 1.0],
+                                            [0.0, 0.0, 0.0]))
+        node.on_wheels(messages.joint_state(4.0, ['rw1'], [1.0], [0.0]))
+        node.on_wheels(messages.joint_state(6.0, ['rw1'], [float('nan')], [0.0]))
+        counters = node.input_counters
+        assert counters['length_mismatch'] == 1
+        assert counters['unknown_wheel'] == 1 and counters['empty_name'] == 1
+        assert counters['out_of_order'] == 1
+        rw1 = node.wheels['rw1']
+        assert rw1.samples == 2 and rw1.window.non_finite == 1
+
+
+def test_parameters(repo_root):
+    with RosWorld() as world:
+        with pytest.raises(ConfigError, match='window_length'):
+            _node(world, window_length=10)
+        with pytest.raises(ConfigError, match='model'):
+            _node(world, model='/nonexistent/model.json')
+        node = world.node(FssDiagnoserNode, cli_args=[
+            '--ros-args', '--params-file', str(repo_root / 'config' / 'rwa_monitor.yaml')])
+        assert node.params['window_length'] == 80_000 and node._config.window == 20
+        result = node.set_parameters([Parameter('beam', value=0)])[0]
+        assert not result.successful and 'beam' in result.reason
+        assert node.set_parameters([Parameter('beam', value=64)])[0].successful
+        assert node._config.beam == 64
+
+
+def test_memory_is_bounded_by_the_window():
+    with RosWorld() as world:
+        node = _node(world, window_length=500, window_period=10_000)
+        rng = np.random.default_rng(0)
+        for k in range(3000):
+            node.on_wheels(messages.joint_state(k * 0.1, ['rw1'], [300.0],
+                                                [float(rng.normal())]))
+        window = node.wheels['rw1'].window
+        assert window.size == 500 and window.snapshot()[0][0] == pytest.approx(250.0)
