@@ -62,8 +62,8 @@ def test_lemma1_nominal_statistic_follows_the_generalised_chi_square():
 
     def sums(m):
         a, b, c = h1[:m] @ h1[:m], h1[:m] @ h2[:m], h2[:m] @ h2[:m]
-        u, v, e = f[:, :m] @ h1[:m], f[:, :m] @ h2[:m], np.einsum('ij,ij->i', f[:, :m],
-                                                                     f[:, :m])
+        fm = f[:, :m]
+        u, v, e = fm @ h1[:m], fm @ h2[:m], np.einsum('ij,ij->i', fm, fm)
         return np.column_stack([np.full(runs, a), np.full(runs, b), np.full(runs, c), u, v, e])
 
     cfg = {'min_excitation': 1e-6, 'noise_std': 1.0}
