@@ -21,6 +21,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 import math
 import sys
+import time
 from typing import Any, Callable, Iterator, Mapping, Sequence
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -309,9 +310,14 @@ class DiagnosticsPublisher:
         self._watchdog = node.create_timer(period, self._publish_if_clock_stopped,
                                            clock=self._steady)
 
-    def now(self) -> float:
-        """Return the steady-clock time (s) used for staleness."""
-        return self._steady.now().nanoseconds * 1e-9
+    @staticmethod
+    def now() -> float:
+        """Return the steady-clock time (s) used for staleness.
+
+        ``time.monotonic`` reads the same CLOCK_MONOTONIC as rclpy's STEADY_TIME clock,
+        at a fraction of the cost (it is called once per message).
+        """
+        return time.monotonic()
 
     def component(self, hardware_id: str, check: str) -> ComponentHealth:
         """Return the health record of ``hardware_id`` (created on first use)."""

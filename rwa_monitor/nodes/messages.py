@@ -25,13 +25,19 @@ from rwa_monitor.nodes.common import ERROR, key_values, WARN
 ERROR_KINDS = frozenset({'both'})
 
 
-def to_stamp(seconds: float) -> Time:
-    """Return the Time of ``seconds`` (nanosecond resolution, nanosec in [0, 1e9))."""
+def split_seconds(seconds: float) -> tuple[int, int]:
+    """Return ``(sec, nanosec)`` of ``seconds`` (nanosec in [0, 1e9))."""
     whole = math.floor(seconds)
     nanosec = int(round((seconds - whole) * 1e9))
     if nanosec >= 1_000_000_000:
         whole, nanosec = whole + 1, nanosec - 1_000_000_000
-    return Time(sec=int(whole), nanosec=nanosec)
+    return int(whole), nanosec
+
+
+def to_stamp(seconds: float) -> Time:
+    """Return the Time of ``seconds`` (nanosecond resolution)."""
+    sec, nanosec = split_seconds(seconds)
+    return Time(sec=sec, nanosec=nanosec)
 
 
 def to_seconds(stamp: Time) -> float:

@@ -250,26 +250,30 @@ class TelemetryReplay(Node):
 
 
 class _Rows:
-    """Row access to the telemetry as plain Python lists (fast message building)."""
+    """Row access to the telemetry arrays (each row converted when it is published)."""
 
     def __init__(self, tele: Telemetry) -> None:
         self.names = list(tele.wheels)
-        self.speed = np.column_stack([w.speed for w in tele.wheels.values()]).tolist() \
-            if tele.wheels else None
         nan = np.full(len(tele), np.nan)
+        self.speed = np.column_stack([w.speed for w in tele.wheels.values()]) \
+            if tele.wheels else None
         self.friction = np.column_stack(
             [nan if w.friction is None else w.friction for w in tele.wheels.values()]
-        ).tolist() if tele.wheels else None
-        self.gyro = None if tele.gyro is None else tele.gyro.tolist()
-        self.attitude = None if tele.attitude is None else tele.attitude.tolist()
-        self.reference = None if tele.reference_rate is None else tele.reference_rate.tolist()
+        ) if tele.wheels else None
+        self.gyro = tele.gyro
+        self.attitude = tele.attitude
+        self.reference = tele.reference_rate
+        self._wheels_msg: JointState | None = None
 
     def wheels(self, i: int, t: float) -> JointState:
-        msg = JointState()
-        msg.header.stamp = messages.to_stamp(t)
-        msg.name = self.names
-        msg.velocity = self.speed[i]
-        msg.effort = self.friction[i]
+        """Return row ``i`` as a JointState (one object, refilled: publish copies it)."""
+        msg = self._wheels_msg
+        if msg is None:
+            msg = self._wheels_msg = JointState()
+            msg.name = self.names
+        msg.header.stamp.sec, msg.header.stamp.nanosec = messages.split_seconds(t)
+        msg.velocity = self.speed[i].tolist()
+        msg.effort = self.friction[i].tolist()
         return msg
 
 
