@@ -31,7 +31,7 @@ def validate_parameters(component: str = 'rw1', *, window: int = 500,
                         k_verif: int | None = None, false_alarm_rate: float = 1e-5,
                         noise_std: float | None = None,
                         regressors: RegressorSet | None = None,
-                        min_excitation: float = 1e-6, category_level: float | None = None,
+                        min_excitation: float = 1e-6, category_level: float = 1e-3,
                         category_revisions: int = 3, refine_change: bool = True
                         ) -> dict[str, Any]:
     """Check the detector's keyword parameters; return them normalised (ValueError if bad)."""
@@ -121,7 +121,8 @@ class LLRDetector:
     ``false_alarm_rate`` r in (0, 1), ``noise_std`` (N m; None: estimated from the
     reference fit), ``regressors`` (a RegressorSet; None: the paper's eq. (1)),
     ``min_excitation`` (smallest ``det(corr(Pi_P))``, in [0, 1): below it the test is
-    skipped and counted), ``category_level`` (level of the dry / viscous tests; None: r),
+    skipped and counted), ``category_level`` (level of each dry / viscous test, default
+    1e-3; None: r),
     ``category_revisions`` (re-checks of the kind as data arrive), ``refine_change`` (ML
     refinement of the change time). Positions count accepted samples; events carry the row
     index (number of ``update`` calls before that sample since construction or reset).

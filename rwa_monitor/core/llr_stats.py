@@ -91,7 +91,7 @@ def categorise(before: np.ndarray, n_before: int, after: np.ndarray, n_after: in
     Pi_after^-1)`` (independent segments, noise variance from the reference fit before the
     change). ``z_i = dx_i / sd_i`` for i = dry, viscous. The dry-only model (``dx_viscous =
     0``) is rejected when ``|z_viscous| > z_threshold`` and the viscous-only model when
-    ``|z_dry| > z_threshold`` (both marginal tests at the detector's level ``r``):
+    ``|z_dry| > z_threshold`` (two-sided marginal tests at ``category_level``):
     both rejected -> ``both``; one rejected -> the other kind; none rejected -> the kind
     with the larger ``|z|`` (the single-component model that fits better). An
     after-segment that cannot separate dry from viscous (speed barely varying) gives
