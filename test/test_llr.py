@@ -67,7 +67,8 @@ def test_lemma1_nominal_statistic_follows_the_generalised_chi_square():
         return np.column_stack([np.full(runs, a), np.full(runs, b), np.full(runs, c), u, v, e])
 
     cfg = {'min_excitation': 1e-6, 'noise_std': 1.0}
-    ok, testable, y, tr, dm, _, _ = _stats(sums(k), sums(k + w), np.full(runs, float(k)), cfg)
+    ok, testable, y, tr, dm, _, _ = _stats(sums(k).T, sums(k + w).T, np.full(runs, float(k)),
+                                           cfg)
     assert np.all(ok)
     half = 0.5 * tr[0]
     disc = math.sqrt(half * half - dm[0])

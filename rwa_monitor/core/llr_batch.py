@@ -64,9 +64,12 @@ def accepted_mask(t: np.ndarray, w: np.ndarray, f: np.ndarray
 
 
 def _stats(pp: np.ndarray, pt: np.ndarray, n_p: np.ndarray, cfg: Mapping[str, Any]):
-    """Vectorised statistic of the streaming path (same operations, same order)."""
-    A, B, C, U, V, E = (pp[:, i] for i in range(6))
-    At, Bt, Ct, Ut, Vt = (pt[:, i] for i in range(5))
+    """Vectorised statistic of the streaming path (same operations, same order).
+
+    ``pp``, ``pt``: prefix rows at ``k`` and ``k + w``, shape ``(6, n)``.
+    """
+    A, B, C, U, V, E = pp[0], pp[1], pp[2], pp[3], pp[4], pp[5]
+    At, Bt, Ct, Ut, Vt = pt[0], pt[1], pt[2], pt[3], pt[4]
     ac = A * C
     det = ac - B * B
     dett = At * Ct - Bt * Bt
@@ -93,48 +96,50 @@ def _stats(pp: np.ndarray, pt: np.ndarray, n_p: np.ndarray, cfg: Mapping[str, An
         half = 0.5 * tr
         lam1 = half + np.sqrt(np.maximum(half * half - dm, 0.0))
         testable = ok & (tr > 0.0) & (y > 0.0)
-        lam1 = np.where(testable, lam1, 1.0)
-        b = np.where(testable, y / (2.0 * lam1), 0.0)
-        rho = np.clip(dm / lam1, 0.0, None) / lam1
-        a = np.maximum(b * (1.0 - rho), 0.0)
+        b = y / (2.0 * lam1)
+        rho = np.maximum(dm / lam1, 0.0) / lam1
+        a = np.maximum(b - b * rho, 0.0)
         # Bounds of log p_k: see candidate_log_p2 (lower) and gchi2 (upper: J <= i0e(a/2)).
-        upper = np.where(testable, -b + np.log(special.i0e(0.5 * a)), 0.0)
-        lower = np.where(testable, -b * rho + log_lower_bound_array(a), 0.0)
+        upper = np.where(testable, np.log(special.i0e(0.5 * a)) - b, 0.0)
+        lower = log_lower_bound_array(a) - b * rho
     return ok, testable, y, tr, dm, upper, lower
 
 
 class _Reference:
-    """Prefix sums of one reference segment, extended chunk by chunk, front trimmed."""
+    """Prefix sums (shape ``(6, m)``) of one reference segment, extended chunk by chunk."""
 
-    def __init__(self, terms: np.ndarray, c: int, keep: int):
+    def __init__(self, terms: np.ndarray, c: int):
         self.terms = terms
         self.c = c
         self.pos0 = c
-        self.rows = np.zeros((1, terms.shape[1]))
-        self.keep = keep
+        self.rows = np.zeros((terms.shape[0], 1))
 
     @property
     def end(self) -> int:
         """Last position whose prefix is held."""
-        return self.pos0 + self.rows.shape[0] - 1
+        return self.pos0 + self.rows.shape[1] - 1
 
     def extend(self, last: int) -> None:
         """Hold prefixes up to position ``last`` (sequential continuation of the sums)."""
         if last <= self.end:
             return
-        block = np.vstack([self.rows[-1:], self.terms[self.end:last]])
-        self.rows = np.vstack([self.rows, np.cumsum(block, axis=0)[1:]])
+        block = np.concatenate([self.rows[:, -1:], self.terms[:, self.end:last]], axis=1)
+        self.rows = np.concatenate([self.rows, np.cumsum(block, axis=1)[:, 1:]], axis=1)
 
     def trim(self, first: int) -> None:
         """Drop prefixes of positions before ``first``."""
         cut = first - self.pos0
         if cut > 0:
-            self.rows = self.rows[cut:]
+            self.rows = self.rows[:, cut:]
             self.pos0 = first
 
+    def span(self, first: int, last: int) -> np.ndarray:
+        """Return the prefixes of positions ``first..last`` as a ``(6, n)`` view."""
+        return self.rows[:, first - self.pos0:last + 1 - self.pos0]
+
     def at(self, positions) -> np.ndarray:
-        """Return the prefix rows at ``positions``."""
-        return self.rows[np.asarray(positions) - self.pos0]
+        """Return the prefix rows at ``positions`` (shape ``(..., 6)``)."""
+        return self.rows[:, np.asarray(positions) - self.pos0].T
 
 
 def _scan(ref: _Reference, k0: int, k1: int, state: dict, cfg: Mapping[str, Any],
@@ -144,7 +149,7 @@ def _scan(ref: _Reference, k0: int, k1: int, state: dict, cfg: Mapping[str, Any]
     c = ref.c
     ks = np.arange(k0, k1 + 1)
     ref.extend(k1 + w)
-    ok, testable, y, tr, dm, upper, lower = _stats(ref.at(ks), ref.at(ks + w),
+    ok, testable, y, tr, dm, upper, lower = _stats(ref.span(k0, k1), ref.span(k0 + w, k1 + w),
                                                    (ks - c).astype(float), cfg)
     bound = np.minimum.accumulate(np.concatenate([[state['bound']], upper]))
     state['bound'] = float(bound[-1])
@@ -199,11 +204,21 @@ def detect_batch_with_counters(time, speed, friction, *, component: str = 'rw1',
     if not cfg['regressors'].is_coulomb_viscous:
         return _streamed(t, w, f, aux, component, params)
     accepted, counts = accepted_mask(t, w, f)
-    rows = np.flatnonzero(accepted)
-    tv, wv, fv = t[rows], w[rows], f[rows]
+    if accepted.all():
+        rows = np.arange(t.size)
+        tv, wv, fv = t, w, f
+    else:
+        rows = np.flatnonzero(accepted)
+        tv, wv, fv = t[rows], w[rows], f[rows]
     h1 = -np.sign(wv)
     h2 = -wv
-    terms = np.column_stack([h1 * h1, h1 * h2, h2 * h2, h1 * fv, h2 * fv, fv * fv])
+    terms = np.empty((6, rows.size))
+    np.multiply(h1, h1, out=terms[0])
+    np.multiply(h1, h2, out=terms[1])
+    np.multiply(h2, h2, out=terms[2])
+    np.multiply(h1, fv, out=terms[3])
+    np.multiply(h2, fv, out=terms[4])
+    np.multiply(fv, fv, out=terms[5])
     n_total = rows.size
     win, kverif = cfg['window'], cfg['k_verif']
     logr = math.log(cfg['false_alarm_rate'])
@@ -235,7 +250,7 @@ def detect_batch_with_counters(time, speed, friction, *, component: str = 'rw1',
 
     c = 0
     while True:
-        ref = _Reference(terms, c, keep)
+        ref = _Reference(terms, c)
         state.update(logp=0.0, kmin=c, ystar=0.0, bound=0.0)
         k0 = c + win + 1
         declared = None
