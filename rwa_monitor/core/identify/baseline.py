@@ -28,9 +28,11 @@ import numpy as np
 from scipy import stats
 
 from rwa_monitor.core.identify.data import IdentData
+from rwa_monitor.core.identify.effects import spectral_peaks
 from rwa_monitor.exceptions import NotIdentifiableError
 
 RIDGE = 1e-9
+PEAKS = 3
 FLEX_ROWS = 20000  # the flexible background is fitted on at most about this many rows
 
 
@@ -90,32 +92,56 @@ def flexible_residual(data: IdentData, spacing: int,
     that are piecewise linear in time (knots every ``spacing`` rows): without the time
     terms a slow effect would bend the fitted function of speed and leave a residual that
     is not smooth in time. ``extra`` columns (effects already identified) join the fit.
+    Then sinusoids at the residual's three largest spectral peaks are added and the fit
+    repeated, so that a periodic torque does not pass for a string of jumps (a step has
+    a broad spectrum that three sinusoids hardly absorb). The coefficients are fitted on
+    at most about FLEX_ROWS evenly spaced rows; the residual is evaluated on all rows.
     """
     w = data.speed
+    n = len(w)
     aw = np.abs(w[w != 0])
     near = [float(np.quantile(aw, q)) for q in (0.005, 0.01, 0.02, 0.04)] if len(aw) else []
     knots = np.unique(np.concatenate([np.quantile(w, np.linspace(0.0, 1.0, 25)),
                                       near, [-x for x in near], [0.0]]))
     knots = knots[(knots >= w.min()) & (knots <= w.max())]
-    eye = np.eye(len(knots))
-    hats = np.column_stack([np.interp(w, knots, eye[j]) for j in range(len(knots))])
-    n = len(w)
     count = int(np.clip(n // spacing + 1, 2, 17))
-    tknots = np.unique(np.linspace(0, n - 1, count).astype(int))
-    teye = np.eye(len(tknots))
-    thats = np.column_stack([np.interp(np.arange(n), tknots, teye[j])
-                             for j in range(len(tknots))])
-    h = baseline_columns(w)
-    X = np.hstack([h, hats, h[:, :1] * thats, h[:, 1:] * thats, thats]
-                  + ([] if extra is None else [extra.reshape(n, -1)]))
-    X = X / data.noise_std[:, None]
-    y = data.friction / data.noise_std
+    tknots = np.unique(np.linspace(0, n - 1, count).astype(int)).astype(float)
+    t = data.time - data.time[0]
+
+    def design(rows: np.ndarray, freqs: list[float]) -> np.ndarray:
+        wr = w[rows]
+        eye = np.eye(len(knots))
+        hats = [np.interp(wr, knots, eye[j]) for j in range(len(knots))]
+        teye = np.eye(len(tknots))
+        thats = np.column_stack([np.interp(rows.astype(float), tknots, teye[j])
+                                 for j in range(len(tknots))])
+        h = baseline_columns(wr)
+        cols = [h, np.column_stack(hats), h[:, :1] * thats, h[:, 1:] * thats, thats]
+        if extra is not None:
+            cols.append(extra.reshape(n, -1)[rows])
+        cols += [f(2 * np.pi * fr * t[rows])[:, None] for fr in freqs
+                 for f in (np.cos, np.sin)]
+        return np.hstack(cols)
+
+    fit_rows = np.arange(0, n, max(1, n // FLEX_ROWS))
+    resid = _residual(design, fit_rows, data, [])
+    freqs, _ = spectral_peaks(data.time, resid, PEAKS, refine=False)
+    return _residual(design, fit_rows, data, freqs) if freqs else resid
+
+
+def _residual(design, fit_rows: np.ndarray, data: IdentData, freqs: list[float]
+              ) -> np.ndarray:
+    s = data.noise_std
+    X = design(fit_rows, freqs) / s[fit_rows, None]
+    y = data.friction[fit_rows] / s[fit_rows]
     scale = 1.0 / np.maximum(np.sqrt(np.sum(X * X, axis=0)), 1e-300)
     Xs = X * scale
-    rows = slice(None, None, max(1, n // FLEX_ROWS))
-    gram = Xs[rows].T @ Xs[rows] + RIDGE * np.eye(X.shape[1])
-    coef = np.linalg.solve(gram, Xs[rows].T @ y[rows])
-    return (y - Xs @ coef) * data.noise_std
+    coef = np.linalg.solve(Xs.T @ Xs + RIDGE * np.eye(X.shape[1]), Xs.T @ y) * scale
+    out = np.empty(len(data))
+    for start in range(0, len(data), FLEX_ROWS):
+        rows = np.arange(start, min(start + FLEX_ROWS, len(data)))
+        out[rows] = data.friction[rows] - design(rows, freqs) @ coef
+    return out
 
 
 def _solve_rss(gram: np.ndarray, xy: np.ndarray, yy: np.ndarray) -> np.ndarray:
@@ -160,26 +186,34 @@ def step_gains(data: IdentData, resid: np.ndarray, ks: np.ndarray, window: int,
 
 def find_jumps(data: IdentData, window: int | None = None, alpha: float = 1e-3,
                max_jumps: int = 20, extra: np.ndarray | None = None) -> Segments:
-    """Return the segments between abrupt friction jumps (see the module docstring)."""
+    """Return the segments between abrupt friction jumps (see the module docstring).
+
+    Greedy: the strongest jump is taken, its step joins the flexible background, and the
+    record is scanned again for the next one, so that a large jump's imprint on the
+    background fit cannot pass for further jumps.
+    """
     n = len(data)
     if window is None:
         window = int(np.clip(n // 40, 30, 500))
     segments = Segments()
     if n < 4 * window:
         return segments
-    resid = flexible_residual(data, 4 * window, extra)
     threshold = float(stats.chi2.isf(alpha * window / n, 2))
     stride = max(1, window // 5)
     coarse = np.arange(window, n - window + 1, stride)
-    gains = step_gains(data, resid, coarse, window)
+    base = baseline_columns(data.speed)
     found: list[int] = []
-    order = np.argsort(gains)[::-1]
-    for i in order:
-        if gains[i] <= threshold or len(found) >= max_jumps:
+    while len(found) < max_jumps:
+        cols = [] if extra is None else [extra.reshape(n, -1)]
+        cols += [base * (np.arange(n) >= k)[:, None] for k in found]
+        resid = flexible_residual(data, 4 * window, np.hstack(cols) if cols else None)
+        gains = step_gains(data, resid, coarse, window)
+        for k in found:
+            gains[np.abs(coarse - k) < window] = -np.inf
+        i = int(np.argmax(gains))
+        if gains[i] <= threshold:
             break
         k0 = int(coarse[i])
-        if any(abs(k0 - k) < window for k in found):
-            continue
         fine = np.arange(max(window, k0 - stride), min(n - window, k0 + stride) + 1)
         fine_gains = step_gains(data, resid, fine, window)
         k = int(fine[int(np.argmax(fine_gains))])

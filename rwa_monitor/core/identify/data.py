@@ -95,7 +95,8 @@ def prepare(tele: Telemetry, wheel: str | None = None, inertia: float | None = N
         keep = np.flatnonzero(ok)
         _need(len(keep))
         friction = np.asarray(channels.friction, dtype=float)[keep]
-        noise = local_noise_std(time[keep], friction, half_width, 2, _block(len(keep)))
+        noise = local_noise_std(time[keep], friction, half_width, 2, _block(len(keep)),
+                                exclude=_near_sign_change(speed[keep], half_width))
         derived, stride = False, 1
     else:
         keep, friction, noise = _from_speed(tele, wheel, inertia, torque_constant,
@@ -105,6 +106,16 @@ def prepare(tele: Telemetry, wheel: str | None = None, inertia: float | None = N
     return IdentData(wheel=wheel, time=time[keep], speed=speed[keep], friction=friction,
                      noise_std=noise, aux=aux, derived=derived, stride=stride,
                      counts=counts, notes=notes)
+
+
+def _near_sign_change(speed: np.ndarray, half_width: int) -> np.ndarray:
+    """Return the samples within ``half_width`` rows of a change of sign of the speed."""
+    sign = np.sign(speed)
+    change = np.flatnonzero(sign[1:] != sign[:-1])
+    near = np.zeros(len(speed) + 1, dtype=int)
+    np.add.at(near, np.clip(change - half_width, 0, len(speed)), 1)
+    np.add.at(near, np.clip(change + half_width + 2, 0, len(speed)), -1)
+    return np.cumsum(near)[:len(speed)] > 0
 
 
 def _need(n: int) -> None:

@@ -63,14 +63,17 @@ def local_polynomial_derivative(time: np.ndarray, values: np.ndarray, half_width
 
 
 def local_noise_std(time: np.ndarray, values: np.ndarray, half_width: int = 5,
-                    order: int = 2, block: int = 0) -> np.ndarray:
+                    order: int = 2, block: int = 0, exclude: np.ndarray | None = None
+                    ) -> np.ndarray:
     """Return a robust estimate of the white-noise standard deviation of ``values``.
 
     The residual of each sample from the local polynomial through its window has variance
     s^2 (1 - 2 g_ii + sum_j g_ij^2) under white noise; its median absolute value (times
     1.4826) over the whole record, or over blocks of ``block`` samples when block > 0,
     estimates s robustly (jumps and rare spikes do not move a median). Returned per
-    sample (constant when block == 0).
+    sample (constant when block == 0). Samples flagged in ``exclude`` (e.g. windows that
+    straddle a zero crossing of the speed, where friction jumps by 2 x dry) are left out
+    of the medians unless a block would keep fewer than 20 samples.
     """
     time = np.asarray(time, dtype=float)
     values = np.asarray(values, dtype=float)
@@ -80,12 +83,17 @@ def local_noise_std(time: np.ndarray, values: np.ndarray, half_width: int = 5,
     own = level[np.arange(n), np.arange(n) - idx[:, 0]]
     factor = np.sqrt(np.maximum(1.0 - 2.0 * own + np.sum(level ** 2, axis=1), 1e-12))
     scaled = np.abs(values - np.sum(level * values[idx], axis=1)) / factor
+    use = np.ones(n, dtype=bool) if exclude is None else ~np.asarray(exclude, dtype=bool)
+
+    def robust(part: slice) -> float:
+        kept = scaled[part][use[part]]
+        return _MAD_TO_STD * float(np.median(kept if len(kept) >= 20 else scaled[part]))
     if block <= 0 or block >= n:
-        return np.full(n, _MAD_TO_STD * np.median(scaled))
+        return np.full(n, robust(slice(0, n)))
     out = np.empty(n)
     for start in range(0, n, block):
         stop = start + block if n - (start + block) >= block // 2 else n
-        out[start:stop] = _MAD_TO_STD * np.median(scaled[start:stop])
+        out[start:stop] = robust(slice(start, stop))
         if stop == n:
             break
     return out

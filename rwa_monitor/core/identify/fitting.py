@@ -54,6 +54,7 @@ class Design:
         self.held_out = np.asarray(held_out, dtype=bool)
         self.train = ~self.held_out
         self.X = np.empty((len(self.y), 0))
+        self._xt = np.empty((int(np.sum(self.train)), 0))
         self._yt = self.y[self.train]
         self._yy = float(self._yt @ self._yt)
         self._gram = np.empty((0, 0))
@@ -65,10 +66,11 @@ class Design:
         columns = np.asarray(columns, dtype=float).reshape(len(self.y), -1)
         self._gram, self._xy = self._extended(columns)
         self.X = np.hstack([self.X, columns])
+        self._xt = self.X[self.train]
 
     def _extended(self, columns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         ct = columns[self.train]
-        xc = self.X[self.train].T @ ct
+        xc = self._xt.T @ ct
         gram = np.block([[self._gram, xc], [xc.T, ct.T @ ct]])
         return gram, np.concatenate([self._xy, ct.T @ self._yt])
 
