@@ -20,7 +20,6 @@ import math
 from typing import Any, Mapping
 
 import numpy as np
-from scipy import special
 
 from rwa_monitor.core import llr_stats
 from rwa_monitor.core.events import AnomalyEvent
@@ -28,7 +27,8 @@ from rwa_monitor.core.gchi2 import log_lower_bound_array, skip_threshold
 from rwa_monitor.core.llr import (candidate_log_p2, checkpoints, declaration, LLRDetector,
                                   make_event, validate_parameters)
 
-CHUNK = 1 << 16
+CHUNK = 1 << 13
+_PI_4 = math.pi / 4.0
 
 
 def _arrays(time, speed, friction) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -80,7 +80,7 @@ def _stats(pp: np.ndarray, pt: np.ndarray, n_p: np.ndarray, cfg: Mapping[str, An
         if cfg['noise_std'] is None:
             s2 = (E - (x1 * U + x2 * V)) / (n_p - 2)
             floor = llr_stats.NOISE_FLOOR_REL * E / n_p + llr_stats.NOISE_FLOOR_ABS
-            s2 = np.where(s2 > floor, s2, floor)
+            s2 = np.fmax(s2, floor)
         else:
             s2 = cfg['noise_std'] ** 2
         Aw = At - A
@@ -99,8 +99,10 @@ def _stats(pp: np.ndarray, pt: np.ndarray, n_p: np.ndarray, cfg: Mapping[str, An
         b = y / (2.0 * lam1)
         rho = np.maximum(dm / lam1, 0.0) / lam1
         a = np.maximum(b - b * rho, 0.0)
-        # Bounds of log p_k: see candidate_log_p2 (lower) and gchi2 (upper: J <= i0e(a/2)).
-        upper = np.where(testable, np.log(special.i0e(0.5 * a)) - b, 0.0)
+        # Bounds of log p_k: candidate_log_p2 (lower); upper: J <= i0e(a/2) (gchi2) and
+        # i0e(z) = (1/pi) int_0^pi exp(-2 z sin^2(t/2)) dt <= int_0^1 exp(-2 z u^2) du
+        # <= sqrt(pi / (8 z)) (sin s >= 2 s / pi), i.e. log J <= log(pi / (4 a)) / 2.
+        upper = np.where(testable, np.minimum(0.5 * np.log(_PI_4 / a), 0.0) - b, 0.0)
         lower = log_lower_bound_array(a) - b * rho
     return ok, testable, y, tr, dm, upper, lower
 
