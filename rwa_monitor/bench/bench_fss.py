@@ -9,6 +9,7 @@ Data: ``rwa-monitor fss build`` (seed 0, 100 windows per status) in data/generat
 
 from __future__ import annotations
 
+import os
 import pathlib
 import time
 
@@ -40,7 +41,8 @@ def _dataset(quick: bool) -> pathlib.Path:
     return path
 
 
-def classification(items: list[dict], splits: int, use: str = 'both') -> dict:
+def classification(items: list[dict], splits: int, use: str = 'both',
+                   bins: int = 20) -> dict:
     """Return min/mean/max detection matrices over random 20 % / 80 % splits (Fig. 11).
 
     Each split trains on a random 20 % of every status and validates on the rest.
@@ -55,7 +57,7 @@ def classification(items: list[dict], splits: int, use: str = 'both') -> dict:
             chosen.update(rng.permutation(idx)[:max(1, len(idx) // 5)].tolist())
         train = [it for i, it in enumerate(items) if i in chosen]
         valid = [it for i, it in enumerate(items) if i not in chosen]
-        model = train_model(train, use=use)
+        model = train_model(train, use=use, bins=bins)
         mats.append(detection_matrix(model, valid))
         nominal = [it for it in valid if it['status'] == 'nominal']
         any_nominal.append(np.mean([any(model.predict(it['features']).values())
@@ -117,6 +119,58 @@ def arl_check(trials: int, seed: int = 0) -> dict:
     return {'trials': trials, 'threshold': float(thr), 'mdr_measured': missed / trials,
             'mdr_target': 1e-3, 'p_exceed_2_measured': exceed / trials,
             'p_exceed_2_chi2': float(stats.chi2.sf(2.0, 1))}
+
+
+def _summary(values) -> dict:
+    values = np.asarray(values, dtype=float)
+    return {'min': float(values.min()), 'median': float(np.median(values)),
+            'mean': float(values.mean()), 'max': float(values.max())}
+
+
+def timing_pass(path: pathlib.Path, manifest: dict, items: list[dict],
+                repeats: int = 3) -> dict:
+    """Return per-stage times over all windows, each the minimum of ``repeats`` runs.
+
+    The machine is shared: a single run measures the other processes as much as this code,
+    so each window is run ``repeats`` times and its fastest run per stage is kept (the
+    load average before and after is recorded beside).
+    """
+    from rwa_monitor.core.fss.pipeline import load_model
+    model = load_model()
+    per_stage: dict[str, list[float]] = {k: [] for k in (
+        'changepoints', 'least_squares', 'assignment', 'classification', 'total')}
+    load_before = os.getloadavg()
+    for entry, item in zip(manifest['windows'], items):
+        speed, friction = fss.load_window(path, entry)
+        best: dict[str, float] = {}
+        for _ in range(repeats):
+            ext = extract(speed, friction)
+            t0 = time.perf_counter()
+            model.predict(item['features'])
+            run = dict(ext.timings, classification=time.perf_counter() - t0)
+            run['total'] = sum(run.values())
+            for k, v in run.items():
+                best[k] = min(best.get(k, np.inf), v)
+        for k, v in best.items():
+            per_stage[k].append(v)
+    out = {k: _summary(v) for k, v in per_stage.items()}
+    out['repeats'] = repeats
+    out['load_average_before'] = list(load_before)
+    out['load_average_after'] = list(os.getloadavg())
+    return out
+
+
+def bins_sweep(items: list[dict], splits: int, bins=(5, 10, 20, 40)) -> list[dict]:
+    """Return the FSS diagonal and nominal false flags vs histogram bins (Fig. 12)."""
+    rows = []
+    for n_bins in bins:
+        res = classification(items, splits, bins=n_bins)
+        m = res['matrix']
+        rows.append({'bins': n_bins, 'fss1': m['fss1']['fss1']['mean'],
+                     'fss2': m['fss2']['fss2']['mean'],
+                     'nominal_fss1': m['nominal']['fss1']['mean'],
+                     'nominal_fss2': m['nominal']['fss2']['mean']})
+    return rows
 
 
 def changepoint_truth(path: pathlib.Path, manifest: dict, count: int) -> dict:
@@ -184,26 +238,9 @@ def run(out_dir: pathlib.Path, quick: bool) -> dict:
     started = time.perf_counter()
     path = _dataset(quick)
     manifest = fss.load_manifest(path)
-    items = fss.dataset_extractions(path, cache=False)  # fresh: the timings of this code
+    items = fss.dataset_extractions(path)  # cached per code and parameters
     stats_ = [it['stats'] for it in items]
-    timing = {}
-    for stage in ('changepoints', 'least_squares', 'assignment'):
-        values = np.array([s['timings'][stage] for s in stats_])
-        timing[stage] = {'median': float(np.median(values)), 'mean': float(values.mean()),
-                         'max': float(values.max()), 'min': float(values.min())}
-    from rwa_monitor.core.fss.pipeline import load_model
-    model = load_model()
-    t_cls = []
-    for it in items:
-        t0 = time.perf_counter()
-        model.predict(it['features'])
-        t_cls.append(time.perf_counter() - t0)
-    timing['classification'] = {'median': float(np.median(t_cls)),
-                                'mean': float(np.mean(t_cls)), 'max': float(np.max(t_cls)),
-                                'min': float(np.min(t_cls))}
-    total = np.array([sum(s['timings'].values()) for s in stats_]) + np.array(t_cls)
-    timing['total'] = {'median': float(np.median(total)), 'mean': float(total.mean()),
-                       'max': float(total.max()), 'min': float(total.min())}
+    timing = timing_pass(path, manifest, items, repeats=3)
     splits = 5 if quick else 30
     results = {
         'dataset': {'path': str(path), 'windows': len(items), 'per_status': manifest[
@@ -220,6 +257,7 @@ def run(out_dir: pathlib.Path, quick: bool) -> dict:
                'iterations': [s['iterations'] for s in stats_],
                'exact': float(np.mean([s['exact'] for s in stats_]))},
         'beam': beam_effect(path, manifest, 10 if quick else 60),
+        'bins': bins_sweep(items, splits),
         'timing_s': timing,
     }
     results['goals'] = goals(results)
@@ -240,6 +278,7 @@ def goals(results: dict) -> dict:
     worst = min(m[a][a]['mean'] for a in ANOMALIES)
     nominal = results['classification']['nominal_any_flag']['mean']
     t = results['timing_s']
+    # Timing goals use the per-window minimum of 3 runs (timing_pass).
     return {'detection_min_over_anomalies': {'value': worst, 'goal': 0.97,
                                              'met': worst >= 0.97},
             'nominal_flagged': {'value': nominal, 'goal': 0.03, 'met': nominal <= 0.03},
