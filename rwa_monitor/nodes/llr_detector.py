@@ -23,6 +23,7 @@ from typing import Any, Sequence
 
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
+from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import JointState
 
 from rwa_monitor.core import keys
@@ -103,7 +104,7 @@ class LLRDetectorNode(Node):
         self.wheels: dict[str, _Wheel] = {}
         self.input_counters = {'messages': 0, 'length_mismatch': 0,
                                'empty_name': 0, 'duplicate_name': 0, 'unknown_wheel': 0,
-                               'too_many_wheels': 0}
+                               'too_many_wheels': 0, 'undecodable': 0}
         self.events: list[AnomalyEvent] = []
         self._logged: set[tuple[str, str]] = set()
         self._allowed = self._allowed_wheels()
@@ -115,8 +116,8 @@ class LLRDetectorNode(Node):
             DiagnosticArray, 'anomalies', EVENTS_QOS,
             event_callbacks=qos_event_callbacks(self, 'anomalies', True))
         self.create_subscription(
-            JointState, 'telemetry/wheels', self.on_wheels, telemetry_qos(),
-            event_callbacks=qos_event_callbacks(self, 'telemetry/wheels'))
+            JointState, 'telemetry/wheels', self.on_raw_wheels, telemetry_qos(),
+            event_callbacks=qos_event_callbacks(self, 'telemetry/wheels'), raw=True)
 
     # ------------------------------------------------------------------- parameters
     def _detector_config(self, values: Any = None) -> dict[str, Any]:
@@ -154,18 +155,39 @@ class LLRDetectorNode(Node):
         self.input_counters[reason] += count
         self._log_once(reason, subject, text)
 
+    def on_raw_wheels(self, buffer: bytes) -> None:
+        """Feed one serialised ``telemetry/wheels`` message (the subscription is raw)."""
+        try:
+            fields = messages.decode_joint_state(buffer)
+        except ValueError:
+            try:
+                msg = deserialize_message(buffer, JointState)
+            except Exception:  # noqa: BLE001 - anything undecodable is counted, not fatal
+                self.input_counters['messages'] += 1
+                self._reject('undecodable', '', 'dropped an undecodable telemetry/wheels '
+                             'message')
+                return
+            self.on_wheels(msg)
+            return
+        self._process(*fields)
+
     def on_wheels(self, msg: JointState) -> None:
         """Feed one ``telemetry/wheels`` message to the wheels' detectors."""
+        self._process(messages.to_seconds(msg.header.stamp), msg.name, msg.velocity,
+                      msg.effort)
+
+    def _process(self, seconds: float, names: Sequence[str], speeds: Sequence[float],
+                 efforts: Sequence[float]) -> None:
         self.input_counters['messages'] += 1
         now = self.diagnostics.now()
         self.diagnostics.mark_input(INPUT_ID, 'input', now)
         try:
-            seconds, samples = messages.wheel_samples(msg)
+            seconds, samples = messages.samples_of(seconds, names, speeds, efforts)
         except messages.BadMessage as err:
             self._reject(err.reason, '', f'dropped a telemetry/wheels message: {err}')
             return
-        if len(samples) != len(msg.name):
-            for reason, count in messages.wheel_name_problems(msg).items():
+        if len(samples) != len(names):
+            for reason, count in messages.wheel_name_problems(names).items():
                 if count:
                     self._reject(reason, '', f'dropped {count} entries: {reason}', count)
         for wheel_id, speed, friction in samples:

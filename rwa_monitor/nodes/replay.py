@@ -263,18 +263,11 @@ class _Rows:
         self.gyro = tele.gyro
         self.attitude = tele.attitude
         self.reference = tele.reference_rate
-        self._wheels_msg: JointState | None = None
 
-    def wheels(self, i: int, t: float) -> JointState:
-        """Return row ``i`` as a JointState (one object, refilled: publish copies it)."""
-        msg = self._wheels_msg
-        if msg is None:
-            msg = self._wheels_msg = JointState()
-            msg.name = self.names
-        msg.header.stamp.sec, msg.header.stamp.nanosec = messages.split_seconds(t)
-        msg.velocity = self.speed[i].tolist()
-        msg.effort = self.friction[i].tolist()
-        return msg
+    def wheels(self, i: int, t: float) -> bytes:
+        """Return row ``i`` as a serialised JointState (``publish`` takes the bytes)."""
+        return messages.encode_joint_state(t, self.names, self.speed[i].tolist(),
+                                           self.friction[i].tolist())
 
 
 def main(args: Sequence[str] | None = None) -> int:
