@@ -1,0 +1,132 @@
+"""Launch-free integration tests of the vsadc_detector node (with the replay node)."""
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+import pytest
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from ros_harness import Collector, RosWorld
+
+from rwa_monitor.exceptions import ConfigError
+from rwa_monitor.nodes import messages
+from rwa_monitor.nodes.common import DIAGNOSTICS_QOS, EVENTS_QOS, telemetry_qos
+from rwa_monitor.nodes.replay import TelemetryReplay
+from rwa_monitor.nodes.vsadc_detector import VsadcDetectorNode
+from rwa_monitor.pipelines import vsadc as pipeline
+from rwa_monitor.sim.aocs import named_fault, simulate_aocs
+from rwa_monitor.telemetry import read_telemetry, write_telemetry
+
+pytestmark = pytest.mark.ros
+
+# Short windows so that a 900 s record holds start-up, a drift and a bias.
+CONFIG = {'window': 40, 'sigma_window': 40, 'reference_window': 200}
+
+
+def _detector(world, **params):
+    overrides = [Parameter(k, value=v) for k, v in {**CONFIG, **params}.items()]
+    return world.node(VsadcDetectorNode, parameter_overrides=overrides)
+
+
+def _events(collector):
+    return [messages.status_event(s) for m in collector.messages for s in m.status]
+
+
+def _key(e):
+    return (e.component, e.kind, e.index, e.declared_index)
+
+
+def test_node_events_equal_detect_pipeline(tmp_path):
+    tele = simulate_aocs(900.0, fault=named_fault('fast', 'y', 300.0), seed=21)
+    path = tmp_path / 'gyro.csv'
+    write_telemetry(path, tele)
+    tele = read_telemetry(path)
+    expected = pipeline.run(tele, {**pipeline.DEFAULTS, **CONFIG})
+    assert expected and expected[0].component == 'gyro_y'
+    with RosWorld('events') as world:
+        detector = _detector(world)
+        sink = world.node(Node, 'sink')
+        anomalies = Collector(sink, DiagnosticArray, 'anomalies', EVENTS_QOS)
+        replay = world.node(TelemetryReplay, parameter_overrides=[
+            Parameter('file', value=str(path)), Parameter('rate', value=0.0),
+            Parameter('burst', value=20), Parameter('min_subscribers', value=1),
+            Parameter('exit_when_done', value=False)])
+        world.wait_until(lambda: replay.done and detector.samples == len(tele), 60.0,
+                         'every row through the detector')
+        world.wait_until(lambda: len(_events(anomalies)) >= len(expected), 10.0, 'events')
+        got = _events(anomalies)
+        assert detector.counters['reference_from_parameter'] == 0
+        assert detector.counters['unpaired_gyro'] == 0
+    assert [_key(e) for e in got] == [_key(e) for e in expected]
+    assert all(e.detector == 'vsadc' for e in got)
+
+
+def _publish_rows(world, pubs, tele, rows, with_star=True):
+    gyro_pub, star_pub = pubs
+    for k in rows:
+        t = float(tele.time[k])
+        if with_star:
+            star_pub.publish(messages.quaternion(t, tele.attitude[k]))
+        gyro_pub.publish(messages.imu(t, tele.gyro[k]))
+        world.spin_once(0.0)
+
+
+def test_star_tracker_that_stops_makes_the_axes_stale_not_drift():
+    # Healthy data; after 300 rows the star tracker goes silent while the gyro goes on:
+    # the gyro samples wait (max_lag), then are held; no event; the axes turn STALE after
+    # stale_timeout of steady time while the input itself is still alive.
+    from geometry_msgs.msg import QuaternionStamped
+    from sensor_msgs.msg import Imu
+    tele = simulate_aocs(200.0, seed=22)
+    with RosWorld() as world:
+        detector = _detector(world, stale_timeout=0.5, diagnostic_period=0.1, max_lag=5)
+        src = world.node(Node, 'source')
+        pubs = (src.create_publisher(Imu, 'telemetry/gyro', telemetry_qos()),
+                src.create_publisher(QuaternionStamped, 'telemetry/star_tracker',
+                                     telemetry_qos()))
+        diags = Collector(src, DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
+        events = Collector(src, DiagnosticArray, 'anomalies', EVENTS_QOS)
+        for pub in pubs:
+            world.wait_for_subscribers(pub)
+        _publish_rows(world, pubs, tele, range(300))
+        world.wait_until(lambda: detector.samples >= 300, 10.0, '300 paired samples')
+        _publish_rows(world, pubs, tele, range(300, 400), with_star=False)
+        world.wait_until(lambda: detector.samples >= 395, 10.0, 'gyro fed without q')
+
+        def stale_axis():
+            for msg in diags.messages[-3:]:
+                for s in msg.status:
+                    if s.hardware_id == 'gyro_x' and s.level == DiagnosticStatus.STALE:
+                        return True
+            return False
+        world.wait_until(stale_axis, 10.0, 'gyro_x STALE')
+        assert detector.counters['unpaired_gyro'] >= 95
+        assert detector.detector.states == {'x': 0, 'y': 0, 'z': 0}
+        world.spin_for(0.2)
+        assert _events(events) == []
+
+
+def test_reference_parameter_used_when_the_topic_is_silent_and_bad_values_rejected():
+    with RosWorld() as world:
+        detector = _detector(world, reference_rate=[0.0, 0.0, 1.0e-3])
+        assert detector.reference == [0.0, 0.0, 1.0e-3]
+        detector.on_gyro(messages.imu(1.0, [0.0, 0.0, 1.0e-3]))
+        detector.on_star_tracker(messages.quaternion(1.0, [0.0, 0.0, 0.0, 1.0]))
+        assert detector.samples == 1 and detector.counters['reference_from_parameter'] == 1
+        result = detector.set_parameters([Parameter('window', value=1)])[0]
+        assert not result.successful and 'window' in result.reason
+        result = detector.set_parameters([Parameter('reference_rate', value=[1.0, 2.0])])[0]
+        assert not result.successful and 'reference_rate' in result.reason
+        assert detector.set_parameters([Parameter('margin', value=2.0)])[0].successful
+        assert detector.detector.channels[0].margin == 2.0
+    with RosWorld() as world:
+        with pytest.raises(ConfigError, match='distance_threshold'):
+            _detector(world, distance_threshold=-1.0)
+
+
+def test_replay_loop_restarts_the_detector():
+    with RosWorld() as world:
+        detector = _detector(world)
+        for t in (10.0, 10.25, 10.5, 2.0):
+            detector.on_gyro(messages.imu(t, [0.0, 0.0, 0.0]))
+            detector.on_star_tracker(messages.quaternion(t, [0.0, 0.0, 0.0, 1.0]))
+        assert detector.counters['time_jump_reset'] == 1
+        assert detector.detector.rows == 1
