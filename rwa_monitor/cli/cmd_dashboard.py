@@ -33,6 +33,7 @@ class Board:
         self.health: dict[tuple[str, str], dict[str, Any]] = {}
         self.events: collections.deque[dict[str, Any]] = collections.deque(maxlen=max_events)
         self.n_events = 0
+        self.by_detector: dict[str, int] = {}
         self._seen: set[tuple] = set()
 
     def on_diagnostics(self, msg: Any) -> None:
@@ -53,6 +54,8 @@ class Board:
                 continue
             self._seen.add(key)
             self.n_events += 1
+            detector = str(fields.get('detector', '?'))
+            self.by_detector[detector] = self.by_detector.get(detector, 0) + 1
             self.events.append({'level': level_of(status), 'name': status.name,
                                 'component': status.hardware_id, 'fields': fields})
 

@@ -106,6 +106,8 @@ class DemoResult:
     matches: list[tuple[Any, Any]]
     false_alarms: list[Any]
     notes: list[str]
+    repeats: list[Any] = dataclasses.field(default_factory=list)
+    other_detectors: dict[str, int] = dataclasses.field(default_factory=dict)
 
 
 def _make_executor(kind: str, context: Any, notes: list[str]) -> tuple[Any, str]:
@@ -196,11 +198,12 @@ def run_demo(path: pathlib.Path, *, domain_id: int = 0, executor: str = 'events'
         for node in nodes:
             node.destroy_node()
         rclpy.try_shutdown(context=context)
-    return _evaluate(tele, events, wall, kind, notes, llr)
+    others = {name: n for name, n in board.by_detector.items() if name != 'llr'}
+    return _evaluate(tele, events, wall, kind, notes, llr, others)
 
 
 def _evaluate(tele: Any, events: list[Any], wall: float, kind: str, notes: list[str],
-              llr: Any) -> DemoResult:
+              llr: Any, others: dict[str, int]) -> DemoResult:
     """Match events to the injected changes; run the file pipeline for comparison."""
     from rwa_monitor.pipelines import llr as llr_pipeline
     from rwa_monitor.sim.friction import changes_from_truth
@@ -217,9 +220,12 @@ def _evaluate(tele: Any, events: list[Any], wall: float, kind: str, notes: list[
         if hit is not None:
             used.add(id(hit))
         matches.append((change, hit))
-    false_alarms = [e for e in first if id(e) not in used]
+    near = {id(e) for e in first for c in changes
+            if e.component == c.wheel and abs(e.time - c.time_s) <= tolerance}
+    repeats = [e for e in first if id(e) not in used and id(e) in near]
+    false_alarms = [e for e in first if id(e) not in used and id(e) not in near]
     return DemoResult(len(tele), wall, kind, events, pipeline_events, changes, matches,
-                      false_alarms, notes)
+                      false_alarms, notes, repeats, others)
 
 
 def summary(result: DemoResult) -> str:
@@ -238,6 +244,8 @@ def summary(result: DemoResult) -> str:
             kinds = hit.kind if final == hit.kind else f'{hit.kind}->{final}'
             lines.append(left + f'{kinds:<8} {hit.time:>10.1f} {hit.declared_time:>12.1f} '
                          f'{hit.declared_time - change.time_s:>8.1f}')
+    lines.append(f'repeated declarations of an injected change (after the detector '
+                 f'restarted, within one window of it): {len(result.repeats)}')
     lines.append(f'false alarms (first declarations away from every injected change): '
                  f'{len(result.false_alarms)}')
     for event in result.false_alarms:
@@ -249,6 +257,9 @@ def summary(result: DemoResult) -> str:
     lines.append(f'{result.rows} rows x {len(WHEELS)} wheels in {result.wall_s:.1f} s '
                  f'({result.rows / max(result.wall_s, 1e-9):.0f} wheel messages/s, '
                  f'{result.executor} executor)')
+    for name, count in sorted(result.other_detectors.items()):
+        lines.append(f'{name} detector: {count} events on the anomalies topic (see the log '
+                     'above; its truth is not part of this file)')
     for note in result.notes:
         lines.append(f'note: {note}')
     return '\n'.join(lines)
