@@ -26,6 +26,7 @@ from rwa_monitor.nodes import messages  # noqa: E402
 from rwa_monitor.nodes.basilisk_bus import BasiliskBusNode  # noqa: E402
 from rwa_monitor.nodes.common import CLOCK_QOS, EVENTS_QOS  # noqa: E402
 from rwa_monitor.nodes.llr_detector import LLRDetectorNode  # noqa: E402
+from rwa_monitor.nodes.vsadc_detector import VsadcDetectorNode  # noqa: E402
 
 pytestmark = pytest.mark.ros
 
@@ -85,6 +86,31 @@ def test_scheduled_and_live_friction_faults_reported_on_the_right_wheel():
         assert max(same_change, key=lambda e: e.revision).kind == 'dry'
         # Algorithm 1 declares after the window and k_verif = window / 2 more samples
         assert first[w].declared_time <= t0 + 1.5 * LLR['window'] / RATE_HZ + 1.0
+
+
+@pytest.mark.slow
+def test_gyro_drift_ramp_classified_as_drift_on_its_axis():
+    """Drift 1e-6 rad/s per s on x from 600 s, held at 2e-4 rad/s from 800 s.
+
+    The guidance is scaled to 0.1: at full amplitude the attitude tracking error (up to
+    4e-4 rad/s) is larger than the fault and VSADC declares nothing (docs/basilisk.md).
+    """
+    with RosWorld() as world:
+        world.node(VsadcDetectorNode, parameter_overrides=[
+            Parameter('use_sim_time', value=True)])
+        sink = world.node(Node, 'sink')
+        anomalies = Collector(sink, DiagnosticArray, 'anomalies', EVENTS_QOS)
+        bus = _bus(world, rate=50.0, duration_s=900.0, guidance_scale=0.1,
+                   faults='gyro:x:600:drift=1e-6,level=2e-4')
+        world.wait_until(lambda: bus.done, 120.0, 'the bus done')
+        world.wait_until(lambda: any(e.kind == 'bias' for e in _events(anomalies)), 20.0,
+                         'the bias after the drift')
+        events = _events(anomalies)
+    assert {e.component for e in events} == {'gyro_x'}
+    drift = [e for e in events if e.kind == 'drift']
+    assert drift and 600.0 <= drift[0].time <= 650.0
+    assert drift[0].declared_time < 800.0
+    assert [e.kind for e in events if e.revision == 0][:2] == ['drift', 'bias']
 
 
 def test_bad_faults_are_rejected_with_the_reason():

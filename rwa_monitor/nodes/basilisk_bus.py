@@ -66,6 +66,9 @@ PARAMETERS = (
     ParamSpec('null_speed', BusConfig.null_speed, 'Wheel speed bias along the null space '
               '(rad/s); large values keep the wheels away from zero speed.', low=0.0,
               read_only=True),
+    ParamSpec('guidance_scale', 1.0, 'Factor on the guidance rate amplitudes (0 = inertial '
+              'hold; small values keep the attitude tracking error below gyro faults).',
+              low=0.0, read_only=True),
     ParamSpec('friction_noise_std', BusConfig.friction_noise_std, 'White noise std of the '
               'friction telemetry (N m).', low=0.0, read_only=True),
     ParamSpec('faults', '', 'Faults scheduled at start, ";"-separated, e.g. '
@@ -99,6 +102,8 @@ class BasiliskBusNode(Node):
         from rwa_monitor.sim.basilisk import BasiliskBus
         config = BusConfig(rate_hz=self.params['rate_hz'],
                            null_speed=self.params['null_speed'],
+                           ref_amplitude=tuple(self.params['guidance_scale'] * a
+                                               for a in BusConfig.ref_amplitude),
                            friction_noise_std=self.params['friction_noise_std'])
         try:
             faults = [parse_fault(s) for s in self.params['faults'].split(';') if s.strip()]
@@ -176,11 +181,13 @@ class BasiliskBusNode(Node):
 
     def _publish(self, sample: Any) -> None:
         t = sample.time
+        # reference and star tracker before the gyro: a gyro consumer that pairs on the
+        # gyro's arrival then finds both partners already there
+        self._ref_pub.publish(messages.vector3(t, sample.reference_rate, self._frame))
+        self._star_pub.publish(messages.quaternion(t, sample.attitude, self._frame))
+        self._gyro_pub.publish(messages.imu(t, sample.gyro, self._frame))
         self._wheels_pub.publish(messages.joint_state(t, self.bus.wheel_ids, sample.speed,
                                                       sample.friction))
-        self._gyro_pub.publish(messages.imu(t, sample.gyro, self._frame))
-        self._star_pub.publish(messages.quaternion(t, sample.attitude, self._frame))
-        self._ref_pub.publish(messages.vector3(t, sample.reference_rate, self._frame))
         self._clock_pub.publish(messages.clock(t))
         self.published += 1
 
