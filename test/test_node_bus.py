@@ -162,3 +162,13 @@ def test_console_script_ends_cleanly_when_done_and_on_ctrl_c():
         assert bad.wait(timeout=60) == 2
         assert 'WHEEL must be one of' in bad.stdout.read()
     assert os.environ.get('ROS_AUTOMATIC_DISCOVERY_RANGE') == 'LOCALHOST'
+
+
+def test_parameters_load_from_the_shipped_yaml(repo_root):
+    path = str(repo_root / 'config' / 'rwa_monitor.yaml')
+    with RosWorld() as world:
+        bus = world.node(BasiliskBusNode, cli_args=['--ros-args', '--params-file', path])
+        assert bus.params['rate'] == 1.0
+        assert bus.params['friction_noise_std'] == 5.0e-5
+        assert bus.bus.config.null_speed == 10.0
+        assert bus.bus.faults == []
