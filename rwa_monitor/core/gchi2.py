@@ -84,6 +84,48 @@ def log_sf2(x: float, w1: float, w2: float) -> float:
     return -b + math.log(total * end) + _LOG_2_OVER_PI
 
 
+def log_sf2_t(x: float, w1: float, w2: float, dof: float) -> float:
+    """Return log P(w1 Z1^2 + w2 Z2^2 > x S), S ~ chi2_dof / dof independent (pure Python).
+
+    The studentised tail of Lemma 1 when the noise variance is estimated with ``dof``
+    residual degrees of freedom independently of the statistic. Averaging the integrand
+    ``exp(-x S k(psi))`` of :func:`log_sf2` over ``S`` gives ``(1 + 2 x k(psi) / dof)^(-dof /
+    2)``; as there, the value at ``psi = 0``, ``(1 + 2 b / dof)^(-dof / 2)``, is factored
+    out, the rest ``(1 + a' h(psi))^(-dof / 2)`` with ``a' = 2 a / (dof + 2 b)`` and ``h =
+    sin^2 / (cos^2 + rho sin^2)`` is cut where it falls below ``exp(-CUT)`` and integrated
+    with the same rule. Tends to :func:`log_sf2` as ``dof`` grows.
+    """
+    if not x > 0.0:
+        return 0.0
+    if w1 < w2:
+        w1, w2 = w2, w1
+    if not w1 > 0.0:
+        return -math.inf
+    b = x / (2.0 * w1)
+    rho = w2 / w1 if w2 > 0.0 else 0.0
+    a = b * (1.0 - rho)
+    half = 0.5 * dof
+    lead = -half * math.log1p(2.0 * b / dof)
+    ap = 2.0 * a / (dof + 2.0 * b)
+    end = _HALF_PI
+    if ap > 0.0:
+        big = math.expm1(CUT / half) / ap
+        if rho * big < 1.0:
+            end = math.atan(math.sqrt(big / (1.0 - rho * big)))
+    total = 0.0
+    sin = math.sin
+    cos = math.cos
+    log1p = math.log1p
+    exp = math.exp
+    for u, wt in zip(_NODES, _WEIGHTS):
+        psi = end * u
+        s = sin(psi)
+        c = cos(psi)
+        s2 = s * s
+        total += wt * exp(-half * log1p(ap * s2 / (c * c + rho * s2)))
+    return lead + math.log(total * end) + _LOG_2_OVER_PI
+
+
 def _log_sf2_array(x: np.ndarray, w1: float, w2: float) -> np.ndarray:
     """Vectorised :func:`log_sf2` over ``x`` for fixed weights (w1 >= w2 >= 0, w1 > 0)."""
     x = np.asarray(x, dtype=float)
@@ -147,24 +189,31 @@ def skip_threshold(log_p: float) -> float:
     return y
 
 
-def _cgf(s: complex, w: Sequence[float], m2: Sequence[float]) -> complex:
-    """Cumulant generating function ``sum_i -log(1 - 2 w_i s)/2 + m_i^2 w_i s/(1 - 2 w_i s)``."""
+def _cgf(s: complex, terms: Sequence[tuple[float, float, float]]) -> complex:
+    """Cumulant generating function ``sum -k log(1 - 2 w s) + m2 w s / (1 - 2 w s)``.
+
+    ``terms`` holds ``(w, m2, k)``: weight, squared mean, half the degrees of freedom.
+    """
     total = 0j
-    for wi, mi in zip(w, m2):
-        one = 1.0 - 2.0 * wi * s
-        total += -0.5 * cmath.log(one) + mi * wi * s / one
+    for w, m2, k in terms:
+        one = 1.0 - 2.0 * w * s
+        total += -k * cmath.log(one) + m2 * w * s / one
     return total
 
 
 def gchi2_logsf_general(x: float, weights: Sequence[float],
-                        means: Sequence[float] | None = None) -> tuple[float, float]:
-    """Return ``(log P(Q > x), relative error estimate)`` for any weights and means.
+                        means: Sequence[float] | None = None,
+                        dof: float | None = None) -> tuple[float, float]:
+    """Return ``(log P(Q > x S), relative error estimate)`` for any weights and means.
 
-    Laplace inversion ``P(Q > x) = (1/pi) int_0^inf Re[M(c + i t) exp(-(c + i t) x) / (c +
-    i t)] dt`` with ``M`` the moment generating function and ``c`` in ``(0, 1/(2 w_max))``
-    the saddle point of ``K(s) - s x - log s``. The integrand is divided by its value at
-    ``t = 0`` so that the result never underflows. The error estimate is the adaptive
-    quadrature's, relative to the integral.
+    ``Q = sum w_i (Z_i + m_i)^2``; ``S = 1`` if ``dof`` is None, else an independent
+    ``chi2_dof / dof`` (studentised case: the noise variance estimated with ``dof`` degrees
+    of freedom). Laplace inversion of ``X = Q - x S`` at 0: ``P(X > 0) = (1/pi) int_0^inf
+    Re[M(c + i t) / (c + i t)] dt`` with ``M`` the moment generating function of ``X`` and
+    ``c`` in ``(0, 1/(2 w_max))`` the saddle point of ``K(s) - log s``. The integrand is
+    divided by its value at ``t = 0`` (no underflow). For ``S = 1`` the factor ``exp(-i t
+    x)`` is split off and the cosine and sine Fourier integrals of the slowly varying rest
+    use QUADPACK's QAWF. The error estimate is the quadrature's, relative to the integral.
     """
     w = np.asarray(weights, dtype=float).ravel()
     m2 = np.zeros_like(w) if means is None else np.asarray(means, dtype=float).ravel() ** 2
@@ -174,11 +223,19 @@ def gchi2_logsf_general(x: float, weights: Sequence[float],
         return 0.0, 0.0
     if w.size == 0:
         return -math.inf, 0.0
+    terms = [(wi, mi, 0.5) for wi, mi in zip(w.tolist(), m2.tolist())]
+    shift = x
+    if dof is not None:
+        terms.append((-x / dof, 0.0, 0.5 * dof))
+        shift = 0.0
     s_max = 1.0 / (2.0 * w.max())
 
     def dphi(s: float) -> float:
-        one = 1.0 - 2.0 * w * s
-        return float(np.sum(w / one + m2 * w / one ** 2)) - x - 1.0 / s
+        total = -shift - 1.0 / s
+        for wi, mi, k in terms:
+            one = 1.0 - 2.0 * wi * s
+            total += 2.0 * k * wi / one + mi * wi / (one * one)
+        return total
 
     lo, hi = s_max * 1e-15, s_max * (1.0 - 1e-15)
     if dphi(lo) > 0.0:
@@ -187,35 +244,44 @@ def gchi2_logsf_general(x: float, weights: Sequence[float],
         c = hi
     else:
         c = optimize.brentq(dphi, lo, hi, xtol=1e-300, rtol=1e-14, maxiter=500)
-    k0 = _cgf(c, w.tolist(), m2.tolist()).real - c * x - math.log(c)
-    one = 1.0 - 2.0 * w * c
-    d2 = float(np.sum(2.0 * w ** 2 / one ** 2 + 4.0 * m2 * w ** 2 / one ** 3)) + 1.0 / c ** 2
+    k0 = _cgf(c, terms).real - c * shift - math.log(c)
+    d2 = 1.0 / (c * c)
+    for wi, mi, k in terms:
+        one = 1.0 - 2.0 * wi * c
+        d2 += 4.0 * k * wi * wi / (one * one) + 4.0 * mi * wi * wi / one ** 3
     scale = 1.0 / math.sqrt(d2)
-
-    wl, ml = w.tolist(), m2.tolist()
 
     def amplitude(u: float) -> complex:
         s = complex(c, u * scale)
-        return cmath.exp(_cgf(s, wl, ml) - c * x - cmath.log(s) - k0)
+        return cmath.exp(_cgf(s, terms) - c * shift - cmath.log(s) - k0)
 
-    freq = x * scale
-    cos_part, err_c = integrate.quad(lambda u: amplitude(u).real, 0.0, np.inf, weight='cos',
-                                     wvar=freq, epsabs=1e-11, limlst=200)
-    sin_part, err_s = integrate.quad(lambda u: amplitude(u).imag, 0.0, np.inf, weight='sin',
-                                     wvar=freq, epsabs=1e-11, limlst=200)
-    val = (cos_part + sin_part) * scale / math.pi
-    err = (err_c + err_s) * scale / math.pi
+    if dof is None:
+        freq = x * scale
+        cos_part, err_c = integrate.quad(lambda u: amplitude(u).real, 0.0, np.inf,
+                                         weight='cos', wvar=freq, epsabs=1e-11, limlst=200)
+        sin_part, err_s = integrate.quad(lambda u: amplitude(u).imag, 0.0, np.inf,
+                                         weight='sin', wvar=freq, epsabs=1e-11, limlst=200)
+        val, err = cos_part + sin_part, err_c + err_s
+    else:
+        val, err = integrate.quad(lambda u: amplitude(u).real, 0.0, np.inf, epsabs=1e-12,
+                                  epsrel=1e-11, limit=500)
+    val *= scale / math.pi
+    err *= scale / math.pi
     if not val > 0.0:
         return -math.inf, math.inf
     return k0 + math.log(val), err / val
 
 
-def gchi2_logsf(x, weights: Sequence[float], means: Sequence[float] | None = None):
-    """Return ``log P(sum_i w_i (Z_i + m_i)^2 > x)``, vectorised over ``x``.
+def gchi2_logsf(x, weights: Sequence[float], means: Sequence[float] | None = None,
+                dof: float | None = None):
+    """Return ``log P(sum_i w_i (Z_i + m_i)^2 > x S)``, vectorised over ``x``.
 
-    Central two-term case: :func:`log_sf2` (exact integral, fixed Gauss-Legendre rule).
-    One term: closed form. Otherwise :func:`gchi2_logsf_general` per element.
+    ``S = 1`` (``dof`` None) or ``chi2_dof / dof`` (studentised). Central case with at most
+    two terms: :func:`log_sf2` / :func:`log_sf2_t` (exact integral, fixed Gauss-Legendre
+    rule). Otherwise :func:`gchi2_logsf_general` per element.
     """
+    if dof is not None and not (isinstance(dof, (int, float)) and dof > 0.0):
+        raise ValueError(f'dof must be a number in (0, inf) or None, got {dof!r}')
     w = np.asarray(weights, dtype=float).ravel()
     if w.size == 0 or np.any(~np.isfinite(w)) or np.any(w < 0.0) or not np.any(w > 0.0):
         raise ValueError(f'weights must be finite, >= 0 and not all zero; got {weights!r}')
@@ -231,29 +297,36 @@ def gchi2_logsf(x, weights: Sequence[float], means: Sequence[float] | None = Non
     if central and wp.size <= 2:
         w1 = float(wp[0])
         w2 = float(wp[1]) if wp.size == 2 else 0.0
-        out = _log_sf2_array(x_arr.ravel(), w1, w2).reshape(x_arr.shape)
+        if dof is None:
+            out = _log_sf2_array(x_arr.ravel(), w1, w2).reshape(x_arr.shape)
+        else:
+            out = np.asarray([log_sf2_t(float(v), w1, w2, float(dof)) for v in x_arr.ravel()],
+                             dtype=float).reshape(x_arr.shape)
     else:
-        flat = [gchi2_logsf_general(float(v), w, mu)[0] for v in x_arr.ravel()]
+        flat = [gchi2_logsf_general(float(v), w, mu, dof)[0] for v in x_arr.ravel()]
         out = np.asarray(flat, dtype=float).reshape(x_arr.shape)
     return float(out) if out.ndim == 0 else out
 
 
-def gchi2_sf(x, weights: Sequence[float], means: Sequence[float] | None = None):
-    """Return ``P(sum_i w_i (Z_i + m_i)^2 > x)`` (Lemma 1 of the llr-realtime paper).
+def gchi2_sf(x, weights: Sequence[float], means: Sequence[float] | None = None,
+             dof: float | None = None):
+    """Return ``P(sum_i w_i (Z_i + m_i)^2 > x S)`` (Lemma 1 of the llr-realtime paper).
 
     ``weights`` are the ``w_i >= 0`` (the eigenvalues ``lambda_i`` of Lemma 1), ``means``
-    the optional ``m_i`` (non-central case: detection probability under a change).
-    Vectorised over ``x``; ``x <= 0`` gives 1.
+    the optional ``m_i`` (non-central case: detection probability under a change), ``dof``
+    the optional degrees of freedom of an independent variance estimate (``S ~ chi2_dof /
+    dof``; None: ``S = 1``). Vectorised over ``x``; ``x <= 0`` gives 1.
     """
-    out = np.exp(gchi2_logsf(x, weights, means))
+    out = np.exp(gchi2_logsf(x, weights, means, dof))
     return float(out) if np.ndim(out) == 0 else out
 
 
-def gchi2_isf(p: float, weights: Sequence[float]) -> float:
-    """Return the ``x`` with ``P(sum_i w_i Z_i^2 > x) = p`` (central case), p in (0, 1).
+def gchi2_isf(p: float, weights: Sequence[float], dof: float | None = None) -> float:
+    """Return the ``x`` with ``P(sum_i w_i Z_i^2 > x S) = p`` (central case), p in (0, 1).
 
     Root of ``log sf(x) = log p`` bracketed by ``w_max chi2_1.isf(p)`` (lower bound of
-    the tail) and ``w_max chi2_p.isf(p)`` (upper bound).
+    the tail) and ``w_max chi2_p.isf(p)`` (upper bound); with ``dof`` the upper end is
+    doubled until it brackets.
     """
     if not 0.0 < p < 1.0:
         raise ValueError(f'p must be a number in (0, 1), got {p!r}')
@@ -264,15 +337,15 @@ def gchi2_isf(p: float, weights: Sequence[float]) -> float:
     npos = int(np.count_nonzero(w > 0.0))
     lo = wmax * 2.0 * float(special.erfcinv(p)) ** 2
     hi = wmax * float(special.chdtri(npos, p))
-    if npos == 1 or hi <= lo:
+    if dof is None and (npos == 1 or hi <= lo):
         return lo
     target = math.log(p)
 
     def f(v: float) -> float:
-        return float(gchi2_logsf(v, w)) - target
+        return float(gchi2_logsf(v, w, None, dof)) - target
 
     if f(lo) <= 0.0:
         return lo
-    if f(hi) >= 0.0:
-        return hi
+    while f(hi) >= 0.0:
+        hi *= 2.0
     return float(optimize.brentq(f, lo, hi, xtol=1e-300, rtol=1e-13, maxiter=200))

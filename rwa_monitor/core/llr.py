@@ -20,7 +20,7 @@ from rwa_monitor.core import keys, llr_stats
 from rwa_monitor.core.events import AnomalyEvent
 from rwa_monitor.core.friction import coulomb_viscous, RegressorSet
 from rwa_monitor.core.gchi2 import (gchi2_logsf_general, log_lower_bound, log_sf2,
-                                    skip_threshold)
+                                    log_sf2_t, skip_threshold)
 from rwa_monitor.core.params import check_int, check_real
 
 COUNTER_NAMES = ('nonfinite', 'non_increasing_time', 'missing_aux', 'ill_conditioned')
@@ -321,12 +321,14 @@ class LLRDetector:
             x2 = (A * V - B * U) / det
             if self._noise_var is None:
                 n_p = k - self._c
-                s2 = (E - (x1 * U + x2 * V)) / (n_p - 2)
+                dof = float(n_p - 2)
+                s2 = (E - (x1 * U + x2 * V)) / dof
                 floor = llr_stats.NOISE_FLOOR_REL * E / n_p + llr_stats.NOISE_FLOOR_ABS
                 if not s2 > floor:
                     s2 = floor
             else:
                 s2 = self._noise_var
+                dof = None
             Aw = At - A
             Bw = Bt - B
             Cw = Ct - C
@@ -339,7 +341,7 @@ class LLRDetector:
             self._last_y = y
             if tr > 0.0 and y > 0.0 and not y / tr < self._ystar:
                 dm = (Aw * Cw - Bw * Bw) / dett
-                logp = candidate_log_p2(y, tr, dm, self._logpmin)
+                logp = candidate_log_p2(y, tr, dm, self._logpmin, dof)
                 if logp is not None and logp < self._logpmin:
                     self._record(k, logp)
         else:
@@ -468,11 +470,13 @@ class LLRDetector:
             n_p = k - self._c
             x = np.linalg.solve(pi_p, q_p)
             if self._noise_var is None:
-                s2 = (float(e) - float(x @ q_p)) / (n_p - p)
+                dof = float(n_p - p)
+                s2 = (float(e) - float(x @ q_p)) / dof
                 floor = llr_stats.NOISE_FLOOR_REL * float(e) / n_p + llr_stats.NOISE_FLOOR_ABS
                 s2 = s2 if s2 > floor else floor
             else:
                 s2 = self._noise_var
+                dof = None
             pi_w = pi_t - pi_p
             m = np.linalg.solve(pi_t, np.column_stack([(q_t - q_p) - pi_w @ x, pi_w]))
             d = m[:, 0]
@@ -484,7 +488,7 @@ class LLRDetector:
                 lam = np.sort(np.clip(linalg.eigh(pi_w, pi_t, eigvals_only=True), 0.0, 1.0))
                 # Dropping all but the two largest terms gives a lower bound of the tail.
                 if not log_sf2(y, lam[-1], lam[-2]) > self._logpmin + 1e-9:
-                    logp = gchi2_logsf_general(y, lam)[0]
+                    logp = gchi2_logsf_general(y, lam, None, dof)[0]
                     if logp < self._logpmin:
                         self._record(k, logp)
         else:
@@ -492,16 +496,20 @@ class LLRDetector:
         return k > self._kmin + self._kverif and self._logpmin <= self._logr
 
 
-def candidate_log_p2(y: float, tr: float, dm: float, log_p_min: float) -> float | None:
+def candidate_log_p2(y: float, tr: float, dm: float, log_p_min: float,
+                     dof: float | None = None) -> float | None:
     """Return log p_k (eq. (7), Algorithm 2) if it may be below ``log_p_min``, else None.
 
     ``y = LLR_k / sigma^2``; ``tr`` and ``dm`` are the trace and determinant of ``Pi_T^-1
     Pi_W`` (``Pi_W = Pi_T - Pi_P``), whose eigenvalues are those of Lemma 1's ``I -
-    Pi_P^1/2 Pi_T^-1 Pi_P^1/2`` (similar matrices). With ``b = y / (2 l1)``, ``rho = l2 /
-    l1`` and ``a = b (1 - rho)``, ``p_k >= exp(-b rho) erfc(sqrt(a))`` (drop ``rho sin^2`` in
-    the integral of :mod:`rwa_monitor.core.gchi2`); when that bound already exceeds
-    ``p_min`` the sample cannot be a new minimum and the exact tail is not computed.
-    Shared by the streaming and the batch path (same floats, same decision).
+    Pi_P^1/2 Pi_T^-1 Pi_P^1/2`` (similar matrices). ``dof``: residual degrees of freedom
+    of the estimated noise variance (studentised tail, :func:`log_sf2_t`), None when the
+    noise level is given (Lemma 1's tail, :func:`log_sf2`). With ``b = y / (2 l1)``, ``rho =
+    l2 / l1`` and ``a = b (1 - rho)``, ``p_k >= exp(-b rho) erfc(sqrt(a))`` (drop ``rho
+    sin^2`` in the integral of :mod:`rwa_monitor.core.gchi2`; the studentised tail is
+    larger still); when that bound already exceeds ``p_min`` the sample cannot be a new
+    minimum and the exact tail is not computed. Shared by the streaming and the batch path
+    (same floats, same decision).
     """
     half = 0.5 * tr
     disc = half * half - dm
@@ -513,7 +521,9 @@ def candidate_log_p2(y: float, tr: float, dm: float, log_p_min: float) -> float 
     rho = lam2 / lam1
     if -b * rho + log_lower_bound(b * (1.0 - rho)) > log_p_min + 1e-9 * (1.0 - log_p_min):
         return None
-    return log_sf2(y, lam1, lam2)
+    if dof is None:
+        return log_sf2(y, lam1, lam2)
+    return log_sf2_t(y, lam1, lam2, dof)
 
 
 def detect_batch(time, speed, friction, *, component: str = 'rw1',

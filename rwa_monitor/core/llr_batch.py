@@ -78,7 +78,7 @@ def _stats(pp: np.ndarray, pt: np.ndarray, n_p: np.ndarray, cfg: Mapping[str, An
         x1 = (C * U - B * V) / det
         x2 = (A * V - B * U) / det
         if cfg['noise_std'] is None:
-            s2 = (E - (x1 * U + x2 * V)) / (n_p - 2)
+            s2 = (E - (x1 * U + x2 * V)) / (n_p - 2.0)
             floor = llr_stats.NOISE_FLOOR_REL * E / n_p + llr_stats.NOISE_FLOOR_ABS
             s2 = np.fmax(s2, floor)
         else:
@@ -102,7 +102,12 @@ def _stats(pp: np.ndarray, pt: np.ndarray, n_p: np.ndarray, cfg: Mapping[str, An
         # Bounds of log p_k: candidate_log_p2 (lower); upper: J <= i0e(a/2) (gchi2) and
         # i0e(z) = (1/pi) int_0^pi exp(-2 z sin^2(t/2)) dt <= int_0^1 exp(-2 z u^2) du
         # <= sqrt(pi / (8 z)) (sin s >= 2 s / pi), i.e. log J <= log(pi / (4 a)) / 2.
-        upper = np.where(testable, np.minimum(0.5 * np.log(_PI_4 / a), 0.0) - b, 0.0)
+        if cfg['noise_std'] is None:
+            # Studentised tail (log_sf2_t): at most its value at psi = 0.
+            dof = n_p - 2.0
+            upper = np.where(testable, -0.5 * dof * np.log1p(2.0 * b / dof), 0.0)
+        else:
+            upper = np.where(testable, np.minimum(0.5 * np.log(_PI_4 / a), 0.0) - b, 0.0)
         lower = log_lower_bound_array(a) - b * rho
     return ok, testable, y, tr, dm, upper, lower
 
@@ -158,13 +163,15 @@ def _scan(ref: _Reference, k0: int, k1: int, state: dict, cfg: Mapping[str, Any]
     prev = bound[:-1]
     margin = 1e-6 * (1.0 + np.abs(prev))
     cand = np.flatnonzero(testable & (lower <= prev + margin))
-    declared = _candidates(ks, cand, y, tr, dm, state, kverif, logr)
+    dof = None if cfg['noise_std'] is not None else (ks - c - 2).astype(float)
+    declared = _candidates(ks, cand, y, tr, dm, dof, state, kverif, logr)
     last = k1 if declared is None else declared
     state['ill'] += int(np.count_nonzero(~ok[:last - k0 + 1]))
     return declared
 
 
-def _candidates(ks, cand, y, tr, dm, state: dict, kverif: int, logr: float) -> int | None:
+def _candidates(ks, cand, y, tr, dm, dof, state: dict, kverif: int, logr: float
+                ) -> int | None:
     """Algorithm 1 lines 11-18 over the candidate tests of a chunk (exact p_k)."""
     k1 = int(ks[-1])
     for i in cand:
@@ -173,7 +180,8 @@ def _candidates(ks, cand, y, tr, dm, state: dict, kverif: int, logr: float) -> i
             return state['kmin'] + kverif + 1
         yv, trv = float(y[i]), float(tr[i])
         if not yv / trv < state['ystar']:
-            logp = candidate_log_p2(yv, trv, float(dm[i]), state['logp'])
+            logp = candidate_log_p2(yv, trv, float(dm[i]), state['logp'],
+                                    None if dof is None else float(dof[i]))
             if logp is not None and logp < state['logp']:
                 state.update(logp=logp, kmin=k, ystar=skip_threshold(logp))
         if state['logp'] <= logr and k > state['kmin'] + kverif:
