@@ -2,8 +2,10 @@
 
 A segment's cost is the residual sum of squares of the least-squares fit of model (1),
 f = -f_c sign(w) - f_v w, on that segment (the same regressors as the online detector),
-computed in O(1) from cumulative sums. The search is the ruptures library's PELT (exact
-minimisation of total cost + penalty x number of changes). Penalty: BIC-like,
+computed in O(1) from cumulative sums. The search is the ruptures library's binary
+segmentation (Binseg): split where the cost falls most, while the fall exceeds the penalty.
+For a single change its first split is the exact least-squares change point, the same as
+PELT's (checked on the Fig. 3 runs), at a hundredth of PELT's time. Penalty: BIC-like,
 ``3 * noise_var * ln(n)`` (each change adds two regression parameters and a location),
 with the noise variance known, as the online detector is given it in the benchmark.
 """
@@ -52,8 +54,8 @@ def bic_penalty(n: int, noise_var: float) -> float:
 
 def detect_offline(speed: np.ndarray, friction: np.ndarray, *, noise_var: float = 1.0,
                    min_size: int = 50, jump: int = 5) -> list[int]:
-    """Return the change indices (first sample of each new segment) found by PELT."""
+    """Return the change indices (first sample of each new segment) found by Binseg."""
     signal = np.column_stack([friction, speed])
-    algo = rpt.Pelt(custom_cost=FrictionRegressionCost(), min_size=min_size, jump=jump)
+    algo = rpt.Binseg(custom_cost=FrictionRegressionCost(), min_size=min_size, jump=jump)
     bkps = algo.fit(signal).predict(pen=bic_penalty(len(signal), noise_var))
     return [int(b) for b in bkps[:-1]]

@@ -23,7 +23,7 @@ def plots(out_dir: pathlib.Path, r: dict[str, Any]) -> None:
         bins = list(range(-300, 301, 20))
         ax.hist(r['fig3'][size]['llr']['errors'], bins=bins, alpha=0.6, label='online LLR')
         ax.hist(r['fig3'][size]['peer']['errors'], bins=bins, alpha=0.6,
-                label='offline PELT')
+                label='offline Binseg')
         ax.set_title(f'dry +{size} at k = 1500 (miss '
                      f'{100 * r["fig3"][size]["llr"]["miss_rate"]:.1f} %)')
         ax.set_xlabel('estimated change step - 1500')
@@ -98,8 +98,9 @@ def markdown(r: dict[str, Any]) -> str:
            f'`rwa-monitor bench llr`, {r["bench_seconds"]:.0f} s; scaled units (noise std 1, '
            'given to both detectors), change at k = 1500 of 3000-sample runs; a change is '
            'detected by a declaration whose estimated step is within +-500 samples. '
-           'Offline peer: PELT with a model (1) least-squares cost, penalty 3 ln(n) '
-           '(BIC-like), min segment 50, step grid 5 (`rwa_monitor/bench/llr_peer.py`). '
+           'Offline peer: binary segmentation with a model (1) least-squares cost, '
+           'penalty 3 ln(n) (BIC-like), min segment 50, step grid 5 '
+           '(`rwa_monitor/bench/llr_peer.py`). '
            'Plots: `bench/results/llr_fig3.png`, `llr_fig4.png`, `llr_fig5.png`, '
            '`llr_memory.png`.', '']
     out += ['### Fig. 3: localisation (w_k = 20 - 10cos(pi k/1200), r = 1e-5, w = 500, '
@@ -141,8 +142,8 @@ def markdown(r: dict[str, Any]) -> str:
     out += ['', 'Paper: simulated detection above the Lemma-1 curve, increasing with the '
             'change and with r (graph only, no numbers).', '',
             f'### Fig. 5: run length to a false alarm (w_k = 20 + 5cos(k/5000), no anomaly, '
-            f'{r["fig5"]["runs_per_cell"]} runs x {r["fig5"]["samples_per_run"]} samples '
-            'per cell)', '']
+            f'up to {r["fig5"]["max_runs_per_cell"]} runs x {r["fig5"]["samples_per_run"]} '
+            'samples per cell, about 100/r samples)', '']
     rows = [[c['window'], f'{c["rate"]:g}', c['alarms'], c['samples'],
              '> samples' if c['alarms'] == 0 else f'{c["arl"]:.3g}',
              f'{c["arl_lower_95"]:.3g}', f'{c["one_over_r"]:.0f}',
@@ -151,8 +152,9 @@ def markdown(r: dict[str, Any]) -> str:
             for c in r['fig5']['cells']]
     out.append(table(['w', 'r', 'alarms', 'samples', 'ARL', 'ARL 95 % lower bound',
                       '1/r (paper: ARL above it)', 'ARL > 1/r'], rows))
-    out += ['', 'Run lengths are capped by the budget above (a few minutes); a cell with '
-            'few alarms has a wide bound.', '',
+    out += ['', 'ARL = samples / alarms (restarts included); the lower bound is the '
+            'one-sided 95 % Poisson bound. Sample budgets keep the section to a few minutes; '
+            'a cell with no alarm only bounds the ARL from below.', '',
             f'### Categorisation (profile fig3, r = 1e-5, w = 500, {s["cat_runs"]} runs; '
             'viscous step 0.025 = a 0.5 torque step at 20 rad/s)', '']
     rows = []
@@ -178,7 +180,7 @@ def markdown(r: dict[str, Any]) -> str:
                     '-' if llr_cell is None else
                     f'{1e5 * llr_cell["alarms"] / llr_cell["samples"]:.2f}',
                     f'{min(x["batch_per_s"] for x in r["throughput"]["rows"]):.0f} (batch)'],
-                   ['offline PELT', f'{fa["per_100k"]:.2f} ({fa["samples"]} samples)',
+                   ['offline Binseg', f'{fa["per_100k"]:.2f} ({fa["samples"]} samples)',
                     f'{fa["samples_per_s"]:.0f}']]), '']
     out += ['### Throughput (realistic SI profile, w = 400, r = 1e-4, noise estimated; '
             'one wheel)', '']
