@@ -153,10 +153,9 @@ class StarTrackerRate:
 
     def update(self, t: float, q) -> tuple[float, float, float] | None:
         """Take the quaternion ``q`` stamped ``t``; return the rate since the last one."""
-        x, y, z, w = (float(v) for v in q)
+        x, y, z, w = q
         norm = math.sqrt(x * x + y * y + z * z + w * w)
-        if not (math.isfinite(norm) and math.isfinite(t)
-                and abs(norm - 1.0) <= self.norm_tolerance):
+        if not abs(norm - 1.0) <= self.norm_tolerance or not math.isfinite(t):
             self.invalid += 1
             return None
         if t <= self._prev_time:

@@ -151,10 +151,15 @@ class VsadcAxis:
 
     def reset(self) -> None:
         """Forget everything: the next sample starts a new nominal batch."""
-        w = self.window
-        self._x1, self._x2 = _Window(w), _Window(w)
-        self._d = _Window(self.sigma_window)
+        w, m = self.window, self.sigma_window
+        self._buf1, self._buf2 = [0.0] * w, [0.0] * w       # feature windows (ring)
         self._stamps: list[Any] = [None] * w
+        self._pos = 0
+        self._sum1 = self._sum2 = 0.0
+        self._dbuf = [0.0] * m                              # distance window (ring)
+        self._dpos = self._dcount = 0
+        self._dsum = self._dsq = 0.0
+        self._ready = False
         self._ref_max = _SlidingMax(self.reference_window)
         self._ref = _Window(self.reference_window)
         self._new_regime()
@@ -195,33 +200,51 @@ class VsadcAxis:
         caller (:class:`VsadcDetector` holds the axis instead).
         """
         w = self.window
-        slot = self._x1.pos
-        old_stamp = self._stamps[slot]
-        self._stamps[slot] = stamp
-        old1 = self._x1.push(res_sst)
-        old2 = self._x2.push(res_gyr)
-        self._n += 1
-        n = self._n
+        pos = self._pos
+        old1, old2, old_stamp = self._buf1[pos], self._buf2[pos], self._stamps[pos]
+        self._buf1[pos], self._buf2[pos], self._stamps[pos] = res_sst, res_gyr, stamp
+        self._pos = pos + 1 if pos + 1 < w else 0
+        n = self._n = self._n + 1
+        self._sum1 += res_sst - old1                        # old values are 0.0 while filling
+        self._sum2 += res_gyr - old2
+        if n % _RESUM_EVERY == 0:                           # bound the running sums' rounding
+            self._sum1, self._sum2 = math.fsum(self._buf1), math.fsum(self._buf2)
         if n < w:
             return None
         if n == w:                                          # Alg. 1 lines 12-13
-            self._mu1, self._mu2 = self._x1.mean(), self._x2.mean()
-        d1 = self._x1.total / w - self._mu1
-        d2 = self._x2.total / w - self._mu2
+            self._mu1, self._mu2 = self._sum1 / w, self._sum2 / w
+        d1 = self._sum1 / w - self._mu1
+        d2 = self._sum2 / w - self._mu2
         d = math.sqrt(d1 * d1 + d2 * d2)                    # eq. (8), line 20
-        self._d.push(d)
         self.distance = d
-        if n < w + self.sigma_window:
+        m = self.sigma_window
+        dpos = self._dpos
+        dold = self._dbuf[dpos]
+        self._dbuf[dpos] = d
+        self._dpos = dpos + 1 if dpos + 1 < m else 0
+        if self._dcount < m:
+            self._dcount += 1
+        self._dsum += d - dold
+        self._dsq += d * d - dold * dold
+        if n % _RESUM_EVERY == 0:
+            self._dsum = math.fsum(self._dbuf)
+            self._dsq = math.fsum(v * v for v in self._dbuf)
+        if n < w + m - 1:
             return None
-        sigma = self._d.std()                               # line 22
+        mean_d = self._dsum / m
+        var = self._dsq / m - mean_d * mean_d
+        sigma = math.sqrt(var) if var > 0.0 else 0.0        # line 22
         self.sigma = sigma
-        if not self.ready:
-            if n >= 2 * w + self.sigma_window:
-                self._learn_nominal(d, sigma, old1, old2, True)
-            return None
-        lim1 = self.margin * self._ref_max.max()            # line 24, see module doc
+        if not self._ready:
+            self._ready = self.ready
+            if not self._ready:
+                if n >= 2 * w + m:
+                    self._learn_nominal(d, sigma, old1, old2, True)
+                return None
+        ref_max = self._ref_max.max()
+        lim1 = self.margin * ref_max                        # line 24, see module doc
         lim2 = self.exit_margin * (self._ref.mean() if self.exit_limit == 'mean'
-                                   else self._ref_max.max())
+                                   else ref_max)
         self.sigma_lim1, self.sigma_lim2 = lim1, lim2
         spread = math.sqrt(self._d_var)
         quiet = d <= self._d_mean + 3.0 * spread
@@ -241,7 +264,10 @@ class VsadcAxis:
                 new = DRIFT if sigma > lim1 else BIAS
         else:
             new = HEALTHY                                   # line 36
-        transition = self._settle(new, d, sigma, stamp, old_stamp)
+        if new == state and self._run == 0:
+            transition = None
+        else:
+            transition = self._settle(new, d, sigma, stamp, old_stamp)
         if transition is not None:
             self._new_regime()
         elif self._run == 0:
@@ -363,9 +389,13 @@ class VsadcDetector:
         if not math.isfinite(time) or time <= self._last_time:
             self.out_of_order += 1
             return []
-        g = [float(v) for v in gyro]
-        r = [float(v) for v in ref]
-        if not all(math.isfinite(v) for v in g + r) or len(g) != 3 or len(r) != 3:
+        if len(gyro) != 3 or len(ref) != 3:
+            self.bad_gyro += 1
+            return []
+        g, r = gyro, ref
+        isfinite = math.isfinite
+        if not (isfinite(g[0]) and isfinite(g[1]) and isfinite(g[2]) and isfinite(r[0])
+                and isfinite(r[1]) and isfinite(r[2])):
             self.bad_gyro += 1
             return []
         self._last_time = time
