@@ -129,35 +129,41 @@ def _summary(values) -> dict:
 
 def timing_pass(path: pathlib.Path, manifest: dict, items: list[dict],
                 repeats: int = 3) -> dict:
-    """Return per-stage times over all windows, each the minimum of ``repeats`` runs.
+    """Return per-stage wall and CPU times over all windows, each the minimum of repeats.
 
-    The machine is shared: a single run measures the other processes as much as this code,
-    so each window is run ``repeats`` times and its fastest run per stage is kept (the
-    load average before and after is recorded beside).
+    The machine is shared: a wall-clock run measures the other processes as much as this
+    code. Each window is run ``repeats`` times; per stage we keep the fastest wall time
+    and the smallest CPU time of this thread (``time.thread_time``: the time the stage
+    actually ran, which is what an otherwise idle computer would take). The load average
+    before and after is recorded beside.
     """
     from rwa_monitor.core.fss.pipeline import load_model
     model = load_model()
-    per_stage: dict[str, list[float]] = {k: [] for k in (
-        'changepoints', 'least_squares', 'assignment', 'classification', 'total')}
+    stages = ('changepoints', 'least_squares', 'assignment', 'classification', 'total')
+    wall: dict[str, list[float]] = {k: [] for k in stages}
+    cpu: dict[str, list[float]] = {k: [] for k in stages}
     load_before = os.getloadavg()
     for entry, item in zip(manifest['windows'], items):
         speed, friction = fss.load_window(path, entry)
-        best: dict[str, float] = {}
+        best_wall: dict[str, float] = {}
+        best_cpu: dict[str, float] = {}
         for _ in range(repeats):
             ext = extract(speed, friction)
-            t0 = time.perf_counter()
+            t0, c0 = time.perf_counter(), time.thread_time()
             model.predict(item['features'])
-            run = dict(ext.timings, classification=time.perf_counter() - t0)
-            run['total'] = sum(run.values())
-            for k, v in run.items():
-                best[k] = min(best.get(k, np.inf), v)
-        for k, v in best.items():
-            per_stage[k].append(v)
-    out = {k: _summary(v) for k, v in per_stage.items()}
-    out['repeats'] = repeats
-    out['load_average_before'] = list(load_before)
-    out['load_average_after'] = list(os.getloadavg())
-    return out
+            run_wall = dict(ext.timings, classification=time.perf_counter() - t0)
+            run_cpu = dict(ext.cpu_timings, classification=time.thread_time() - c0)
+            for run, best in ((run_wall, best_wall), (run_cpu, best_cpu)):
+                run['total'] = sum(run.values())
+                for k, v in run.items():
+                    best[k] = min(best.get(k, np.inf), v)
+        for k in stages:
+            wall[k].append(best_wall[k])
+            cpu[k].append(best_cpu[k])
+    return {'wall': {k: _summary(v) for k, v in wall.items()},
+            'cpu': {k: _summary(v) for k, v in cpu.items()}, 'repeats': repeats,
+            'load_average_before': list(load_before),
+            'load_average_after': list(os.getloadavg())}
 
 
 def bins_sweep(items: list[dict], splits: int, bins=(5, 10, 20, 40)) -> list[dict]:
@@ -277,12 +283,12 @@ def goals(results: dict) -> dict:
     m = results['classification']['matrix']
     worst = min(m[a][a]['mean'] for a in ANOMALIES)
     nominal = results['classification']['nominal_any_flag']['mean']
-    t = results['timing_s']
-    # Timing goals use the per-window minimum of 3 runs (timing_pass).
+    t = results['timing_s']['cpu']
+    # Timing goals: the thread's CPU time per stage, minimum of 3 runs (timing_pass).
     return {'detection_min_over_anomalies': {'value': worst, 'goal': 0.97,
                                              'met': worst >= 0.97},
             'nominal_flagged': {'value': nominal, 'goal': 0.03, 'met': nominal <= 0.03},
-            'changepoint_median_s': {'value': t['changepoints']['median'], 'goal': 0.05,
+            'changepoint_cpu_median_s': {'value': t['changepoints']['median'], 'goal': 0.05,
                                      'met': t['changepoints']['median'] <= 0.05},
-            'assignment_max_s': {'value': t['assignment']['max'], 'goal': 0.1,
+            'assignment_cpu_max_s': {'value': t['assignment']['max'], 'goal': 0.1,
                                  'met': t['assignment']['max'] <= 0.1}}
