@@ -46,12 +46,13 @@ def test_bias_step_then_recovery_by_hand():
     # the first sample above the quiet level. d is flat from 109 on, so the sigma window
     # holds only flat values from 118: bias at 118. Step removed at 200: d falls 0.4 a
     # sample, the first falling distance (200) lifts sigma above the bias's own limit:
-    # drift; d < 1 once 8 samples are back (207): healthy.
+    # drift; d < 0.75 (recovery_fraction x threshold) once 9 samples are back (208; 0.8 at
+    # 207): healthy.
     feats = _features(260)
     feats[100:200, 1] += 4.0
     got = _run(VsadcAxis(**SMALL), feats)
     assert got == [(102, HEALTHY, DRIFT, 100), (118, DRIFT, BIAS, 108),
-                   (200, BIAS, DRIFT, 190), (207, DRIFT, HEALTHY, 207)]
+                   (200, BIAS, DRIFT, 190), (208, DRIFT, HEALTHY, 208)]
 
 
 def test_hold_delays_every_change_by_hold_minus_one_samples():
@@ -123,7 +124,8 @@ def test_paper_literal_settings_are_accepted():
 @pytest.mark.parametrize('name,value', [
     ('window', 1), ('sigma_window', 1), ('distance_threshold', 0.0), ('margin', 0.0),
     ('exit_limit', 'median'), ('exit_margin', -1.0), ('hold', 0), ('nominal_tracking', -1),
-    ('freeze_fraction', 1.5), ('reference_window', 0), ('adaptive', 'yes')])
+    ('freeze_fraction', 1.5), ('reference_window', 0), ('adaptive', 'yes'),
+    ('recovery_fraction', 0.0)])
 def test_bad_parameters_name_themselves(name, value):
     with pytest.raises(ValueError, match=name):
         VsadcAxis(**{name: value})

@@ -36,7 +36,8 @@ TRAIN_FRACTION = 0.7
 #: Algorithm 1 read literally: one window everywhere, limits from the last SW sigmas,
 #: hysteresis on the mean, no margins.
 PAPER_LITERAL = {'sigma_window': 0, 'reference_window': 0, 'margin': 1.0,
-                 'exit_limit': 'mean', 'exit_margin': 1.0}
+                 'exit_limit': 'mean', 'exit_margin': 1.0, 'adaptive': False,
+                 'recovery_fraction': 1.0}
 
 # The paper's Tables 3-6 (fast, medium, slow). Two cells garbled by the extraction are
 # read through IDR = FAR + MAR: RBF MAR fast 2.5 ("25"), kNN-2 FAR slow 7.93 ("193").

@@ -20,13 +20,15 @@ pseudo-code leaves open is argued in docs/vsadc.md; in short:
 - start-up: label 0 until the nominal batch, one independent evolving window, one
   window of distances and ``reference_window`` reference sigmas exist;
 - a new label is adopted after ``hold`` consecutive samples agree (1 = Alg. 1 as is);
+- a fault ends when ``d`` falls below ``recovery_fraction`` times the threshold (1 = the
+  paper), so that a distance hovering at the threshold does not flicker;
 - beyond the paper, ``nominal_tracking`` > 0 keeps moving the nominal centre with the
   samples that leave the evolving window (a running mean over that many samples), only
   while the axis is healthy and ``d`` is below ``freeze_fraction`` times the threshold,
   so a drift freezes the nominal before it is detected.
 
 The paper-literal reading is ``sigma_window=window, reference_window=window, margin=1,
-exit_limit='mean', exit_margin=1, adaptive=False``.
+exit_limit='mean', exit_margin=1, adaptive=False, recovery_fraction=1``.
 """
 
 from __future__ import annotations
@@ -129,7 +131,8 @@ class VsadcAxis:
                  sigma_window: int | None = None, reference_window: int | None = 1200,
                  margin: float = 1.5, exit_limit: str = 'max', exit_margin: float = 1.25,
                  hold: int = 1, nominal_tracking: int = 0,
-                 freeze_fraction: float = 0.5, adaptive: bool = True) -> None:
+                 freeze_fraction: float = 0.5, adaptive: bool = True,
+                 recovery_fraction: float = 0.75) -> None:
         self.window = check_int('window', window, 2, 100_000)
         self.sigma_window = check_int(
             'sigma_window', self.window if sigma_window is None else sigma_window, 2, 100_000)
@@ -144,6 +147,8 @@ class VsadcAxis:
         self.hold = check_int('hold', hold, 1, 100_000)
         self.nominal_tracking = check_int('nominal_tracking', nominal_tracking, 0)
         self.freeze_fraction = check_real('freeze_fraction', freeze_fraction, 0.0, 1.0)
+        self.recovery_fraction = check_real('recovery_fraction', recovery_fraction, 0.0, 1.0,
+                                            low_open=True)
         if not isinstance(adaptive, bool):
             raise ValueError(f'adaptive must be true or false, got {adaptive!r}')
         self.adaptive = adaptive
@@ -254,7 +259,10 @@ class VsadcAxis:
             self._quiet_stamp = stamp       # first sample above the quiet level: the onset
         state = self._state
         regime = self.adaptive and self._regime.count >= self.reference_window  # adapted
-        if d > self.distance_threshold:                     # line 26
+        limit = self.distance_threshold                     # line 26, with hysteresis:
+        if state != HEALTHY:                                # a fault ends below a lower
+            limit *= self.recovery_fraction                 # distance (no flicker)
+        if d > limit:
             if state == DRIFT:                              # lines 30-33
                 new = DRIFT if sigma > lim2 else BIAS
             else:                                           # lines 28-29, 32-33

@@ -47,7 +47,8 @@ HEALTH_LEVEL = {0: OK, 1: ERROR, 2: WARN}
 
 DETECTOR_PARAMETERS = ('window', 'sigma_window', 'distance_threshold', 'reference_window',
                        'margin', 'exit_limit', 'exit_margin', 'hold', 'nominal_tracking',
-                       'freeze_fraction', 'adaptive', 'max_gap', 'norm_tolerance', 'axes')
+                       'freeze_fraction', 'adaptive', 'recovery_fraction', 'max_gap',
+                       'norm_tolerance', 'axes')
 PARAMETERS = (
     ParamSpec('window', DEFAULTS['window'], 'SW: samples of the nominal batch and of the '
               'evolving window (vsadc paper, Algorithm 1).', low=2, high=100_000),
@@ -71,6 +72,9 @@ PARAMETERS = (
               'distance exceeds this fraction of distance_threshold.', low=0.0, high=1.0),
     ParamSpec('adaptive', DEFAULTS['adaptive'], 'Enter drift from a lasting bias above the '
               'sigmas of that bias (self-adaptive limit).'),
+    ParamSpec('recovery_fraction', DEFAULTS['recovery_fraction'], 'A fault ends when the '
+              'distance falls below this fraction of distance_threshold.', low=0.0, high=1.0,
+              low_open=True),
     ParamSpec('max_gap', DEFAULTS['max_gap'], 'Seconds between star-tracker samples above '
               'which the star-tracker rate restarts.', low=0.0, low_open=True),
     ParamSpec('norm_tolerance', DEFAULTS['norm_tolerance'], 'Quaternions whose norm is '

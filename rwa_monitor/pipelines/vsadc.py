@@ -22,6 +22,7 @@ DEFAULTS: dict[str, Any] = {
     'window': 200, 'sigma_window': 200, 'distance_threshold': 1.5e-5,
     'reference_window': 1200, 'margin': 1.5, 'exit_limit': 'max', 'exit_margin': 1.25,
     'hold': 1, 'nominal_tracking': 0, 'freeze_fraction': 0.5, 'adaptive': True,
+    'recovery_fraction': 0.75,
     'max_gap': 1.0,
     'norm_tolerance': 0.1, 'reference_rate': [0.0, 0.0, 0.0], 'axes': 'x,y,z',
 }
@@ -46,7 +47,8 @@ def detector_kwargs(config: Mapping[str, Any]) -> dict[str, Any]:
         reference_window=check_int('reference_window', p['reference_window'], 0) or None,
         margin=p['margin'], exit_limit=p['exit_limit'], exit_margin=p['exit_margin'],
         hold=p['hold'], nominal_tracking=p['nominal_tracking'],
-        freeze_fraction=p['freeze_fraction'], adaptive=p['adaptive'], max_gap=p['max_gap'],
+        freeze_fraction=p['freeze_fraction'], adaptive=p['adaptive'],
+        recovery_fraction=p['recovery_fraction'], max_gap=p['max_gap'],
         norm_tolerance=p['norm_tolerance'], axes=axes)
 
 
