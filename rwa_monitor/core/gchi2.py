@@ -251,11 +251,21 @@ def gchi2_logsf_general(x: float, weights: Sequence[float],
         d2 += 4.0 * k * wi * wi / (one * one) + 4.0 * mi * wi * wi / one ** 3
     scale = 1.0 / math.sqrt(d2)
 
-    def amplitude(u: float) -> complex:
-        s = complex(c, u * scale)
-        return cmath.exp(_cgf(s, terms) - c * shift - cmath.log(s) - k0)
+    # The integrand is Re[A(t) exp(-i t x)] with A slowly varying (for S = 1, A excludes
+    # the factor exp(-i t x) of M; in the studentised case with many degrees of freedom
+    # the phase of the S term is close to -t x and is given back): cosine and sine
+    # Fourier integrals (QAWF). Few degrees of freedom: the integrand decays fast and a
+    # plain adaptive quadrature is used.
+    fourier = dof is None or dof >= 100.0
+    back = 0.0 if dof is None or not fourier else x
 
-    if dof is None:
+    def amplitude(u: float) -> complex:
+        t = u * scale
+        s = complex(c, t)
+        return cmath.exp(_cgf(s, terms) - c * shift + complex(0.0, t * back)
+                         - cmath.log(s) - k0)
+
+    if fourier:
         freq = x * scale
         cos_part, err_c = integrate.quad(lambda u: amplitude(u).real, 0.0, np.inf,
                                          weight='cos', wvar=freq, epsabs=1e-11, limlst=200)

@@ -265,18 +265,27 @@ class LLRDetector:
             self._counters['non_increasing_time'] += 1
             return []
         if self._default:
-            h1 = -1.0 if w > 0.0 else (1.0 if w < 0.0 else 0.0)
-            h2 = -w
-        else:
-            h = self._row(t, w, aux)
-            if h is None:
-                return []
-            if self._p != 2:
-                self._last_t = t
-                return self._update_general(row, t, f, h)
-            h1 = float(h[0])
-            h2 = float(h[1])
+            self._last_t = t
+            return self._add2(row, t, f, -1.0 if w > 0.0 else (1.0 if w < 0.0 else 0.0), -w)
+        h = self._row(t, w, aux)
+        if h is None:
+            return []
         self._last_t = t
+        return self.ingest_row(row, t, f, h)
+
+    def ingest_row(self, row: int, t: float, f: float, h) -> list[AnomalyEvent]:
+        """Process an accepted sample whose regressor row ``h`` is already computed.
+
+        For :func:`detect_batch` with a model other than eq. (1): the rows are computed
+        once for the whole file and validated there (finite, increasing time).
+        """
+        if self._p == 2:
+            return self._add2(row, t, f, float(h[0]), float(h[1]))
+        return self._update_general(row, t, f, np.asarray(h, dtype=float))
+
+    def _add2(self, row: int, t: float, f: float, h1: float, h2: float
+              ) -> list[AnomalyEvent]:
+        """Add one accepted sample to the sums and ring, then test (p = 2)."""
         ta = h1 * h1
         tb = h1 * h2
         tc = h2 * h2
@@ -487,7 +496,9 @@ class LLRDetector:
             if tr > 0.0 and y > 0.0 and not p * y / (2.0 * tr) < self._ystar:
                 lam = np.sort(np.clip(linalg.eigh(pi_w, pi_t, eigvals_only=True), 0.0, 1.0))
                 # Dropping all but the two largest terms gives a lower bound of the tail.
-                if not log_sf2(y, lam[-1], lam[-2]) > self._logpmin + 1e-9:
+                two = (log_sf2(y, lam[-1], lam[-2]) if dof is None
+                       else log_sf2_t(y, lam[-1], lam[-2], dof))
+                if not two > self._logpmin + 1e-9 * (1.0 - self._logpmin):
                     logp = gchi2_logsf_general(y, lam, None, dof)[0]
                     if logp < self._logpmin:
                         self._record(k, logp)

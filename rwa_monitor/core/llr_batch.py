@@ -296,16 +296,50 @@ def detect_batch_with_counters(time, speed, friction, *, component: str = 'rw1',
 def _streamed(t: np.ndarray, w: np.ndarray, f: np.ndarray,
               aux: Mapping[str, np.ndarray] | None, component: str,
               params: Mapping[str, Any]) -> tuple[list[AnomalyEvent], dict[str, int]]:
-    """Feed the streaming detector row by row (models other than eq. (1))."""
+    """Run the streaming detector on precomputed rows (models other than eq. (1)).
+
+    The regressor matrix is computed once for the whole file; acceptance follows the
+    streaming order of checks (finite time, speed and friction; increasing time; finite
+    row). If the model cannot be evaluated on the file (missing auxiliary channel), the
+    rows are fed one by one through ``update`` instead.
+    """
     det = LLRDetector(component, **params)
+    aux_arrays = None
+    if aux:
+        aux_arrays = {}
+        for name, values in aux.items():
+            col = np.asarray(values, dtype=float)
+            if col.shape != t.shape:
+                raise ValueError(f'aux[{name!r}] must have the length of time ({t.size}), '
+                                 f'got {col.size}')
+            aux_arrays[name] = col
+    try:
+        with np.errstate(all='ignore'):
+            h = det.parameters['regressors'].matrix(w, t, aux_arrays)
+    except (KeyError, TypeError):
+        return _row_by_row(det, t, w, f, aux_arrays)
+    finite = np.isfinite(t) & np.isfinite(w) & np.isfinite(f)
+    ok_row = np.all(np.isfinite(h), axis=1)
+    accepted, _ = accepted_mask(np.where(ok_row, t, np.nan), w, f)
+    prev = np.empty_like(t)
+    prev[:1] = -np.inf
+    np.maximum.accumulate(np.where(accepted, t, -np.inf)[:-1], out=prev[1:])
+    late = finite & ~(t > prev)
+    events: list[AnomalyEvent] = []
+    for i in np.flatnonzero(accepted):
+        events.extend(det.ingest_row(int(i), float(t[i]), float(f[i]), h[i]))
+    counters = det.counters
+    counters['non_increasing_time'] += int(np.count_nonzero(late))
+    counters['nonfinite'] += int(np.count_nonzero(~finite | (finite & ~late & ~ok_row)))
+    return events, counters
+
+
+def _row_by_row(det: LLRDetector, t: np.ndarray, w: np.ndarray, f: np.ndarray,
+                aux: Mapping[str, np.ndarray] | None
+                ) -> tuple[list[AnomalyEvent], dict[str, int]]:
     names = list(aux) if aux else []
-    columns = [np.asarray(aux[name], dtype=float) for name in names] if aux else []
-    for col, name in zip(columns, names):
-        if col.shape != t.shape:
-            raise ValueError(f'aux[{name!r}] must have the length of time ({t.size}), '
-                             f'got {col.size}')
     events: list[AnomalyEvent] = []
     for i in range(t.size):
-        row_aux = {name: float(col[i]) for name, col in zip(names, columns)} if aux else None
+        row_aux = {name: float(aux[name][i]) for name in names} if aux else None
         events.extend(det.update(float(t[i]), float(w[i]), float(f[i]), row_aux))
     return events, det.counters
