@@ -370,3 +370,24 @@ def test_batch_input_shapes_are_checked():
     with pytest.raises(ValueError, match='1-D'):
         detect_batch(np.zeros((2, 2)), np.zeros(4), np.zeros(4))
     assert detect_batch([], [], []) == []
+
+
+def test_custom_model_with_auxiliary_channel_batch_equals_streaming():
+    def viscous_gain(speed, time, aux):
+        return -np.asarray(speed) * aux['gain']
+
+    reg = RegressorSet(('dry', 'viscous'), (dry_column, viscous_gain))
+    t, w, f = friction_signal(6000, 17, ((3000, 0.6, 0.0),))
+    gain = np.ones_like(t)
+    gain[::131] = np.nan
+    t[500] = t[499]
+    params = {'window': 300, 'regressors': reg}
+    det = LLRDetector('rw1', **params)
+    streamed = []
+    for i in range(t.size):
+        streamed.extend(det.update(t[i], w[i], f[i], {'gain': gain[i]}))
+    batch, counters = detect_batch_with_counters(t, w, f, aux={'gain': gain}, **params)
+    assert streamed == batch and counters == det.counters
+    assert counters['nonfinite'] == np.count_nonzero(np.isnan(gain))
+    assert counters['non_increasing_time'] == 1
+    assert [e.kind for e in batch if e.revision == 0] == ['dry']
