@@ -267,10 +267,15 @@ def summary(result: DemoResult) -> str:
 
 def run(args: argparse.Namespace) -> int:
     """Run the demo; return 0."""
-    path = pathlib.Path(args.file) if args.file else demo_file(
-        pathlib.Path(args.cache_dir) if args.cache_dir else cache_dir(), args.hours,
-        args.seed)
-    print(f'telemetry: {path}')
+    if args.file:
+        path = pathlib.Path(args.file)
+    else:
+        directory = pathlib.Path(args.cache_dir) if args.cache_dir else cache_dir()
+        if not (directory / f'demo-4rw-{args.hours:g}h-seed{args.seed}.csv').is_file():
+            print(f'first run: generating the seeded demo telemetry in {directory} ...',
+                  flush=True)
+        path = demo_file(directory, args.hours, args.seed)
+    print(f'telemetry: {path}', flush=True)
     result = run_demo(path, domain_id=args.domain_id, executor=args.executor,
                       live=not args.quiet)
     print(summary(result))
