@@ -251,3 +251,12 @@ def test_svms_learn_separable_anomalies(tmp_path):
     assert again.decision(test[0]) == pytest.approx(model.decision(test[0]))
     with pytest.raises(ValueError, match='fss2'):
         WindowClassifier.fit(feats[:4], statuses[:4])
+
+
+def test_an_fss_without_jumps_is_not_judged():
+    rng = np.random.default_rng(11)
+    statuses = ['nominal', 'dry', 'viscous', 'fss1', 'fss2'] * 10
+    model = WindowClassifier.fit([_features(rng, s) for s in statuses], statuses, bins=10)
+    quiet = {'base_dry': 1.0, 'viscous': 1.0, 'levels': [[0.0], [0.0]]}
+    assert model.predict(quiet) == {'dry': False, 'viscous': False, 'fss1': False,
+                                    'fss2': False}

@@ -134,8 +134,16 @@ class WindowClassifier:
         return out
 
     def predict(self, features: dict) -> dict[str, bool]:
-        """Return one boolean per anomaly."""
-        return {name: value > 0.0 for name, value in self.decision(features).items()}
+        """Return one boolean per anomaly.
+
+        An FSS with no assigned jump in the window (a single level) has no level
+        distribution to judge: its anomaly is reported False (docs/fss.md).
+        """
+        out = {name: value > 0.0 for name, value in self.decision(features).items()}
+        for name in out:
+            if name.startswith('fss') and len(features['levels'][int(name[3:]) - 1]) < 2:
+                out[name] = False
+        return out
 
     def save(self, path: str | os.PathLike) -> None:
         """Write the model as JSON."""
