@@ -143,3 +143,14 @@ def test_detect_command_writes_vsadc_events(tmp_path, medium):
     assert gyro and gyro[0]['component'] == 'gyro_x' and gyro[0]['kind'] == 'drift'
     assert 590.0 <= gyro[0]['time'] <= gyro[0]['declared_time']
     assert doc['summary']['pipelines']['vsadc']['components']['counters']['rows'] == len(medium)
+
+
+def test_two_healthy_hours_give_no_event():
+    # Healthy distances at window 200: about 3e-6 rad/s (star-tracker rate noise
+    # sqrt(2) 5 arcsec / 50 s = 6.9e-7 and gyro 1e-5 / sqrt(200) = 7.1e-7 per component,
+    # plus the nominal estimate's own error, the slew and dropouts); the threshold
+    # 1.5e-5 is about 15 of those standard deviations away. Default settings, three axes.
+    tele = simulate_aocs(7200.0, seed=31)
+    events, det = _events(tele, config=pipeline.DEFAULTS)
+    assert events == []
+    assert all(ch.ready for ch in det.channels)
