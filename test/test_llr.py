@@ -391,3 +391,16 @@ def test_custom_model_with_auxiliary_channel_batch_equals_streaming():
     assert counters['nonfinite'] == np.count_nonzero(np.isnan(gain))
     assert counters['non_increasing_time'] == 1
     assert [e.kind for e in batch if e.revision == 0] == ['dry']
+
+
+def test_inline_default_path_equals_the_generic_two_column_path():
+    # Same columns as eq. (1) but not the default object: update() takes the generic
+    # p = 2 path (_add2) instead of the inline copy; both must agree exactly.
+    reg = RegressorSet(('dry', 'viscous'), (lambda w, t, a: dry_column(w),
+                                            lambda w, t, a: viscous_column(w)))
+    t, w, f, params = _scenario('three_changes_nan')
+    default = stream(LLRDetector('rw1', **params), t, w, f)
+    det = LLRDetector('rw1', regressors=reg, **params)
+    generic = stream(det, t, w, f)
+    assert default == generic and len(default) >= 3
+    assert math.isfinite(det.last_statistic) and det.last_statistic >= 0.0

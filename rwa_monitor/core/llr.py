@@ -177,8 +177,24 @@ class LLRDetector:
 
     @property
     def last_statistic(self) -> float:
-        """Latest ``LLR_k / sigma^2`` (nan before the first test)."""
-        return self._last_y
+        """Latest ``LLR_k / sigma^2`` (nan before the first test or if it was skipped)."""
+        k = self._latest_k()
+        if k < 0:
+            return math.nan
+        if self._p != 2:
+            return self._last_y
+        from rwa_monitor.core.llr_batch import _stats
+        cfg = {'min_excitation': self._min_exc,
+               'noise_std': None if self._noise_var is None else math.sqrt(self._noise_var)}
+        pp = np.asarray(self._rpref[k % self._L], dtype=float)[:, None]
+        pt = np.asarray(self._pref, dtype=float)[:, None]
+        ok, _, y, *_ = _stats(pp, pt, np.array([float(k - self._c)]), cfg)
+        return float(y[0]) if ok[0] else math.nan
+
+    def _latest_k(self) -> int:
+        """Return the candidate k of the latest test of the current reference, or -1."""
+        k = self._pos - self._w
+        return k if k > self._c + self._w else -1
 
     @property
     def reference_start_index(self) -> int:
@@ -186,8 +202,9 @@ class LLRDetector:
         return self._c_row
 
     def _reference_row(self) -> tuple[Any, int]:
-        if self._last_k > self._c:
-            return self._rpref[self._last_k % self._L], self._last_k - self._c
+        k = self._latest_k()
+        if k > self._c:
+            return self._rpref[k % self._L], k - self._c
         return self._pref, self._pos - self._c
 
     @property
@@ -236,7 +253,6 @@ class LLRDetector:
         self._kmin = 0
         self._ystar = 0.0
         self._last_y = math.nan
-        self._last_k = -1
         self._counters = {name: 0 for name in COUNTER_NAMES}
         self._checks: list[int] = []
         self._cat: dict[str, Any] | None = None
@@ -265,8 +281,35 @@ class LLRDetector:
             self._counters['non_increasing_time'] += 1
             return []
         if self._default:
+            # Inline copy of _add2 for the paper's model (one method call less per sample;
+            # test_llr checks that both give the same events).
             self._last_t = t
-            return self._add2(row, t, f, -1.0 if w > 0.0 else (1.0 if w < 0.0 else 0.0), -w)
+            h1 = -1.0 if w > 0.0 else (1.0 if w < 0.0 else 0.0)
+            h2 = -w
+            ta = h1 * h1
+            tb = h1 * h2
+            tc = h2 * h2
+            tu = h1 * f
+            tv = h2 * f
+            te = f * f
+            P = self._pref
+            P = (P[0] + ta, P[1] + tb, P[2] + tc, P[3] + tu, P[4] + tv, P[5] + te)
+            self._pref = P
+            j = self._pos
+            self._pos = j + 1
+            if j == 0:
+                self._c_row = row
+            L = self._L
+            s = j % L
+            self._rterm[s] = (ta, tb, tc, tu, tv, te)
+            self._rrow[s] = row
+            self._rtime[s] = t
+            self._rpref[(j + 1) % L] = P
+            events = self._revise(j) if j == self._checkpoint else []
+            k = j - self._w + 1
+            if k > self._c + self._w and self._test2(k, P):
+                events.extend(self._declare(j))
+            return events
         h = self._row(t, w, aux)
         if h is None:
             return []
@@ -319,7 +362,6 @@ class LLRDetector:
         Pi_W x_P)`` (the window's residual against the reference fit: no difference of
         two nearly equal estimates). Skips (counted) when ``Pi_P`` is ill-conditioned.
         """
-        self._last_k = k
         A, B, C, U, V, E = self._rpref[k % self._L]
         At, Bt, Ct, Ut, Vt, _ = P
         ac = A * C
@@ -347,7 +389,6 @@ class LLRDetector:
             d2 = (At * g2 - Bt * g1) / dett
             y = (A * d1 * d1 + 2.0 * B * d1 * d2 + C * d2 * d2) / s2
             tr = (Ct * Aw - 2.0 * Bt * Bw + At * Cw) / dett
-            self._last_y = y
             if tr > 0.0 and y > 0.0 and not y / tr < self._ystar:
                 dm = (Aw * Cw - Bw * Bw) / dett
                 logp = candidate_log_p2(y, tr, dm, self._logpmin, dof)
@@ -355,7 +396,7 @@ class LLRDetector:
                     self._record(k, logp)
         else:
             self._counters['ill_conditioned'] += 1
-        return k > self._kmin + self._kverif and self._logpmin <= self._logr
+        return self._logpmin <= self._logr and k > self._kmin + self._kverif
 
     def _row(self, t: float, w: float, aux: Mapping[str, float] | None):
         if aux is not None:
@@ -428,7 +469,6 @@ class LLRDetector:
         self._logpmin = 0.0
         self._kmin = c
         self._ystar = 0.0
-        self._last_k = -1
 
     def _revise(self, j: int) -> list[AnomalyEvent]:
         """Re-check the kind of the last declared change at a checkpoint."""
@@ -472,7 +512,7 @@ class LLRDetector:
     def _test_general(self, k: int, P: np.ndarray) -> bool:
         """:meth:`_test2` for p > 2 (numpy; weights from the generalised eigenproblem)."""
         p = self._p
-        self._last_k = k
+        self._last_y = math.nan
         pi_p, q_p, e = llr_stats.unpack(self._rpref[k % self._L], p)
         pi_t, q_t, _ = llr_stats.unpack(P, p)
         if bool(llr_stats.well_conditioned(pi_p, self._min_exc)):
@@ -504,7 +544,7 @@ class LLRDetector:
                         self._record(k, logp)
         else:
             self._counters['ill_conditioned'] += 1
-        return k > self._kmin + self._kverif and self._logpmin <= self._logr
+        return self._logpmin <= self._logr and k > self._kmin + self._kverif
 
 
 def candidate_log_p2(y: float, tr: float, dm: float, log_p_min: float,
