@@ -73,7 +73,7 @@ def _quantiles(values: list[float]) -> dict[str, float]:
 def _llr_stats(outcomes: list[dict[str, Any]]) -> dict[str, Any]:
     hits = [o for o in outcomes if o['detected']]
     return {'runs': len(outcomes), 'detection_rate': len(hits) / len(outcomes),
-            'miss_rate': 1 - len(hits) / len(outcomes),
+            'miss_rate': (len(outcomes) - len(hits)) / len(outcomes),
             'no_declaration_rate': sum(not o['declared_any'] for o in outcomes) / len(outcomes),
             'false_per_run': sum(o['false'] for o in outcomes) / len(outcomes),
             'error': _quantiles([o['error'] for o in hits]),

@@ -140,7 +140,9 @@ def markdown(r: dict[str, Any]) -> str:
         header += [f'sim r={rate}', f'Lemma 1 r={rate}']
     out.append(table(header, rows))
     out += ['', 'Paper: simulated detection above the Lemma-1 curve, increasing with the '
-            'change and with r (graph only, no numbers).', '',
+            'change and with r (graph only, no numbers). Lemma 1 is evaluated at the true '
+            'change step; the simulation counts any declaration within +-500 samples, so '
+            'for tiny changes it includes false alarms in that span (~1000 r).', '',
             f'### Fig. 5: run length to a false alarm (w_k = 20 + 5cos(k/5000), no anomaly, '
             f'up to {r["fig5"]["max_runs_per_cell"]} runs x {r["fig5"]["samples_per_run"]} '
             'samples per cell, about 100/r samples)', '']
