@@ -102,7 +102,8 @@ def prepare(tele: Telemetry, wheel: str | None = None, inertia: float | None = N
         keep, friction, noise = _from_speed(tele, wheel, inertia, torque_constant,
                                             half_width, counts, notes)
         derived, stride = True, 2 * half_width + 1
-    aux = _aux_channels(tele, keep, notes, counts)
+    others = tuple(f'{w}_' for w in tele.wheels if w != wheel)
+    aux = _aux_channels(tele, keep, notes, counts, others)
     return IdentData(wheel=wheel, time=time[keep], speed=speed[keep], friction=friction,
                      noise_std=noise, aux=aux, derived=derived, stride=stride,
                      counts=counts, notes=notes)
@@ -181,11 +182,19 @@ def _from_speed(tele: Telemetry, wheel: str, inertia: float | None,
 
 
 def _aux_channels(tele: Telemetry, keep: np.ndarray, notes: list[str],
-                  counts: dict[str, int]) -> dict[str, np.ndarray]:
-    """Return the aux channels on the kept rows, gaps filled by interpolation in time."""
+                  counts: dict[str, int], others: tuple[str, ...] = ()
+                  ) -> dict[str, np.ndarray]:
+    """Return the aux channels on the kept rows, gaps filled by interpolation in time.
+
+    Channels of other wheels (``<other id>_...``) are left out: another wheel's
+    temperature or current does not act on this wheel's bearing, and through the attitude
+    loop it correlates with this wheel's speed history, which would pass for an effect.
+    """
     out = {}
     time = np.asarray(tele.time, dtype=float)[keep]
     for name, values in tele.aux.items():
+        if others and name.startswith(others):
+            continue
         values = np.asarray(values, dtype=float)[keep]
         ok = np.isfinite(values)
         if np.sum(ok) < 0.5 * len(values):

@@ -27,8 +27,9 @@ Effects (names are the DESIGN.md vocabulary):
   mode, a cage frequency). Columns cos(2 pi f (t - t0)), sin(...); f from the largest
   peaks of the residual's spectrum.
 - ``smooth_speed``: the generic fallback, a piecewise-linear function of speed (hat
-  functions on quantile knots). Not physics: it proves that friction depends on speed in
-  a way model (1) misses when no named effect fits.
+  functions on 12 quantile knots plus knots at 0 and at +- the 0.5, 1, 2, 4 and 8 %
+  quantiles of |w|, where low-speed effects live). Not physics: it proves that friction
+  depends on speed in a way model (1) misses when no named effect fits.
 """
 
 from __future__ import annotations
@@ -47,6 +48,7 @@ DRAG_EXPONENTS = (2.0, 1.25, 1.5, 1.75, 2.5, 3.0, 4.0)
 STRIBECK_QUANTILES = (0.01, 0.02, 0.05, 0.1, 0.2, 0.35)
 PERIODIC_PEAKS = 3
 SMOOTH_KNOTS = 12
+NEAR_ZERO = (0.005, 0.01, 0.02, 0.04, 0.08)  # quantiles of abs(w): extra knots
 
 
 def _get(aux, name):
@@ -154,8 +156,13 @@ def named_candidates(data: IdentData, residual: np.ndarray) -> list[Candidate]:
 
 
 def fallback_candidate(data: IdentData) -> Candidate:
-    """Return the smooth-function-of-speed fallback (knots at speed quantiles)."""
-    knots = np.unique(np.quantile(data.speed, np.linspace(0.0, 1.0, SMOOTH_KNOTS)))
+    """Return the smooth-function-of-speed fallback (knots at speed quantiles, near 0)."""
+    w = data.speed
+    aw = np.abs(w[w != 0])
+    near = [float(np.quantile(aw, q)) for q in NEAR_ZERO] if len(aw) else []
+    knots = np.unique(np.concatenate([np.quantile(w, np.linspace(0.0, 1.0, SMOOTH_KNOTS)),
+                                      near, [-x for x in near], [0.0]]))
+    knots = knots[(knots >= w.min()) & (knots <= w.max())]
     return Candidate(FALLBACK, 'smooth_speed', [{'knots_rad_s': [float(k) for k in knots]}])
 
 

@@ -14,7 +14,10 @@ LR = n_train log(RSS_0 / RSS_1), chi^2 with k degrees of freedom (k = rank added
    the training rows makes the held-out fit worse, not better).
 
 Among the significant named candidates the one with the smallest held-out RSS is added.
-When none is significant the smooth-speed fallback is tried with the same test. The loop
+The smooth-speed fallback is scored with the same test at every step; it is added when
+no named effect is significant, or when its held-out gain is more than FALLBACK_FACTOR
+(2) times the best named effect's (the named effect then explains less than half of what
+friction does as a function of speed: its shape is wrong). The loop
 stops when the residual passes the structure and whiteness tests (residuals.py), when
 nothing significant is left, or after ``max_effects`` effects. Every step is recorded.
 """
@@ -32,6 +35,8 @@ from rwa_monitor.core.identify.data import IdentData
 from rwa_monitor.core.identify.fitting import Design, Fit, held_out_mask
 from rwa_monitor.core.identify.residuals import diagnose
 from rwa_monitor.core.params import check_int, check_real
+
+FALLBACK_FACTOR = 2.0
 
 
 @dataclass
@@ -196,18 +201,24 @@ def _step(design: Design, current: Fit, data: IdentData, residual: np.ndarray,
                                      'significant': s['significant'], **s['evidence']})
         scored.append(s)
     winners = [s for s in scored if s['significant']]
-    if not winners and fallback.name not in tried:
-        s = _score(design, current, fallback, data)
-        if s is not None:
-            s['significant'] = _significant(s['evidence'], level, alpha_held)
-            record['candidates'].append({'name': fallback.name, 'params': s['params'],
-                                         'significant': s['significant'], **s['evidence']})
-            if s['significant']:
-                winners = [s]
-    if not winners:
+    generic = None
+    if fallback.name not in tried:
+        generic = _score(design, current, fallback, data)
+        if generic is not None:
+            generic['significant'] = _significant(generic['evidence'], level, alpha_held)
+            record['candidates'].append({'name': fallback.name, 'params': generic['params'],
+                                         'significant': generic['significant'],
+                                         **generic['evidence']})
+            if not generic['significant']:
+                generic = None
+    chosen = min(winners, key=lambda s: s['fit'].rss_held_out) if winners else generic
+    if (chosen is not None and generic is not None and chosen is not generic
+            and generic['evidence']['lr_held_out']
+            > FALLBACK_FACTOR * chosen['evidence']['lr_held_out']):
+        chosen = generic
+    if chosen is None:
         record['added'] = None
         return None, record
-    chosen = min(winners, key=lambda s: s['fit'].rss_held_out)
     record['added'] = chosen['candidate'].name
     return chosen, record
 
