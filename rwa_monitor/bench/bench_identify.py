@@ -15,6 +15,7 @@ from __future__ import annotations
 import json
 import pathlib
 import statistics
+import subprocess
 import tempfile
 import time
 from typing import Any
@@ -28,6 +29,7 @@ from rwa_monitor.core.identify.data import prepare
 from rwa_monitor.core.identify.model import regressors_from_config, snippet
 from rwa_monitor.core.identify.select import identify
 from rwa_monitor.sim.undeclared import EFFECTS, simulate_undeclared
+from rwa_monitor.telemetry import read_telemetry
 
 MEASURED = pathlib.Path(__file__).resolve().parents[2].parent / 'shared' / 'data' / \
     'measured' / 'drum-coastdown'
@@ -50,6 +52,7 @@ def _measured(out_dir: pathlib.Path, quick: bool) -> dict[str, Any]:
             sel = identify(prepare(read_coastdown(MEASURED, run, body), body, inertia[body]))
             rep = write_outputs(sel, pathlib.Path(tmp) / f'{run}-{body}', f'{run} {body}')
             params = {e['name']: e['parameters'] for e in rep['effects']}
+            weights = snippet(sel)['friction_model']['weights']
             rows.append({'run': run.replace('__Separate__', ' ').replace('.csv', ''),
                          'body': body, 'samples': len(sel.data),
                          'noise_floor': rep['noise_floor'],
@@ -58,6 +61,7 @@ def _measured(out_dir: pathlib.Path, quick: bool) -> dict[str, Any]:
                          'effects': [e['name'] for e in rep['effects']],
                          'dry': rep['baseline']['parameters']['dry'],
                          'viscous': rep['baseline']['parameters']['viscous'],
+                         'refined_dry': weights['dry'], 'refined_viscous': weights['viscous'],
                          'drag_exponent': params.get('drag', {}).get('exponent'),
                          'drag_coefficient': params.get('drag', {}).get('coefficient')})
     return {'inertia_kg_m2': inertia, 'runs': rows}
@@ -74,7 +78,8 @@ def _pooled(rows: list[dict]) -> dict[str, Any]:
         for name in r['effects']:
             counts[name] = counts.get(name, 0) + 1
     out['effect_counts'] = counts
-    for key in ('drag_exponent', 'drag_coefficient', 'dry', 'viscous'):
+    for key in ('drag_exponent', 'drag_coefficient', 'dry', 'viscous', 'refined_dry',
+                'refined_viscous'):
         values = [r[key] for r in rows if r[key] is not None and r['body'] == 'drum']
         if len(values) >= 2:
             q1, med, q3 = np.percentile(values, [25, 50, 75])
@@ -98,6 +103,31 @@ def _undeclared(quick: bool) -> list[dict]:
                          'ratio_after': sel.final_fit.rmse_held_out / data.noise_floor,
                          'jumps': len(sel.segments.starts) - 1})
     return rows
+
+
+def _basilisk(quick: bool) -> dict[str, Any]:
+    """Identify every wheel of a Basilisk bus file (its Stribeck friction undeclared)."""
+    exe = pathlib.Path(__file__).resolve().parents[2] / '.venv-bsk' / 'bin' / 'rwa-monitor'
+    if not exe.exists():
+        return {'skipped': 'the optional Basilisk environment (.venv-bsk) is absent'}
+    out: dict[str, Any] = {'seconds_simulated': 900.0 if quick else 3600.0, 'wheels': {}}
+    with tempfile.TemporaryDirectory() as tmp:
+        path = pathlib.Path(tmp) / 'bus.csv'
+        subprocess.run([str(exe), 'simulate', 'basilisk', '--seconds',
+                        str(out['seconds_simulated']), '--seed', '1', '-o', str(path)],
+                       check=True, capture_output=True)
+        tele = read_telemetry(path)
+        for wheel in tele.wheels:
+            data = prepare(tele, wheel)
+            sel = identify(data)
+            out['wheels'][wheel] = {
+                'noise_floor': data.noise_floor,
+                'held_out_before': sel.baseline_fit.rmse_held_out,
+                'held_out_after': sel.final_fit.rmse_held_out,
+                'effects': [e.name for e in sel.effects],
+                'jumps': len(sel.segments.starts) - 1,
+                'low_speed_share': float(np.mean(np.abs(data.speed) < 2.0))}
+    return out
 
 
 def _speed(quick: bool) -> dict[str, Any]:
@@ -200,6 +230,7 @@ def run(out_dir: pathlib.Path, quick: bool) -> dict:
         results['measured']['pooled'] = _pooled(results['measured']['runs'])
         _plot_measured(out_dir, results['measured']['runs'])
     results['undeclared'] = _undeclared(quick)
+    results['basilisk'] = _basilisk(quick)
     results['speed'] = _speed(quick)
     results['demo'] = _demo(out_dir, quick)
     write_outputs(identify(prepare(simulate_undeclared('drag', seed=1))),
@@ -262,6 +293,20 @@ def _markdown(res: dict) -> str:
                      'false jumps'], rows), '',
               'Goal: found, held-out RMSE after <= 1.10 x noise floor; the no-effect file '
               'keeps the baseline.', '']
+    b = res['basilisk']
+    if 'wheels' in b:
+        lines += ['### Basilisk bus telemetry (its Stribeck friction is not declared)', '',
+                  f'`rwa-monitor simulate basilisk --seconds {b["seconds_simulated"]:g} '
+                  f'--seed 1` (4 Hz; Coulomb 5e-4, breakaway 8e-4 N m at a Stribeck speed '
+                  f'of 1 rad/s, a friction band of +-0.1 rad/s around zero, noise 5e-5 N m).',
+                  '', table(['wheel', 'noise floor', 'held-out before', 'held-out after',
+                             'after / floor', 'share abs(w) < 2 rad/s', 'effects (in order)'],
+                            [[k, v['noise_floor'], v['held_out_before'], v['held_out_after'],
+                              v['held_out_after'] / v['noise_floor'], v['low_speed_share'],
+                              ', '.join(v['effects']) or '(none)']
+                             for k, v in b['wheels'].items()]), '']
+    else:
+        lines += [f'Basilisk telemetry: {b["skipped"]}.', '']
     sp = res['speed']
     lines += ['### Speed', '',
               table(['file', 'samples', 'identify time (s)', 'goal', 'effects'],
