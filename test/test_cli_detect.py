@@ -66,6 +66,8 @@ def test_detect_round_trip_finds_the_step(simulated):
     assert llr['events'] == len(events)
     assert llr['components']['rw2']['samples'] == 12000
     assert llr['components']['rw1']['events'] == 0
+    assert llr['components']['rw2']['changes'] == 1
+    assert sum(llr['components']['rw2']['by_kind'].values()) == 1
     assert llr['components']['rw1']['rejected']['nonfinite'] == 0
 
 

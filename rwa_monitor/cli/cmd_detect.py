@@ -91,16 +91,27 @@ def detect(tele: Telemetry, config: dict[str, Any]) -> tuple[list[AnomalyEvent],
                 found, components = module.run(tele, params), {}
         except ValueError as err:
             raise ConfigError(f'{name}: {err}') from None
-        for event in found:
-            entry = components.setdefault(event.component, {})
-            kinds = entry.setdefault('by_kind', {})
-            kinds[event.kind] = kinds.get(event.kind, 0) + 1
+        _count_kinds(found, components)
         summary['pipelines'][name] = {'events': len(found), 'components': components,
                                       'runtime_s': time.perf_counter() - start}
         events.extend(found)
     events.sort(key=lambda e: (e.time, e.component, e.revision))
     summary['events'] = len(events)
     return events, summary
+
+
+def _count_kinds(events: list[AnomalyEvent], components: dict[str, Any]) -> None:
+    """Add per component the number of changes and their kinds (latest revision)."""
+    latest: dict[tuple[str, int], AnomalyEvent] = {}
+    for e in events:
+        key = (e.component, e.index)
+        if key not in latest or e.revision >= latest[key].revision:
+            latest[key] = e
+    for (component, _), e in sorted(latest.items()):
+        entry = components.setdefault(component, {})
+        entry['changes'] = entry.get('changes', 0) + 1
+        kinds = entry.setdefault('by_kind', {})
+        kinds[e.kind] = kinds.get(e.kind, 0) + 1
 
 
 def run(args: argparse.Namespace) -> int:
@@ -119,14 +130,15 @@ def run(args: argparse.Namespace) -> int:
 
 def print_table(events: list[AnomalyEvent], summary: dict[str, Any], out) -> None:
     """Print the events one per line, then the per-pipeline summary."""
-    header = (f'{"time_s":>10} {"component":<9} {"detector":<8} {"kind":<8} '
+    header = (f'{"time_s":>10} {"component":<9} {"detector":<8} {"kind":<8} {"rev":>3} '
               f'{"p_value":>9} {"declared_s":>10}  details')
     print(header, file=out)
     for e in events:
         details = ' '.join(f'{k}={v:.3g}' if isinstance(v, float) else f'{k}={v}'
                            for k, v in e.details.items())
         print(f'{e.time:>10.1f} {e.component:<9} {e.detector:<8} {e.kind:<8} '
-              f'{e.p_value:>9.2g} {e.declared_time:>10.1f}  {details}', file=out)
+              f'{e.revision:>3} {e.p_value:>9.2g} {e.declared_time:>10.1f}  {details}',
+              file=out)
     if not events:
         print('(no anomaly declared)', file=out)
     print(f'{summary["samples"]} samples', file=out)
