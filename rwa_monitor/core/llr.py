@@ -103,13 +103,14 @@ def declaration(prefix: np.ndarray, first: int, c: int, k_min: int, n: int,
     return tau, kind, dx, z, s2
 
 
-def checkpoints(start: int, n: int, count: int) -> list[int]:
+def checkpoints(start: int, n: int, count: int, window: int) -> list[int]:
     """Return the positions where the kind of a change declared at ``n`` is re-checked.
 
-    The after-segment ``[start, n]`` holds ``L0 = n - start + 1`` samples at declaration;
-    the kind is re-evaluated when it holds ``2 L0, 4 L0, ...`` (``count`` checks).
+    The after-segment ``[start, n]`` holds ``n - start + 1`` samples at declaration; with
+    ``L0 = max(n - start + 1, window)`` the kind is re-evaluated when it holds ``2 L0, 4 L0,
+    ...`` samples (``count`` checks).
     """
-    length = n - start + 1
+    length = max(n - start + 1, window)
     return [start + length * 2 ** i - 1 for i in range(1, count + 1)]
 
 
@@ -440,7 +441,7 @@ class LLRDetector:
         self._cat = dict(before=prefix[tau - first].copy(), n_before=tau - c, kind=kind,
                          revision=0, rows=rows, time=times[0], log_p=self._logpmin,
                          start=tau)
-        self._checks = checkpoints(tau, n, self._cfg['category_revisions'])
+        self._checks = checkpoints(tau, n, self._cfg['category_revisions'], self._w)
         self._checkpoint = self._checks.pop(0) if self._checks else -1
         self._restart(tau, n)
         events = [event]

@@ -287,7 +287,7 @@ def detect_batch_with_counters(time, speed, friction, *, component: str = 'rw1',
                                  0))
         cat = dict(before=prefix[tau - first].copy(), n_before=tau - c, kind=kind,
                    revision=0, rows=ev_rows, time=times[0], log_p=state['logp'], start=tau)
-        checks = checkpoints(tau, n, cfg['category_revisions'])
+        checks = checkpoints(tau, n, cfg['category_revisions'], win)
         c = tau
     counters['ill_conditioned'] = state['ill']
     return events, counters
