@@ -32,6 +32,7 @@ ARL_ALARMS = 100
 MEMORY_BUDGET_S = 240.0
 CATEGORIES = {'dry': (0.5, 0.0), 'viscous': (0.0, 0.025), 'both': (0.5, 0.025)}
 CATEGORY_SCALES = (1, 2)
+REALISTIC_CONFIG = {'window': 400, 'k_verif': 0, 'false_alarm_rate': 1e-4, 'noise_std': 0.0}
 GOALS = {'streaming_per_s': 300_000, 'batch_per_s': 3_000_000, 'miss_rate_0.3': 0.02,
          'categorisation': 0.95}
 
@@ -40,10 +41,12 @@ def _settings(quick: bool) -> dict[str, Any]:
     if quick:
         return {'fig3_runs': 20, 'fig4_runs': 10, 'cat_runs': 10, 'arl_runs': 2,
                 'arl_n': 20_000, 'peer_fa_runs': 2, 'peer_fa_n': 5000,
-                'throughput_n': (88_000,), 'memory_n': (10**5, 3 * 10**5)}
+                'throughput_n': (88_000,), 'memory_n': (10**5, 3 * 10**5),
+                'realistic_runs': 2}
     return {'fig3_runs': 200, 'fig4_runs': 100, 'cat_runs': 100, 'arl_runs': 30,
             'arl_n': 100_000, 'peer_fa_runs': 5, 'peer_fa_n': 100_000,
-            'throughput_n': (88_000, 1_000_000), 'memory_n': (10**5, 10**6, 10**7)}
+            'throughput_n': (88_000, 1_000_000), 'memory_n': (10**5, 10**6, 10**7),
+            'realistic_runs': 20}
 
 
 def _params(window: int = 500, rate: float = 1e-5) -> dict[str, Any]:
@@ -240,18 +243,45 @@ def throughput(s: dict) -> dict[str, Any]:
         batch_s = time.perf_counter() - start
         detector = LLRDetector('rw1', **params)
         t_list, w_list, f_list = tele.time.tolist(), w.speed.tolist(), w.friction.tolist()
-        stream_events = 0
+        stream_events = []
         start = time.perf_counter()
         for t_k, w_k, f_k in zip(t_list, w_list, f_list):
-            stream_events += len(detector.update(t_k, w_k, f_k))
+            found = detector.update(t_k, w_k, f_k)
+            if found:
+                stream_events.extend(found)
         stream_s = time.perf_counter() - start
+        same = [e.to_json() for e in batch_events] == [e.to_json() for e in stream_events]
         row = {'n': n, 'batch_s': batch_s, 'batch_per_s': n / batch_s,
                'stream_s': stream_s, 'stream_per_s': n / stream_s,
-               'batch_events': len(batch_events), 'stream_events': stream_events}
+               'batch_events': len(batch_events), 'stream_events': len(stream_events),
+               'same_events': same}
         print(f'  throughput n={n}: stream {row["stream_per_s"]:.0f}/s, '
               f'batch {row["batch_per_s"]:.0f}/s', flush=True)
         out.append(row)
     return {'params': params, 'rows': out}
+
+
+def realistic(pool, s: dict) -> dict[str, Any]:
+    """Run the file pipeline on 3-hour, 4-wheel SI files with one change per wheel 2-4."""
+    tasks = [{'seed': 50_000 + seed, 'hours': 3.0, 'config': REALISTIC_CONFIG}
+             for seed in range(s['realistic_runs'])]
+    res = _pool_map(pool, llr_cases.realistic_task, tasks, 'realistic')
+    out: dict[str, Any] = {'runs': len(res), 'config': REALISTIC_CONFIG,
+                           'anomalies': llr_cases.REALISTIC_ANOMALIES}
+    for kind in ('dry', 'viscous', 'both'):
+        rows = [c for r in res for c in r['changes'] if c['kind'] == kind]
+        hits = [c for c in rows if c['detected']]
+        out[kind] = {'changes': len(rows), 'detected': len(hits),
+                     'error_s': _quantiles([c['error_s'] for c in hits]),
+                     'delay_s': _quantiles([c['delay_s'] for c in hits]),
+                     'kind_accuracy': (sum(c['final_kind'] == kind for c in hits) / len(hits)
+                                       if hits else math.nan)}
+    hours = sum(r['wheel_hours'] for r in res)
+    false = sum(r['false'] for r in res)
+    out['false'] = false
+    out['wheel_hours'] = hours
+    out['false_per_wheel_hour'] = false / hours
+    return out
 
 
 def memory(s: dict, stream_per_s: float) -> dict[str, Any]:
@@ -289,6 +319,7 @@ def run(out_dir: pathlib.Path, quick: bool) -> dict[str, Any]:
         results['fig5'] = fig5(pool, s)
         results['categorisation'] = categorisation(pool, s)
         results['peer_false_alarms'] = peer_false_alarms(pool, s)
+        results['realistic'] = realistic(pool, s)
     print('memory (fresh processes)', flush=True)
     results['memory'] = memory(s, min(row['stream_per_s']
                                       for row in results['throughput']['rows']))

@@ -8,10 +8,14 @@ from typing import Any, Sequence
 import numpy as np
 
 from rwa_monitor.bench.llr_peer import detect_offline
-from rwa_monitor.sim.friction import Anomaly, REGIMES, simulate_friction
+from rwa_monitor.sim.friction import (Anomaly, parse_anomaly, REGIMES, simulate_friction,
+                                      simulate_friction_with_truth)
 from rwa_monitor.sim.profiles import paper_profile
 
 WHEEL = 'rw1'
+# One change on each of rw2..rw4 (rw1 stays nominal), SI sizes of docs/simulators.md.
+REALISTIC_ANOMALIES = ('rw2:dry:3600:+2e-4', 'rw3:viscous:7200:+3e-7',
+                       'rw4:both:5000:+1e-4:+2e-7')
 
 
 def series(profile: str, n: int, seed: int, delta_dry: float = 0.0,
@@ -123,3 +127,33 @@ def memory_probe(n: int, params: dict[str, Any], chunk: int = 100_000) -> dict[s
     return {'n': n, 'rss_after_first_chunk_kb': baseline, 'rss_final_kb': _status_kb('VmRSS'),
             'peak_rss_kb': _status_kb('VmHWM'), 'seconds': time.perf_counter() - start,
             'events': events}
+
+
+def realistic_task(task: dict[str, Any]) -> dict[str, Any]:
+    """Run the llr file pipeline on one seeded 4-wheel realistic SI file; match changes.
+
+    A change is detected by a first declaration on its wheel whose estimated change is
+    within one window of it; other first declarations are false alarms.
+    """
+    from rwa_monitor.pipelines import llr as pipeline
+    tele, changes = simulate_friction_with_truth(
+        n_wheels=4, duration_s=3600.0 * task['hours'], rate_hz=10.0, profile='realistic',
+        anomalies=[parse_anomaly(a) for a in REALISTIC_ANOMALIES], seed=task['seed'])
+    events = pipeline.run(tele, task['config'])
+    tol = task['config']['window']
+    first = [e for e in events if e.revision == 0]
+    used, rows = set(), []
+    for c in changes:
+        hits = [e for e in first if e.component == c.wheel and abs(e.index - c.index) <= tol]
+        row: dict[str, Any] = {'kind': c.kind, 'detected': bool(hits)}
+        if hits:
+            hit = min(hits, key=lambda e: e.declared_index)
+            used.add(id(hit))
+            about = [e for e in events
+                     if e.component == c.wheel and abs(e.index - c.index) <= tol]
+            final = max(about, key=lambda e: (e.declared_index, e.revision))
+            row.update(error_s=hit.time - c.time_s, delay_s=hit.declared_time - c.time_s,
+                       final_kind=final.kind)
+        rows.append(row)
+    return {'changes': rows, 'false': sum(id(e) not in used for e in first),
+            'wheel_hours': task['hours'] * len(tele.wheels)}
