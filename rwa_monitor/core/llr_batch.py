@@ -112,14 +112,33 @@ def _stats(pp: np.ndarray, pt: np.ndarray, n_p: np.ndarray, cfg: Mapping[str, An
     return ok, testable, y, tr, dm, upper, lower
 
 
+class _Terms:
+    """Per-sample terms ``(h1 h1, h1 h2, h2 h2, h1 f, h2 f, f f)``, built per block."""
+
+    def __init__(self, h1: np.ndarray, h2: np.ndarray, f: np.ndarray):
+        self.h1, self.h2, self.f = h1, h2, f
+
+    def block(self, first: int, last: int) -> np.ndarray:
+        """Return the terms of positions ``first..last - 1``, shape ``(6, n)``."""
+        h1, h2, f = self.h1[first:last], self.h2[first:last], self.f[first:last]
+        out = np.empty((6, h1.size))
+        np.multiply(h1, h1, out=out[0])
+        np.multiply(h1, h2, out=out[1])
+        np.multiply(h2, h2, out=out[2])
+        np.multiply(h1, f, out=out[3])
+        np.multiply(h2, f, out=out[4])
+        np.multiply(f, f, out=out[5])
+        return out
+
+
 class _Reference:
     """Prefix sums (shape ``(6, m)``) of one reference segment, extended chunk by chunk."""
 
-    def __init__(self, terms: np.ndarray, c: int):
+    def __init__(self, terms: _Terms, c: int):
         self.terms = terms
         self.c = c
         self.pos0 = c
-        self.rows = np.zeros((terms.shape[0], 1))
+        self.rows = np.zeros((6, 1))
 
     @property
     def end(self) -> int:
@@ -130,7 +149,7 @@ class _Reference:
         """Hold prefixes up to position ``last`` (sequential continuation of the sums)."""
         if last <= self.end:
             return
-        block = np.concatenate([self.rows[:, -1:], self.terms[:, self.end:last]], axis=1)
+        block = np.concatenate([self.rows[:, -1:], self.terms.block(self.end, last)], axis=1)
         self.rows = np.concatenate([self.rows, np.cumsum(block, axis=1)[:, 1:]], axis=1)
 
     def trim(self, first: int) -> None:
@@ -220,15 +239,7 @@ def detect_batch_with_counters(time, speed, friction, *, component: str = 'rw1',
     else:
         rows = np.flatnonzero(accepted)
         tv, wv, fv = t[rows], w[rows], f[rows]
-    h1 = -np.sign(wv)
-    h2 = -wv
-    terms = np.empty((6, rows.size))
-    np.multiply(h1, h1, out=terms[0])
-    np.multiply(h1, h2, out=terms[1])
-    np.multiply(h2, h2, out=terms[2])
-    np.multiply(h1, fv, out=terms[3])
-    np.multiply(h2, fv, out=terms[4])
-    np.multiply(fv, fv, out=terms[5])
+    terms = _Terms(-np.sign(wv), -wv, fv)
     n_total = rows.size
     win, kverif = cfg['window'], cfg['k_verif']
     logr = math.log(cfg['false_alarm_rate'])
