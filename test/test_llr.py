@@ -106,6 +106,8 @@ def _scenario(name: str):
         rng = np.random.default_rng(5)
         f[rng.random(f.size) < 0.01] = np.nan
         w[rng.random(w.size) < 0.002] = np.inf
+        f[777] = 1e200
+        w[1234] = -1e7
         return t, w, f, {}
     if name == 'zero_crossings_rest':
         t, w, f = friction_signal(16_000, 2, ((7000, 0.6, 0.0),), profile='crossing')
@@ -278,6 +280,18 @@ def test_nonfinite_samples_are_dropped_counted_and_harmless():
     np.testing.assert_equal(_state(dirty), _state(clean))
 
 
+def test_absurd_values_are_dropped_and_counted():
+    det = LLRDetector('rw1', window=10, max_abs_friction=10.0)
+    det.update(0.0, 5.0, -1.0)
+    before = _state(det)
+    assert det.update(1.0, 5.0, 1e300) == [] and det.update(2.0, -2e6, -1.0) == []
+    assert det.update(3.0, 5.0, -10.0) == []
+    np.testing.assert_equal(_state(det), before)
+    assert det.counters['out_of_range'] == 3
+    det.update(4.0, 5.0, -1.0)
+    assert det.counters['non_increasing_time'] == 0
+
+
 def test_non_increasing_time_is_dropped_and_counted():
     det = LLRDetector('rw1', window=10)
     det.update(1.0, 5.0, -1.0)
@@ -349,6 +363,8 @@ def test_memory_is_bounded_by_the_windows():
     ({'category_level': 0.0}, 'category_level'),
     ({'category_revisions': -1}, 'category_revisions'),
     ({'refine_change': 'yes'}, 'refine_change'), ({'regressors': 'cv'}, 'regressors'),
+    ({'max_abs_speed': 0.0}, 'max_abs_speed'),
+    ({'max_abs_friction': math.inf}, 'max_abs_friction'),
 ])
 def test_invalid_parameters_raise_naming_the_parameter(params, name):
     with pytest.raises(ValueError, match=name):

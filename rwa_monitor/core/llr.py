@@ -23,7 +23,8 @@ from rwa_monitor.core.gchi2 import (gchi2_logsf_general, log_lower_bound, log_sf
                                     log_sf2_t, skip_threshold)
 from rwa_monitor.core.params import check_int, check_real
 
-COUNTER_NAMES = ('nonfinite', 'non_increasing_time', 'missing_aux', 'ill_conditioned')
+COUNTER_NAMES = ('nonfinite', 'out_of_range', 'non_increasing_time', 'missing_aux',
+                 'ill_conditioned')
 _LN10 = math.log(10.0)
 
 
@@ -32,7 +33,8 @@ def validate_parameters(component: str = 'rw1', *, window: int = 500,
                         noise_std: float | None = None,
                         regressors: RegressorSet | None = None,
                         min_excitation: float = 1e-6, category_level: float = 1e-3,
-                        category_revisions: int = 3, refine_change: bool = True
+                        category_revisions: int = 3, refine_change: bool = True,
+                        max_abs_speed: float = 1e6, max_abs_friction: float = 1e6
                         ) -> dict[str, Any]:
     """Check the detector's keyword parameters; return them normalised (ValueError if bad)."""
     if not isinstance(component, str) or not component:
@@ -56,10 +58,14 @@ def validate_parameters(component: str = 'rw1', *, window: int = 500,
     category_revisions = check_int('category_revisions', category_revisions, 0, 60)
     if not isinstance(refine_change, bool):
         raise ValueError(f'refine_change must be True or False, got {refine_change!r}')
+    max_abs_speed = check_real('max_abs_speed', max_abs_speed, 0.0, math.inf, True, True)
+    max_abs_friction = check_real('max_abs_friction', max_abs_friction, 0.0, math.inf, True,
+                                  True)
     return dict(component=component, window=window, k_verif=k_verif,
                 false_alarm_rate=r, noise_std=noise_std, regressors=regressors,
                 min_excitation=min_excitation, category_level=category_level,
-                category_revisions=category_revisions, refine_change=refine_change)
+                category_revisions=category_revisions, refine_change=refine_change,
+                max_abs_speed=max_abs_speed, max_abs_friction=max_abs_friction)
 
 
 def make_event(component: str, kind: str, rows: tuple[int, int, int],
@@ -125,7 +131,9 @@ class LLRDetector:
     skipped and counted), ``category_level`` (level of each dry / viscous test, default
     1e-3; None: r),
     ``category_revisions`` (re-checks of the kind as data arrive), ``refine_change`` (ML
-    refinement of the change time). Positions count accepted samples; events carry the row
+    refinement of the change time), ``max_abs_speed`` / ``max_abs_friction`` (samples at or
+    beyond are dropped and counted as ``out_of_range``: absurd values never reach the sums;
+    default 1e6 rad/s and 1e6 N m). Positions count accepted samples; events carry the row
     index (number of ``update`` calls before that sample since construction or reset).
     """
 
@@ -143,6 +151,8 @@ class LLRDetector:
         self._min_exc = cfg['min_excitation']
         self._z_thr = llr_stats.z_threshold(cfg['category_level'])
         self._L = 2 * self._w + self._kverif + 2
+        self._max_w = cfg['max_abs_speed']
+        self._max_f = cfg['max_abs_friction']
         self.reset()
 
     # -- read-only state --------------------------------------------------------------
@@ -277,6 +287,9 @@ class LLRDetector:
             return []
         if (t - t) + (w - w) + (f - f) != 0.0:
             self._counters['nonfinite'] += 1
+            return []
+        if not (-self._max_w < w < self._max_w and -self._max_f < f < self._max_f):
+            self._counters['out_of_range'] += 1
             return []
         if not t > self._last_t:
             self._counters['non_increasing_time'] += 1

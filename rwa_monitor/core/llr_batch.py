@@ -45,21 +45,31 @@ def _arrays(time, speed, friction) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return arrays[0], arrays[1], arrays[2]
 
 
-def accepted_mask(t: np.ndarray, w: np.ndarray, f: np.ndarray
+def accepted_mask(t: np.ndarray, w: np.ndarray, f: np.ndarray, max_speed: float,
+                  max_friction: float, row_ok: np.ndarray | None = None
                   ) -> tuple[np.ndarray, dict[str, int]]:
     """Return the samples the streaming detector accepts, and the rejection counts.
 
-    A sample is accepted if time, speed and friction are finite and its time is after the
-    last accepted time, which equals the running maximum of the finite times before it.
+    Checks in the streaming order: finite time, speed and friction (else ``nonfinite``);
+    speed and friction within the bounds (else ``out_of_range``); time after the last
+    accepted time (else ``non_increasing_time``); finite regressor row ``row_ok`` (else
+    ``nonfinite``). The last accepted time before a sample equals the running maximum of
+    the times of the earlier samples that pass all checks but the time check.
     """
     finite = np.isfinite(t) & np.isfinite(w) & np.isfinite(f)
-    tf = np.where(finite, t, -np.inf)
+    with np.errstate(invalid='ignore'):
+        inrange = finite & (np.abs(w) < max_speed) & (np.abs(f) < max_friction)
+    cand = inrange if row_ok is None else inrange & row_ok
+    tf = np.where(cand, t, -np.inf)
     prev = np.empty_like(tf)
     prev[:1] = -np.inf
     np.maximum.accumulate(tf[:-1], out=prev[1:])
-    accepted = finite & (t > prev)
-    counts = {'nonfinite': int(np.count_nonzero(~finite)),
-              'non_increasing_time': int(np.count_nonzero(finite & ~accepted))}
+    timely = t > prev
+    accepted = cand & timely
+    bad_row = 0 if row_ok is None else int(np.count_nonzero(inrange & timely & ~row_ok))
+    counts = {'nonfinite': int(np.count_nonzero(~finite)) + bad_row,
+              'out_of_range': int(np.count_nonzero(finite & ~inrange)),
+              'non_increasing_time': int(np.count_nonzero(inrange & ~timely))}
     return accepted, counts
 
 
@@ -232,7 +242,7 @@ def detect_batch_with_counters(time, speed, friction, *, component: str = 'rw1',
     t, w, f = _arrays(time, speed, friction)
     if not cfg['regressors'].is_coulomb_viscous:
         return _streamed(t, w, f, aux, component, params)
-    accepted, counts = accepted_mask(t, w, f)
+    accepted, counts = accepted_mask(t, w, f, cfg['max_abs_speed'], cfg['max_abs_friction'])
     if accepted.all():
         rows = np.arange(t.size)
         tv, wv, fv = t, w, f
@@ -246,9 +256,7 @@ def detect_batch_with_counters(time, speed, friction, *, component: str = 'rw1',
     z_thr = llr_stats.z_threshold(cfg['category_level'])
     keep = 2 * win + kverif + 2
     events: list[AnomalyEvent] = []
-    counters = {'nonfinite': counts['nonfinite'],
-                'non_increasing_time': counts['non_increasing_time'],
-                'missing_aux': 0, 'ill_conditioned': 0}
+    counters = dict(counts, missing_aux=0, ill_conditioned=0)
     state = {'ill': 0}
     cat: dict[str, Any] | None = None
     checks: list[int] = []
@@ -329,19 +337,15 @@ def _streamed(t: np.ndarray, w: np.ndarray, f: np.ndarray,
             h = det.parameters['regressors'].matrix(w, t, aux_arrays)
     except (KeyError, TypeError):
         return _row_by_row(det, t, w, f, aux_arrays)
-    finite = np.isfinite(t) & np.isfinite(w) & np.isfinite(f)
-    ok_row = np.all(np.isfinite(h), axis=1)
-    accepted, _ = accepted_mask(np.where(ok_row, t, np.nan), w, f)
-    prev = np.empty_like(t)
-    prev[:1] = -np.inf
-    np.maximum.accumulate(np.where(accepted, t, -np.inf)[:-1], out=prev[1:])
-    late = finite & ~(t > prev)
+    cfg = det.parameters
+    accepted, counts = accepted_mask(t, w, f, cfg['max_abs_speed'], cfg['max_abs_friction'],
+                                     np.all(np.isfinite(h), axis=1))
     events: list[AnomalyEvent] = []
     for i in np.flatnonzero(accepted):
         events.extend(det.ingest_row(int(i), float(t[i]), float(f[i]), h[i]))
     counters = det.counters
-    counters['non_increasing_time'] += int(np.count_nonzero(late))
-    counters['nonfinite'] += int(np.count_nonzero(~finite | (finite & ~late & ~ok_row)))
+    for name, value in counts.items():
+        counters[name] += value
     return events, counters
 
 
