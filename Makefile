@@ -42,16 +42,16 @@ $(BSK_STAMP): requirements.txt requirements-bsk.txt setup.py setup.cfg
 	$(BSK_PY) -m pip install --quiet -r requirements.txt
 	$(BSK_PY) -m pip install --quiet -r requirements-bsk.txt
 	$(BSK_PY) -m pip install --quiet --no-deps -e .
-	touch $(BSK_STAMP)
+	touch $(BSK_VENV)/COLCON_IGNORE $(BSK_STAMP)
 
 test-bsk: $(BSK_STAMP)
 	$(BSK_PY) -m pytest test
 
 demo-bus: $(BSK_STAMP)
 	mkdir -p data/generated
-	$(BSK_VENV)/bin/rwa-monitor simulate basilisk --hours 1 --seed 1 \
-	  --fault friction:rw2:1800:dry=3e-4 --fault gyro:x:2400:drift=1e-6,level=2e-4 \
-	  -o data/generated/bus.csv
+	$(BSK_VENV)/bin/rwa-monitor simulate basilisk --hours 1 --seed 1 --null-speed 40 \
+	  --guidance-scale 0.1 --fault friction:rw2:1800:dry=3e-4 \
+	  --fault gyro:x:2400:drift=1e-6,level=2e-4 -o data/generated/bus.csv
 	$(BSK_VENV)/bin/rwa-monitor detect data/generated/bus.csv
 
 bench-bus: $(BSK_STAMP)

@@ -116,3 +116,9 @@ def test_bus_node_without_the_simulator_is_a_config_error(monkeypatch):
     with RosWorld() as world:
         with pytest.raises(ConfigError, match='optional extra'):
             world.node(basilisk_bus.BasiliskBusNode)
+
+
+def test_cli_guidance_scale_must_be_non_negative(tmp_path, capsys):
+    out = str(tmp_path / 'bus.csv')
+    assert main(['simulate', 'basilisk', '--guidance-scale', '-1', '-o', out]) == 2
+    assert 'ref_amplitude' in capsys.readouterr().err

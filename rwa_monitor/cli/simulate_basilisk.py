@@ -42,6 +42,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help='fault to inject (repeatable; see below)')
     parser.add_argument('--rate', type=float, default=BusConfig.rate_hz, metavar='HZ',
                         help=f'sample rate in Hz (default {BusConfig.rate_hz:g})')
+    parser.add_argument('--null-speed', type=float, metavar='RAD_S',
+                        help='wheel speed bias along the null space (default '
+                             f'{BusConfig.null_speed:g}; 40 keeps the wheels off zero speed)')
+    parser.add_argument('--guidance-scale', type=float, default=1.0, metavar='X',
+                        help='factor on the guidance rate amplitudes (default 1; 0 = '
+                             'inertial hold)')
     parser.add_argument('--friction-noise', type=float, metavar='NM',
                         help='std of the friction telemetry noise (default '
                              f'{BusConfig.friction_noise_std:g} N m)')
@@ -59,6 +65,9 @@ def run(args: argparse.Namespace) -> int:
     options = {'rate_hz': args.rate}
     if args.friction_noise is not None:
         options['friction_noise_std'] = args.friction_noise
+    if args.null_speed is not None:
+        options['null_speed'] = args.null_speed
+    options['ref_amplitude'] = tuple(args.guidance_scale * a for a in BusConfig.ref_amplitude)
     try:
         config = BusConfig(**options).validated()
         if not duration >= 1.0 / config.rate_hz:

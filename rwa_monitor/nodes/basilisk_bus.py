@@ -77,8 +77,9 @@ PARAMETERS = (
     ParamSpec('inject', '', 'Set at run time to inject a fault, e.g. '
               '"friction:rw1:now:dry=2e-4" (TIME_S "now" = current simulation time).',
               validate=_check_inject),
-    ParamSpec('min_subscribers', 0, 'Matched subscriptions on telemetry/wheels to wait for '
-              'before the first step (rate 0 waits for at least 1).', low=0, high=1000),
+    ParamSpec('min_subscribers', 0, 'Matched subscriptions (on the telemetry topic with the '
+              'most) to wait for before the first step (rate 0 waits for at least 1).',
+              low=0, high=1000),
     ParamSpec('burst', 1, 'Samples per executor turn at rate 0.', low=1, high=500),
     ParamSpec('exit_when_done', True, 'Shut the process down after duration_s; in-process '
               'users set false and poll `done`.'),
@@ -158,7 +159,7 @@ class BasiliskBusNode(Node):
             needed = self.params['min_subscribers']
             if self.params['rate'] == 0.0:
                 needed = max(needed, 1)
-            if self._wheels_pub.get_subscription_count() < needed:
+            if self.subscribers() < needed:
                 return
             self._started = True
             self._wall_start = _time.perf_counter()
@@ -171,6 +172,11 @@ class BasiliskBusNode(Node):
             self._publish(self.bus.step())
         if steps:
             self._update_health()
+
+    def subscribers(self) -> int:
+        """Return the most subscriptions matched on any one telemetry topic."""
+        return max(pub.get_subscription_count() for pub in (
+            self._wheels_pub, self._gyro_pub, self._star_pub, self._ref_pub))
 
     def _due_steps(self) -> int:
         now = self._steady.now().nanoseconds * 1e-9
