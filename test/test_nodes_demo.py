@@ -96,3 +96,35 @@ def test_dashboard_command_runs_for_a_duration(capsys):
         lease.release()
     assert code == 0
     assert 'rwa_monitor dashboard' in capsys.readouterr().out
+
+
+def test_demo_command_on_a_given_file_with_the_fallback_executor(tmp_path, capsys):
+    from rwa_monitor.cli.main import main
+    from rwa_monitor.sim.friction import simulate_friction
+    from rwa_monitor.telemetry import write_telemetry
+    path = tmp_path / 'small.csv'
+    write_telemetry(path, simulate_friction(wheels=['rw1', 'rw2'], n_samples=600,
+                                            rate_hz=10.0, seed=1))
+    lease = DomainLease()
+    try:
+        code = main(['demo', '--file', str(path), '--quiet', '--executor', 'single',
+                     '--domain-id', str(lease.domain_id)])
+    finally:
+        lease.release()
+    out = capsys.readouterr().out
+    assert code == 0
+    assert 'false alarms (first declarations away from every injected change): 0' in out
+    assert '600 rows' in out and 'single executor' in out
+
+
+def test_events_executor_failure_falls_back(monkeypatch):
+    import rclpy.experimental
+
+    def broken(**kwargs):
+        raise RuntimeError('not here')
+    monkeypatch.setattr(rclpy.experimental, 'EventsExecutor', broken)
+    notes = []
+    with RosWorld() as world:
+        executor, kind = cmd_demo._make_executor('events', world.context, notes)
+        executor.shutdown()
+    assert kind == 'single' and 'SingleThreadedExecutor' in notes[0]

@@ -108,6 +108,7 @@ class DemoResult:
     notes: list[str]
     repeats: list[Any] = dataclasses.field(default_factory=list)
     other_detectors: dict[str, int] = dataclasses.field(default_factory=dict)
+    wheels: int = len(WHEELS)
 
 
 def _make_executor(kind: str, context: Any, notes: list[str]) -> tuple[Any, str]:
@@ -225,7 +226,7 @@ def _evaluate(tele: Any, events: list[Any], wall: float, kind: str, notes: list[
     repeats = [e for e in first if id(e) not in used and id(e) in near]
     false_alarms = [e for e in first if id(e) not in used and id(e) not in near]
     return DemoResult(len(tele), wall, kind, events, pipeline_events, changes, matches,
-                      false_alarms, notes, repeats, others)
+                      false_alarms, notes, repeats, others, len(tele.wheels))
 
 
 def summary(result: DemoResult) -> str:
@@ -254,7 +255,7 @@ def summary(result: DemoResult) -> str:
         [(e.component, e.kind, e.index, e.declared_index) for e in result.pipeline_events]
     lines.append(f'node events identical to `rwa-monitor detect` on the file: '
                  f'{"yes" if same else "NO"} ({len(result.events)} events incl. revisions)')
-    lines.append(f'{result.rows} rows x {len(WHEELS)} wheels in {result.wall_s:.1f} s '
+    lines.append(f'{result.rows} rows x {result.wheels} wheels in {result.wall_s:.1f} s '
                  f'({result.rows / max(result.wall_s, 1e-9):.0f} wheel messages/s, '
                  f'{result.executor} executor)')
     for name, count in sorted(result.other_detectors.items()):

@@ -128,13 +128,17 @@ class TelemetryReplay(Node):
         return [name for name, pub in pubs.items() if pub is not None]
 
     def _period(self) -> float:
-        return 0.0 if self.params['rate'] == 0.0 else _TICK
+        """Return the turn period: 0 (every executor turn) at rate 0 once started."""
+        return 0.0 if self.params['rate'] == 0.0 and self._started else _TICK
+
+    def _restart_timer(self) -> None:
+        self.destroy_timer(self._timer)
+        self._timer = self.create_timer(self._period(), self._tick, clock=self._steady)
 
     def _on_parameter(self, name: str, value: Any) -> None:
         if name == 'rate':
             self._anchor = None
-            self.destroy_timer(self._timer)
-            self._timer = self.create_timer(self._period(), self._tick, clock=self._steady)
+            self._restart_timer()
 
     # ----------------------------------------------------------------------- publishing
     @property
@@ -156,6 +160,7 @@ class TelemetryReplay(Node):
             if not self._ready_to_start():
                 return
             self._started = True
+            self._restart_timer()
         if self._pending and not self._flush_pending():
             return
         if self.params['rate'] == 0.0:
@@ -233,6 +238,7 @@ class TelemetryReplay(Node):
                                    f't={self._time[self._first]:.1f} s')
             return
         self.done = True
+        self.destroy_timer(self._timer)
         self._update_health()
         self.get_logger().info(f'replay done: {self.published} rows published')
         if self.params['exit_when_done']:
