@@ -259,11 +259,18 @@ def gchi2_logsf_general(x: float, weights: Sequence[float],
     fourier = dof is None or dof >= 100.0
     back = 0.0 if dof is None or not fourier else x
 
+    seen: dict[float, complex] = {}
+
     def amplitude(u: float) -> complex:
-        t = u * scale
-        s = complex(c, t)
-        return cmath.exp(_cgf(s, terms) - c * shift + complex(0.0, t * back)
-                         - cmath.log(s) - k0)
+        # The cosine and sine integrals sample the same points: evaluate each once.
+        value = seen.get(u)
+        if value is None:
+            t = u * scale
+            s = complex(c, t)
+            value = cmath.exp(_cgf(s, terms) - c * shift + complex(0.0, t * back)
+                              - cmath.log(s) - k0)
+            seen[u] = value
+        return value
 
     if fourier:
         freq = x * scale
