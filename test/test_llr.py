@@ -420,3 +420,35 @@ def test_inline_default_path_equals_the_generic_two_column_path():
     generic = stream(det, t, w, f)
     assert default == generic and len(default) >= 3
     assert math.isfinite(det.last_statistic) and det.last_statistic >= 0.0
+
+
+def test_bounds_never_change_a_decision():
+    """Exact p_k at every test (no bounds, no skipping) gives the same records/declarations."""
+    from rwa_monitor.core.llr import candidate_log_p2
+    t, w, f = friction_signal(9000, 21, ((2500, 0.5, 0.0), (6000, 0.0, 0.03)))
+    window, kverif, rate = 300, 150, 1e-5
+    events = [e for e in detect_batch(t, w, f, window=window, false_alarm_rate=rate)
+              if e.revision == 0]
+    assert len(events) == 2
+    h1, h2 = -np.sign(w), -w
+    terms = np.array([h1 * h1, h1 * h2, h2 * h2, h1 * f, h2 * f, f * f])
+    c = 0
+    for event in events:
+        pref = np.cumsum(np.concatenate([np.zeros((6, 1)), terms[:, c:]], axis=1), axis=1)
+        ks = np.arange(c + window + 1, t.size - window + 1)
+        ok, testable, y, tr, dm, _, _ = _stats(pref[:, ks - c], pref[:, ks + window - c],
+                                               (ks - c).astype(float),
+                                               {'min_excitation': 1e-6, 'noise_std': None})
+        log_p_min, k_min = 0.0, c
+        for i, k in enumerate(ks):
+            if testable[i]:
+                logp = candidate_log_p2(float(y[i]), float(tr[i]), float(dm[i]), math.inf,
+                                        float(k - c - 2))
+                if logp < log_p_min:
+                    log_p_min, k_min = logp, int(k)
+            if log_p_min <= math.log(rate) and k > k_min + kverif:
+                break
+        assert (event.details[keys.ARGMIN_INDEX], event.declared_index) == (
+            k_min, k_min + kverif + window)
+        assert event.details[keys.LOG10_P_VALUE] == log_p_min / math.log(10.0)
+        c = event.index
