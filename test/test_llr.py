@@ -128,6 +128,12 @@ def _scenario(name: str):
         t, w, f = friction_signal(9000, 5, ((6000, 0.8, 0.0),))
         w[:2500] = 12.0
         return t, w, f, {'false_alarm_rate': 1e-3, 'k_verif': 299}
+    if name == 'catch_up_tests':
+        # k_verif = w - 1: a refined change before k_min leaves complete windows of the
+        # new reference that the streaming path tests at once on restart.
+        t, w, f = friction_signal(12_000, 31, ((3000, 0.6, 0.0), (6000, 0.0, 0.04),
+                                               (9000, -0.6, 0.0)))
+        return t, w, f, {'window': 200, 'k_verif': 199}
     if name == 'scaled_units':
         t, w, f = friction_signal(10_000, 7, ((5000, 0.5, 0.02),))
         return t, w, f * 1e-4, {'window': 250}
@@ -135,7 +141,8 @@ def _scenario(name: str):
 
 
 SCENARIOS = ('three_changes_nan', 'zero_crossings_rest', 'bad_times',
-             'known_noise_no_revisions', 'constant_then_moving', 'scaled_units')
+             'known_noise_no_revisions', 'constant_then_moving', 'catch_up_tests',
+             'scaled_units')
 
 
 @pytest.mark.parametrize('name', SCENARIOS)
