@@ -84,3 +84,43 @@ def test_event_status_round_trip():
     assert status.name == 'llr_detector: rw2 anomaly' and status.hardware_id == 'rw2'
     assert messages.status_event(status) == event
     assert messages.event_level('both') != messages.event_level('dry')
+
+
+@pytest.mark.parametrize('names', [['rw1', 'rw2', 'rw3', 'rw4'], ['a'], ['wheel_ä', 'bb'], []])
+def test_fixed_layout_codec_agrees_with_rclpy(names):
+    codec = messages.JointStateCodec(names)
+    speeds = [float(i) + 0.5 for i in range(len(names))]
+    frictions = [math.nan if i == 0 else -1e-4 * i for i in range(len(names))]
+    msg = deserialize_message(codec.encode(3.75, speeds, frictions), JointState)
+    assert messages.to_seconds(msg.header.stamp) == 3.75 and list(msg.name) == names
+    np.testing.assert_array_equal(msg.velocity, speeds)
+    np.testing.assert_array_equal(msg.effort, frictions)
+    assert len(msg.position) == 0
+    seconds, got_names, velocity, effort = codec.decode(
+        serialize_message(_message(names, speeds, frictions, seconds=3.75)))
+    assert seconds == 3.75 and got_names == names
+    np.testing.assert_array_equal(velocity, speeds)
+    np.testing.assert_array_equal(effort, frictions)
+
+
+def test_fixed_layout_codec_declines_other_layouts():
+    codec = messages.JointStateCodec(['rw1', 'rw2'])
+    others = [_message(['rw1', 'rw3'], [1.0, 2.0], [0.0, 0.0]),
+              _message(['rw1', 'rw2'], [1.0], [0.0, 0.0]),
+              _message(['rw1', 'rw2'], [1.0, 2.0], [0.0, 0.0, 1.0]),
+              _message(['rw1', 'rw2'], [1.0, 2.0], [0.0, 0.0], position=(1.0, 2.0)),
+              _message(['rw1', 'rw2'], [1.0, 2.0], [0.0, 0.0], frame='body'),
+              _message(['rw1'], [1.0], [0.0])]
+    for msg in others:
+        assert codec.decode(serialize_message(msg)) is None
+    assert codec.decode(b'\x00\x01') is None
+
+
+def test_fixed_layout_codec_ignores_padding_bytes():
+    codec = messages.JointStateCodec(['rw1', 'rw22'])
+    clean = codec.encode(1.5, [1.0, 2.0], [3.0, 4.0])
+    dirty = bytearray(clean)
+    dirty[17:20] = b'\xaa\xbb\xcc'  # the padding after the empty frame_id
+    dirty[41:44] = b'\xdd\xee\xff'  # the padding after 'rw22'
+    assert codec.decode(bytes(dirty)) == codec.decode(clean)
+    assert codec.decode(bytes(dirty))[2] == (1.0, 2.0)

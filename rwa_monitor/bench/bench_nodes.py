@@ -223,7 +223,7 @@ def _plot(out_dir: pathlib.Path, mem: dict[str, Any]) -> None:
             [p['rss_mb'] for p in mem['trace']], 'o-')
     ax.set_xlabel('telemetry replayed (h)')
     ax.set_ylabel('resident memory (MB)')
-    ax.set_ylim(bottom=0)
+    ax.set_ylim(0, 1.2 * max(p['rss_mb'] for p in mem['trace']))
     ax.set_title('replay -> llr_detector, 4 wheels, 10 Hz')
     fig.tight_layout()
     fig.savefig(out_dir / 'nodes_memory.png', dpi=120)

@@ -106,6 +106,7 @@ class LLRDetectorNode(Node):
                                'empty_name': 0, 'duplicate_name': 0, 'unknown_wheel': 0,
                                'too_many_wheels': 0, 'undecodable': 0}
         self.events: list[AnomalyEvent] = []
+        self._codec: messages.JointStateCodec | None = None
         self._logged: set[tuple[str, str]] = set()
         self._allowed = self._allowed_wheels()
         self.diagnostics = DiagnosticsPublisher(
@@ -157,8 +158,16 @@ class LLRDetectorNode(Node):
 
     def on_raw_wheels(self, buffer: bytes) -> None:
         """Feed one serialised ``telemetry/wheels`` message (the subscription is raw)."""
+        fields = self._codec.decode(buffer) if self._codec is not None else None
+        if fields is not None:
+            self._process(*fields)
+            return
         try:
             fields = messages.decode_joint_state(buffer)
+            names = fields[1]
+            if (len(fields[2]) == len(fields[3]) == len(names) and all(names)
+                    and len(set(names)) == len(names)):
+                self._codec = messages.JointStateCodec(names)
         except ValueError:
             try:
                 msg = deserialize_message(buffer, JointState)

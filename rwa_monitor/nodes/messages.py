@@ -169,6 +169,80 @@ def decode_joint_state(buffer: bytes) -> tuple[float, list[str], tuple, tuple]:
     return sec + nanosec / 1e9, names, arrays[1], arrays[2]
 
 
+class JointStateCodec:
+    """Encode and decode JointStates of one fixed name list with a precomputed layout.
+
+    With the names (and frame) fixed, every field sits at a fixed offset: the bytes between
+    the stamp and the velocity count are a constant, the rest is one ``struct`` format.
+    :meth:`decode` returns None for a message of another layout (other names, lengths that
+    differ): the caller then uses :func:`decode_joint_state`.
+    """
+
+    _STAMP = struct.Struct('<iI')
+
+    def __init__(self, names: Sequence[str], frame_id: str = '') -> None:
+        self.names = list(names)
+        n = len(self.names)
+        out = bytearray(_CDR_LE) + bytes(8)
+        segments: list[tuple[int, int]] = []  # the bytes that are not padding
+
+        def add(data: bytes) -> None:
+            if segments and segments[-1][1] == len(out):
+                segments[-1] = (segments[-1][0], len(out) + len(data))
+            else:
+                segments.append((len(out), len(out) + len(data)))
+            out.extend(data)
+
+        frame = frame_id.encode()
+        add(_U32.pack(len(frame) + 1) + frame + b'\x00')
+        _pad(out, 4)
+        add(_U32.pack(n))
+        for name in self.names:
+            _pad(out, 4)
+            raw = name.encode()
+            add(_U32.pack(len(raw) + 1) + raw + b'\x00')
+        _pad(out, 4)
+        add(_U32.pack(0))  # position: empty
+        self._middle = bytes(out[12:])
+        # Padding bytes written by other serialisers are not necessarily zero: compare
+        # only the meaningful ones.
+        self._segments = [(a, b, bytes(out[a:b])) for a, b in segments]
+        self._tail_at = len(out)
+        offset, fmt = len(out) - 4, ['<']
+        for _ in range(2):  # velocity, effort
+            fmt.append('x' * (-offset % 4) + 'I')
+            offset += -offset % 4 + 4
+            if n:
+                fmt.append('x' * (-offset % 8) + f'{n}d')
+                offset += -offset % 8 + 8 * n
+        self._tail = struct.Struct(''.join(fmt))
+        self._n = n
+
+    def encode(self, seconds: float, speeds: Sequence[float],
+               frictions: Sequence[float]) -> bytes:
+        """Return the serialised JointState (``speeds``/``frictions``: one per name)."""
+        n = self._n
+        return b''.join((_CDR_LE, self._STAMP.pack(*split_seconds(seconds)), self._middle,
+                         self._tail.pack(n, *speeds, n, *frictions)))
+
+    def decode(self, buffer: bytes) -> tuple[float, list[str], tuple, tuple] | None:
+        """Return ``(time, names, velocity, effort)``, or None if the layout differs."""
+        if buffer[:2] != b'\x00\x01':
+            return None
+        for start, end, expected in self._segments:
+            if buffer[start:end] != expected:
+                return None
+        try:
+            values = self._tail.unpack_from(buffer, self._tail_at)
+        except struct.error:
+            return None
+        n = self._n
+        if values[0] != n or values[n + 1] != n:
+            return None
+        sec, nanosec = self._STAMP.unpack_from(buffer, 4)
+        return sec + nanosec / 1e9, self.names, values[1:n + 1], values[n + 2:]
+
+
 class BadMessage(ValueError):
     """A message that cannot be used at all; ``reason`` is a counter name."""
 

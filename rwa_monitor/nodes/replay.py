@@ -269,11 +269,11 @@ class _Rows:
         self.gyro = tele.gyro
         self.attitude = tele.attitude
         self.reference = tele.reference_rate
+        self._codec = messages.JointStateCodec(self.names)
 
     def wheels(self, i: int, t: float) -> bytes:
         """Return row ``i`` as a serialised JointState (``publish`` takes the bytes)."""
-        return messages.encode_joint_state(t, self.names, self.speed[i].tolist(),
-                                           self.friction[i].tolist())
+        return self._codec.encode(t, self.speed[i].tolist(), self.friction[i].tolist())
 
 
 def main(args: Sequence[str] | None = None) -> int:
