@@ -571,8 +571,8 @@ def candidate_log_p2(y: float, tr: float, dm: float, log_p_min: float,
     of the estimated noise variance (studentised tail, :func:`log_sf2_t`), None when the
     noise level is given (Lemma 1's tail, :func:`log_sf2`). With ``b = y / (2 l1)``, ``rho =
     l2 / l1`` and ``a = b (1 - rho)``, ``p_k >= exp(-b rho) erfc(sqrt(a))`` (drop ``rho
-    sin^2`` in the integral of :mod:`rwa_monitor.core.gchi2`; the studentised tail is
-    larger still); when that bound already exceeds ``p_min`` the sample cannot be a new
+    sin^2`` in the integral of :mod:`rwa_monitor.core.gchi2`), and the studentised
+    analogue below; when the bound already exceeds ``p_min`` the sample cannot be a new
     minimum and the exact tail is not computed. Shared by the streaming and the batch path
     (same floats, same decision).
     """
@@ -584,7 +584,16 @@ def candidate_log_p2(y: float, tr: float, dm: float, log_p_min: float,
         lam2 = 0.0
     b = y / (2.0 * lam1)
     rho = lam2 / lam1
-    if -b * rho + log_lower_bound(b * (1.0 - rho)) > log_p_min + 1e-9 * (1.0 - log_p_min):
+    a = b * (1.0 - rho)
+    if dof is None:
+        lower = -b * rho + log_lower_bound(a)
+    else:
+        # Studentised: h <= tan^2 and (1 + u)^-m >= exp(-m u) give p_k >= (1 + 2 b /
+        # dof)^(-dof/2) exp(A) erfc(sqrt(A)), A = dof a / (dof + 2 b) (tighter than the
+        # Gaussian bound, which also holds).
+        big_a = dof * a / (dof + 2.0 * b)
+        lower = -0.5 * dof * math.log1p(2.0 * b / dof) + big_a + log_lower_bound(big_a)
+    if lower > log_p_min + 1e-9 * (1.0 - log_p_min):
         return None
     if dof is None:
         return log_sf2(y, lam1, lam2)
