@@ -289,6 +289,6 @@ def goals(results: dict) -> dict:
                                              'met': worst >= 0.97},
             'nominal_flagged': {'value': nominal, 'goal': 0.03, 'met': nominal <= 0.03},
             'changepoint_cpu_median_s': {'value': t['changepoints']['median'], 'goal': 0.05,
-                                     'met': t['changepoints']['median'] <= 0.05},
+                                         'met': t['changepoints']['median'] <= 0.05},
             'assignment_cpu_max_s': {'value': t['assignment']['max'], 'goal': 0.1,
-                                 'met': t['assignment']['max'] <= 0.1}}
+                                     'met': t['assignment']['max'] <= 0.1}}
