@@ -90,6 +90,7 @@ def test_sliding_window_is_bounded_and_ordered():
     assert not win.update(10.0, 1.0, 1.0) and win.out_of_order == 1
     win.update(300.0, float('nan'), 1.0)
     assert win.non_finite == 1 and win.snapshot()[0][-1] == 300.0
+    assert win.gaps == 1  # 300 after 249 with a step of 1
     win.reset()
     assert win.size == 0
     with pytest.raises(ValueError, match='length'):

@@ -182,11 +182,13 @@ def bins_sweep(items: list[dict], splits: int, bins=(5, 10, 20, 40)) -> list[dic
 def changepoint_truth(path: pathlib.Path, manifest: dict, count: int) -> dict:
     """Return false and missed changepoints per window against the simulator's truth."""
     false, missed, big_missed, excess_cp, excess_naive = [], [], [], [], []
+    right_system, matched = 0, 0
     config = FssConfig()
     for entry in manifest['windows'][:count]:
         speed, friction = fss.load_window(path, entry)
         with np.load(path / entry['file']) as data:
             true = np.flatnonzero(data['jump'])
+            true_system = data['jump'][true]
         cps = detect_changepoints(friction, speed)
         d = np.abs(cps.changepoints[:, None] - true[None, :]) if true.size else None
         near = d.min(axis=1) <= 3 if d is not None else np.zeros(cps.changepoints.size, bool)
@@ -198,6 +200,12 @@ def changepoint_truth(path: pathlib.Path, manifest: dict, count: int) -> dict:
         big_missed.append(int(np.sum(~hit & isolated)))
         sigma = estimate_sigma(friction, speed, 1.0)
         ext = extract(speed, friction, config)
+        if true.size and ext.accepted.size:
+            dist = np.abs(ext.accepted[:, None] - true[None, :])
+            hit = dist.min(axis=1) <= 3
+            nearest = true_system[dist.argmin(axis=1)]
+            matched += int(hit.sum())
+            right_system += int(np.sum(hit & (nearest == ext.systems_of)))
         excess_cp.append(ext.rmse - sigma)
         excess_naive.append(fit_intervals(friction, speed, []).rmse - sigma)
     return {'windows': count, 'false_per_window': float(np.mean(false)),
@@ -205,7 +213,8 @@ def changepoint_truth(path: pathlib.Path, manifest: dict, count: int) -> dict:
             'missed_isolated_per_window': float(np.mean(big_missed)),
             'true_per_window': float(np.mean([e['n_jumps'] for e in
                                               manifest['windows'][:count]])),
-            'excess_rmse_with_cp': excess_cp, 'excess_rmse_naive': excess_naive}
+            'excess_rmse_with_cp': excess_cp, 'excess_rmse_naive': excess_naive,
+            'assigned_to_the_true_system': right_system / max(matched, 1)}
 
 
 def beam_effect(path: pathlib.Path, manifest: dict, count: int,

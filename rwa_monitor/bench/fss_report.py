@@ -166,6 +166,8 @@ def markdown(results: dict) -> str:
                      ['true jumps not detected', f'{cp["missed_per_window"]:.2f}'],
                      ['... of which isolated (> 2w from other jumps)',
                       f'{cp["missed_isolated_per_window"]:.2f}'],
+                     ['accepted changepoints on a true jump assigned to the FSS that jumped',
+                      f'{100 * cp["assigned_to_the_true_system"]:.1f} %'],
                      ['mean excess RMSE, one dry coefficient (paper 0.13)',
                       f'{np.mean(cp["excess_rmse_naive"]):.4f}'],
                      ['mean excess RMSE, with changepoints (paper 0.0025)',

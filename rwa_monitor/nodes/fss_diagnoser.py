@@ -17,7 +17,8 @@ with the window bounds and the extracted base dry and viscous friction); each wh
 health on ``/diagnostics`` (OK, or WARN listing the anomalies of the last window, STALE
 when telemetry stops), with the counters of bad input. Bad input: as the llr_detector
 node for messages; per wheel, a stamp not after the last one is dropped and counted,
-NaN/Inf samples are kept in the window (the stages skip them) and counted.
+NaN/Inf samples are kept in the window (the stages skip them) and counted, and gaps in
+the stamps are counted (the stages count in samples).
 """
 
 from __future__ import annotations
@@ -270,6 +271,7 @@ class FssDiagnoserNode(Node):
         values: dict[str, Any] = {'samples': wheel.samples, 'diagnoses': wheel.diagnoses,
                                   'window_samples': wheel.window.size,
                                   'non_finite': wheel.window.non_finite,
+                                  'gaps': wheel.window.gaps,
                                   'skipped_busy': wheel.skipped_busy}
         if wheel.result is None:
             return OK, f'waiting for a full window ({wheel.window.size}/' \

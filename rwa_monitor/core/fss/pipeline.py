@@ -190,12 +190,17 @@ class SlidingWindow:
 
     ``update(t, speed, friction)`` per sample; a stamp not after the previous one is
     dropped and counted (``out_of_order``); non-finite values are kept (the stages skip
-    them) and counted (``non_finite``). Memory: three arrays of ``length``.
+    them) and counted (``non_finite``); a step between stamps more than ``gap_factor``
+    times the first step seen is counted (``gaps``) and otherwise ignored: the stages
+    count in samples, so a gap only shortens the FSS residence times it spans.
+    Memory: three arrays of ``length``.
     """
 
-    def __init__(self, *, length: int = 80_000, period: int = 20_000) -> None:
+    def __init__(self, *, length: int = 80_000, period: int = 20_000,
+                 gap_factor: float = 3.0) -> None:
         self.length = check_int('length', length, 100, 10**8)
         self.period = check_int('period', period, 1, 10**8)
+        self.gap_factor = check_real('gap_factor', gap_factor, 1.0, low_open=True)
         self._t = np.empty(self.length)
         self._w = np.empty(self.length)
         self._f = np.empty(self.length)
@@ -206,8 +211,10 @@ class SlidingWindow:
         self._count = 0
         self._since = 0
         self._last_t = -np.inf
+        self._step = None
         self.out_of_order = 0
         self.non_finite = 0
+        self.gaps = 0
 
     @property
     def size(self) -> int:
@@ -221,6 +228,12 @@ class SlidingWindow:
             return False
         if not (np.isfinite(speed) and np.isfinite(friction)):
             self.non_finite += 1
+        if np.isfinite(self._last_t):
+            step = t - self._last_t
+            if self._step is None:
+                self._step = step
+            elif step > self.gap_factor * self._step:
+                self.gaps += 1
         i = self._count % self.length
         self._t[i], self._w[i], self._f[i] = t, speed, friction
         self._count += 1
