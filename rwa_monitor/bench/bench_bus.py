@@ -183,9 +183,10 @@ def _markdown(results: dict[str, Any]) -> str:
                           else f' (detector {100 * n["llr_share"]:.1f} %)')]
                       for n in results['node']]), '',
              'Rate 0 with burst 1 publishes one sample per executor turn: every subscriber '
-             'in the executor takes it before the next (lossless); a fixed time factor '
-             'publishes on the wall clock and the reliable depth-1000 queues drop what one '
-             'executor thread cannot process.', '',
+             'in the executor takes it before the next (lossless by construction). A fixed '
+             'time factor publishes on the wall clock: the share delivered depends on the '
+             'load of the machine (the reliable depth-1000 queues drop what one executor '
+             'thread cannot process in time).', '',
              f'Memory growth while stepping: {bare["rss_growth_mb_per_sim_hour"]:.2f} MB per '
              'simulated hour (nothing is recorded).', '',
              'LLR detector (config/rwa_monitor.yaml) on bus telemetry with no injected fault. '
@@ -197,7 +198,8 @@ def _markdown(results: dict[str, Any]) -> str:
                    [[f['scenario'], f['hours'], round(f['zero_crossings_per_wheel_hour'], 2),
                      f['declarations'], round(f['false_alarms_per_wheel_hour'], 3),
                      f['near_zero_speed']] for f in results['false_alarms']]), '',
-             '"Near zero speed": |w| < 1 rad/s within one window of the estimated change. '
+             '"Near zero speed": |w| < 1 rad/s within one window of the estimated change; '
+             'a declaration counts once (its revisions are not counted). '
              'Plot: `bench/results/bus_friction_near_zero.png`. Reading: docs/basilisk.md.']
     return '\n'.join(lines)
 
