@@ -139,6 +139,16 @@ def markdown(results: dict) -> str:
               'splits, mean % on the diagonal: ' + ', '.join(
                   f'{a} {_pct(paper_cls["matrix"][a][a]["mean"])}' for a in ANOMALIES)
               + f'; nominal flagged {_pct(paper_cls["nominal_any_flag"]["mean"])} %.', '']
+    ho = results['held_out']
+    trained = ho['trained_on']
+    lines += [f'The shipped model (`rwa_monitor/data/fss_model.json`, trained on the '
+              f'{trained.get("windows", "?")} windows of `{trained.get("dataset", "?")}`) on '
+              f'an independent data set (seed {ho["seed"]}, {ho["windows"]} windows), % of '
+              'windows:', '',
+              table(['status'] + list(ANOMALIES),
+                    [[s] + [_pct(ho['matrix'][s][a]) for a in ANOMALIES] for s in STATUSES]),
+              '', f'Nominal windows with any anomaly flagged: {_pct(ho["nominal_any_flag"])} %.',
+              '']
     arl = results['arl']
     lines += ['### ARL at 0.1 % missed detection (Fig. 7)', '',
               'Jump in the middle of a slew at the largest acceleration of the profile; ARL '
