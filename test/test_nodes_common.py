@@ -96,3 +96,17 @@ def test_diagnostics_levels_names_and_stale():
         diag.mark_input('rw1', 'rw1 friction')
         world.wait_until(lambda: last_status().level == DiagnosticStatus.WARN, 5.0,
                          'back to WARN after input resumed')
+
+
+def test_a_failing_health_provider_reports_error_not_a_crash():
+    with RosWorld() as world:
+        node = world.node(Node, 'health_node')
+        diag = common.DiagnosticsPublisher(node, period=0.2, stale_timeout=5.0)
+
+        def broken():
+            raise ZeroDivisionError('bug')
+        diag.provide('rw1', 'rw1 friction', broken)
+        diag.mark_input('rw1', 'rw1 friction')
+        status = diag.status(diag.components['rw1'])
+        assert status.level == DiagnosticStatus.ERROR and 'bug' in status.message
+        diag.publish()

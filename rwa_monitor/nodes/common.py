@@ -355,7 +355,10 @@ class DiagnosticsPublisher:
         now = self.now() if now is None else now
         since = now - (self._started if health.last_input is None else health.last_input)
         if health.provider is not None:
-            health.level, health.message, health.values = health.provider()
+            try:
+                health.level, health.message, health.values = health.provider()
+            except Exception as err:  # noqa: BLE001 - a health bug must not stop the node
+                health.level, health.message = ERROR, f'health check failed: {err!r}'
         values = dict(health.values)
         level, message = health.level, health.message
         if since > self.stale_timeout:

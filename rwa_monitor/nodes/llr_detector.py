@@ -19,6 +19,7 @@ logged once; none reaches the detector's statistics.
 
 from __future__ import annotations
 
+import collections
 from typing import Any, Sequence
 
 from diagnostic_msgs.msg import DiagnosticArray
@@ -35,6 +36,7 @@ from rwa_monitor.nodes.common import (declare_parameters, DiagnosticsPublisher, 
 from rwa_monitor.pipelines.llr import detector_kwargs
 
 NODE_NAME = 'llr_detector'
+MAX_KEPT = 10_000  # events kept in memory for in-process users (demo, tests)
 INPUT_ID = 'telemetry/wheels'
 
 DETECTOR_PARAMETERS = ('window', 'k_verif', 'false_alarm_rate', 'noise_std')
@@ -105,7 +107,7 @@ class LLRDetectorNode(Node):
         self.input_counters = {'messages': 0, 'length_mismatch': 0,
                                'empty_name': 0, 'duplicate_name': 0, 'unknown_wheel': 0,
                                'too_many_wheels': 0, 'undecodable': 0}
-        self.events: list[AnomalyEvent] = []
+        self.events: collections.deque[AnomalyEvent] = collections.deque(maxlen=MAX_KEPT)
         self._codec: messages.JointStateCodec | None = None
         self._logged: set[tuple[str, str]] = set()
         self._allowed = self._allowed_wheels()
@@ -230,8 +232,8 @@ class LLRDetectorNode(Node):
             back = wheel.last_time - seconds
             if back > self.params['time_jump']:
                 wheel.counters['time_jump_reset'] += 1
-                self.get_logger().warning(
-                    f'{wheel_id}: time jumped back {back:.3f} s: detector restarted')
+                self._log_once('time_jump_reset', wheel_id, f'{wheel_id}: time jumped back '
+                               f'{back:.3f} s: detector restarted')
                 wheel.restart()
             else:
                 reason = 'duplicate_stamp' if back == 0 else 'out_of_order'
