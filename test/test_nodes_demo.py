@@ -81,7 +81,7 @@ def test_dashboard_shows_health_and_late_joined_anomalies():
     text = cmd_dashboard.render(board)
     lines = text.splitlines()
     rw2 = next(line for line in lines if line.startswith('rw2'))
-    assert 'WARN' in rw2 and 'dry' in rw2 and '120.5' in rw2
+    assert 'WARN' in rw2 and 'dry' in rw2 and '120.5' in rw2 and 'llr_detector' in rw2
     assert any(line.startswith('rw1') and 'OK' in line for line in lines)
     assert 'anomalies: 1' in text
     assert any('change t=120.5 s' in line and 'declared t=150.0 s' in line for line in lines)

@@ -79,12 +79,15 @@ def render(board: Board, *, title: str = 'rwa_monitor', progress: str | None = N
     if progress:
         lines.append(progress)
     lines.append('')
-    lines.append(f'{"component":<18} {"level":<6} {"kind":<9} {"change s":>10}  status')
-    for (name, hardware_id), item in sorted(board.health.items(), key=lambda kv: kv[0][1]):
+    lines.append(f'{"component":<18} {"node":<16} {"level":<6} {"kind":<9} {"change s":>10}'
+                 '  status')
+    for (name, hardware_id), item in sorted(board.health.items(),
+                                            key=lambda kv: (kv[0][1], kv[0][0])):
         fields = item['fields']
         kind = fields.get('kind', '')
         change = fields.get('change_time_s', '')
-        row = (f'{hardware_id or name:<18} {LEVEL_NAMES.get(item["level"], "?"):<6} '
+        node = name.split(':', 1)[0] if ':' in name else ''
+        row = (f'{hardware_id or name:<18} {node:<16} {LEVEL_NAMES.get(item["level"], "?"):<6} '
                f'{str(kind):<9} {_seconds(change):>10}  {item["message"]}')
         lines.append(_paint(row, item['level'], colour))
     if not board.health:
