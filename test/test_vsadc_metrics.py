@@ -18,6 +18,7 @@ def test_scores_by_hand():
     assert s['mar'] == pytest.approx(100 * 2 / 6)
     assert s['idr'] == pytest.approx(100 * 3 / 6)
     assert s['accuracy'] == pytest.approx(100 * 6 / 10)
+    assert s['switches'] == 3             # 0->1, 1->0, 0->2
 
 
 def test_delay_by_hand():

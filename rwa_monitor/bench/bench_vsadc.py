@@ -91,14 +91,17 @@ def scores(pred: np.ndarray, truth: np.ndarray) -> dict[str, float]:
 
     FAR = time labelled faulty while healthy / time faulty; MAR = time labelled healthy
     while faulty / time faulty; IDR = FAR + MAR; accuracy = share of rows whose label
-    (0/1/2) is right. Rows are equally spaced, so times are row counts.
+    (0/1/2) is right. Rows are equally spaced, so times are row counts. ``switches``
+    counts label changes along the rows (the paper's "detection noise"; the truth of a
+    record changes 1 or 2 times).
     """
     faulty = truth != 0
     t_faults = max(int(faulty.sum()), 1)
     far = 100.0 * np.sum((pred != 0) & ~faulty) / t_faults
     mar = 100.0 * np.sum((pred == 0) & faulty) / t_faults
     return {'accuracy': 100.0 * float(np.mean(pred == truth)), 'far': float(far),
-            'mar': float(mar), 'idr': float(far + mar)}
+            'mar': float(mar), 'idr': float(far + mar),
+            'switches': int(np.count_nonzero(np.diff(pred)))}
 
 
 def delay(time_s: np.ndarray, pred: np.ndarray, onset_s: float) -> float:
@@ -283,6 +286,11 @@ def _markdown(res: dict[str, Any]) -> str:
     rows = [[name] + [_fmt(paper[sc][name]['delay_s']) for sc in SCENARIOS] for name in names]
     lines += ['**Detection delay (s): first faulty label on a test row after the onset**', '',
               report.table(['method', *SCENARIOS], rows), '']
+    rows = [[name] + [f'{paper[sc][name]["switches"]:.1f}' for sc in SCENARIOS]
+            for name in names]
+    lines += ['**Label changes along the test rows of a record** (detection noise; the '
+              'truth changes 2 times, once for the bias step)', '',
+              report.table(['method', *SCENARIOS], rows), '']
     for protocol, title in (
             ('smoothed', 'Baselines on the window means of VSADC, same random 70/30 split'),
             ('cross', 'Baselines on window means, trained on another record (own seed and '
@@ -382,7 +390,7 @@ def run(out_dir: pathlib.Path, quick: bool) -> dict[str, Any]:
     for protocol in ('paper', 'smoothed', 'cross'):
         aggregate[protocol] = {
             sc: {name: {m: float(np.nanmean([r[protocol][name][m] for r in rs]))
-                        for m in (*METRICS, 'delay_s')}
+                        for m in (*METRICS, 'delay_s', 'switches')}
                  for name in names if name in rs[0][protocol]}
             for sc, rs in runs.items()}
     detail = {sc: {**{k: float(np.nanmean([r['vsadc_full'][k] for r in rs]))
