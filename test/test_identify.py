@@ -2,7 +2,7 @@
 
 import json
 
-from conftest import SHARED
+from conftest import REPO, SHARED
 import numpy as np
 import pytest
 import yaml
@@ -178,3 +178,19 @@ def test_measured_coastdown_run_is_identified_in_place(tmp_path):
     rep = json.loads((out / 'report.json').read_text())
     assert rep['effects']
     assert rep['rmse_after']['held_out'] < rep['rmse_before']['held_out']
+
+
+BSK = REPO / '.venv-bsk' / 'bin' / 'rwa-monitor'
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not BSK.exists(), reason='optional Basilisk environment absent')
+def test_basilisk_stribeck_friction_is_found_without_being_declared(tmp_path):
+    import subprocess
+    path = tmp_path / 'bus.csv'
+    subprocess.run([str(BSK), 'simulate', 'basilisk', '--seconds', '1800', '--seed', '3',
+                    '-o', str(path)], check=True, capture_output=True, timeout=600)
+    from rwa_monitor.telemetry import read_telemetry
+    sel = identify(prepare(read_telemetry(path), 'rw1'))
+    assert [e.name for e in sel.effects][:1] in (['stribeck'], ['smooth_speed'])
+    assert sel.final_fit.rmse_held_out < sel.baseline_fit.rmse_held_out

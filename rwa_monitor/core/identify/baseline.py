@@ -28,11 +28,12 @@ import numpy as np
 from scipy import stats
 
 from rwa_monitor.core.identify.data import IdentData
-from rwa_monitor.core.identify.effects import spectral_peaks
+from rwa_monitor.core.identify.effects import regressor_columns, spectral_peaks
 from rwa_monitor.exceptions import NotIdentifiableError
 
 RIDGE = 1e-9
 PEAKS = 3
+LOW_SPEED_QUANTILE = 0.1
 FLEX_ROWS = 20000  # the flexible background is fitted on at most about this many rows
 
 
@@ -88,7 +89,8 @@ def flexible_residual(data: IdentData, spacing: int,
                       extra: np.ndarray | None = None) -> np.ndarray:
     """Return the residual of a flexible fit: smooth in speed and slowly varying in time.
 
-    Model (1) plus a piecewise-linear function of speed plus dry, viscous and offset terms
+    Model (1) plus a piecewise-linear function of speed on each side of zero (the
+    fallback effect's columns, free to jump at w = 0) plus dry, viscous and offset terms
     that are piecewise linear in time (knots every ``spacing`` rows): without the time
     terms a slow effect would bend the fitted function of speed and leave a residual that
     is not smooth in time. ``extra`` columns (effects already identified) join the fit.
@@ -104,14 +106,16 @@ def flexible_residual(data: IdentData, spacing: int,
     knots = np.unique(np.concatenate([np.quantile(w, np.linspace(0.0, 1.0, 25)),
                                       near, [-x for x in near], [0.0]]))
     knots = knots[(knots >= w.min()) & (knots <= w.max())]
+    if w.min() < 0 < w.max() and 0.0 not in knots:
+        knots = np.sort(np.append(knots, 0.0))
     count = int(np.clip(n // spacing + 1, 2, 17))
     tknots = np.unique(np.linspace(0, n - 1, count).astype(int)).astype(float)
     t = data.time - data.time[0]
 
     def design(rows: np.ndarray, freqs: list[float]) -> np.ndarray:
         wr = w[rows]
-        eye = np.eye(len(knots))
-        hats = [np.interp(wr, knots, eye[j]) for j in range(len(knots))]
+        hats = [col(wr, None, None) for _, col in
+                regressor_columns('smooth_speed', {'knots_rad_s': knots})]
         teye = np.eye(len(tknots))
         thats = np.column_stack([np.interp(rows.astype(float), tknots, teye[j])
                                  for j in range(len(tknots))])
@@ -158,8 +162,13 @@ def step_gains(data: IdentData, resid: np.ndarray, ks: np.ndarray, window: int,
                chunk: int = 64) -> np.ndarray:
     """Return the chi^2(2) gain of a coefficient step at each k over a smooth background.
 
-    Normal equations of all windows at once (batches of ``chunk`` windows).
+    Normal equations of all windows at once (batches of ``chunk`` windows). Samples in
+    the low-speed region (abs(w) below its LOW_SPEED_QUANTILE quantile) are left out:
+    friction there may depend on more than the sampled speed (pre-sliding, breakaway,
+    the crossing's direction), which would pass for a jump at every zero crossing; a
+    real jump shows at every other speed.
     """
+    low_speed = float(np.quantile(np.abs(data.speed), LOW_SPEED_QUANTILE))
     n2 = 2 * window
     tau = np.linspace(-1.0, 1.0, n2)
     poly = np.stack([np.ones(n2), tau, tau ** 2], axis=1)
@@ -173,8 +182,9 @@ def step_gains(data: IdentData, resid: np.ndarray, ks: np.ndarray, window: int,
         h = np.stack([-np.sign(w), -w], axis=-1)
         smooth = np.concatenate([h[..., :1] * poly, h[..., 1:] * poly,
                                  np.broadcast_to(poly, h.shape[:2] + (3,))], axis=-1)
-        X = np.concatenate([smooth, h * after[None, :, None]], axis=-1) / s[..., None]
-        y = resid[idx] / s
+        keep = (np.abs(w) >= low_speed) / s
+        X = np.concatenate([smooth, h * after[None, :, None]], axis=-1) * keep[..., None]
+        y = resid[idx] * keep
         gram = np.einsum('kij,kil->kjl', X, X)
         xy = np.einsum('kij,ki->kj', X, y)
         yy = np.einsum('ki,ki->k', y, y)

@@ -26,7 +26,8 @@ Effects (names are the DESIGN.md vocabulary):
 - ``periodic``: a disturbance periodic in time (thermal cycle of an orbit, a structural
   mode, a cage frequency). Columns cos(2 pi f (t - t0)), sin(...); f from the largest
   peaks of the residual's spectrum.
-- ``smooth_speed``: the generic fallback, a piecewise-linear function of speed (hat
+- ``smooth_speed``: the generic fallback, a piecewise-linear function of speed on each
+  side of zero (free to jump at w = 0, as friction does; hat
   functions on 12 quantile knots plus knots at 0 and at +- the 0.5, 1, 2, 4 and 8 %
   quantiles of |w|, where low-speed effects live). Not physics: it proves that friction
   depends on speed in a way model (1) misses when no named effect fits.
@@ -88,15 +89,21 @@ def regressor_columns(kind: str, params: dict) -> list[tuple[str, Column]]:
                 ('sin', lambda w, t, a: np.sin(2 * np.pi * f * (np.asarray(t) - t0)))]
     if kind == 'smooth_speed':
         knots = np.asarray(params['knots_rad_s'], dtype=float)
-        return [(f'hat{j}', _hat(knots, j)) for j in range(len(knots))]
+        out = []
+        for j, k in enumerate(knots):
+            for side, tag in ((1.0, 'p'), (-1.0, 'n')):
+                if k * side > 0 or k == 0:
+                    out.append((f'hat{j}{tag}', _hat(knots, j, side)))
+        return out
     raise ValueError(f'unknown effect kind {kind!r}')
 
 
-def _hat(knots: np.ndarray, j: int) -> Column:
+def _hat(knots: np.ndarray, j: int, side: float) -> Column:
+    """Return the hat function of knot j on one side of zero speed (0 on the other)."""
     def column(w, t, a):
         values = np.zeros(len(knots))
         values[j] = 1.0
-        return np.interp(w, knots, values)
+        return np.interp(w, knots, values) * (np.sign(w) == side)
     return column
 
 
