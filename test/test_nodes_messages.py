@@ -4,10 +4,11 @@ import math
 
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticStatus
+from geometry_msgs.msg import QuaternionStamped, Vector3Stamped
 import numpy as np
 import pytest
 from rclpy.serialization import deserialize_message, serialize_message
-from sensor_msgs.msg import JointState
+from sensor_msgs.msg import Imu, JointState
 
 from rwa_monitor.core.events import AnomalyEvent
 from rwa_monitor.nodes import messages
@@ -124,3 +125,15 @@ def test_fixed_layout_codec_ignores_padding_bytes():
     dirty[41:44] = b'\xdd\xee\xff'  # the padding after 'rw22'
     assert codec.decode(bytes(dirty)) == codec.decode(clean)
     assert codec.decode(bytes(dirty))[2] == (1.0, 2.0)
+
+
+@pytest.mark.parametrize('frame', ['body', '', 'star_tracker_1'])
+def test_stamped_codecs_equal_the_message_builders(frame):
+    values = [0.1, -0.2, 0.3, 0.9]
+    cases = [(messages.imu_codec(frame), Imu, messages.imu, values[:3]),
+             (messages.quaternion_codec(frame), QuaternionStamped, messages.quaternion,
+              values),
+             (messages.vector3_codec(frame), Vector3Stamped, messages.vector3, values[:3])]
+    for codec, msg_type, build, data in cases:
+        decoded = deserialize_message(codec.encode(86399.25, data), msg_type)
+        assert decoded == build(86399.25, data, frame)

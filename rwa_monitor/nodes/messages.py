@@ -243,6 +243,54 @@ class JointStateCodec:
         return sec + nanosec / 1e9, self.names, values[1:n + 1], values[n + 2:]
 
 
+class StampedCodec:
+    """Encode a message that is a Header followed only by float64 values, by hand.
+
+    Vector3Stamped (3 values), QuaternionStamped (4) and Imu (41: orientation,
+    its covariance, angular velocity, its covariance, linear acceleration, its
+    covariance) have this shape: after ``frame_id`` the values start at the next multiple
+    of 8 and follow each other. ``template`` holds the constant values; ``slots`` says
+    which of them :meth:`encode` replaces.
+    """
+
+    def __init__(self, template: Sequence[float], slots: Sequence[int],
+                 frame_id: str = '') -> None:
+        frame = frame_id.encode()
+        head = bytearray(_CDR_LE) + bytes(8)
+        head += _U32.pack(len(frame) + 1) + frame + b'\x00'
+        _pad(head, 8)
+        self._middle = bytes(head[12:])
+        self._template = [float(v) for v in template]
+        self._slots = list(slots)
+        self._values = struct.Struct(f'<{len(self._template)}d')
+        self._stamp = struct.Struct('<iI')
+
+    def encode(self, seconds: float, values: Sequence[float]) -> bytes:
+        """Return the serialised message with ``values`` in the slots."""
+        row = self._template.copy()
+        for slot, value in zip(self._slots, values):
+            row[slot] = value
+        return b''.join((_CDR_LE, self._stamp.pack(*split_seconds(seconds)), self._middle,
+                         self._values.pack(*row)))
+
+
+def vector3_codec(frame_id: str = 'body') -> StampedCodec:
+    """Return the codec of ``telemetry/reference_rate`` (geometry_msgs/Vector3Stamped)."""
+    return StampedCodec([0.0] * 3, range(3), frame_id)
+
+
+def quaternion_codec(frame_id: str = 'body') -> StampedCodec:
+    """Return the codec of ``telemetry/star_tracker`` (QuaternionStamped, scalar last)."""
+    return StampedCodec([0.0, 0.0, 0.0, 1.0], range(4), frame_id)
+
+
+def imu_codec(frame_id: str = 'body') -> StampedCodec:
+    """Return the codec of ``telemetry/gyro`` (Imu: angular velocity only, as :func:`imu`)."""
+    template = [0.0, 0.0, 0.0, 1.0, -1.0, *[0.0] * 8, 0.0, 0.0, 0.0, *[0.0] * 9,
+                0.0, 0.0, 0.0, -1.0, *[0.0] * 8]
+    return StampedCodec(template, (13, 14, 15), frame_id)
+
+
 class BadMessage(ValueError):
     """A message that cannot be used at all; ``reason`` is a counter name."""
 

@@ -85,6 +85,10 @@ class TelemetryReplay(Node):
             raise ConfigError(f'parameter start_offset: {self.params["start_offset"]} s is '
                               f'past the end of the file ({self._time[-1] - self._time[0]} s)')
         self._rows = _Rows(telemetry)
+        frame = self.params['frame_id']
+        self._imu = messages.imu_codec(frame)
+        self._quaternion = messages.quaternion_codec(frame)
+        self._vector3 = messages.vector3_codec(frame)
         self.next_row = self._first
         self.published = 0
         self.loops = 0
@@ -182,17 +186,18 @@ class TelemetryReplay(Node):
         return min(due, self.next_row + _MAX_ROWS_PER_TICK)
 
     def _row_messages(self, i: int) -> list[tuple[Any, Any]]:
+        """Return (publisher, serialised message) of every channel of row ``i``."""
         t = float(self._time[i])
-        rows, frame = self._rows, self.params['frame_id']
+        rows = self._rows
         out = []
         if self._wheels_pub is not None:
             out.append((self._wheels_pub, rows.wheels(i, t)))
         if self._gyro_pub is not None:
-            out.append((self._gyro_pub, messages.imu(t, rows.gyro[i], frame)))
+            out.append((self._gyro_pub, self._imu.encode(t, rows.gyro[i].tolist())))
         if self._star_pub is not None:
-            out.append((self._star_pub, messages.quaternion(t, rows.attitude[i], frame)))
+            out.append((self._star_pub, self._quaternion.encode(t, rows.attitude[i].tolist())))
         if self._ref_pub is not None:
-            out.append((self._ref_pub, messages.vector3(t, rows.reference[i], frame)))
+            out.append((self._ref_pub, self._vector3.encode(t, rows.reference[i].tolist())))
         return out
 
     def _flush_pending(self) -> bool:
