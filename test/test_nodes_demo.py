@@ -128,3 +128,18 @@ def test_events_executor_failure_falls_back(monkeypatch):
         executor, kind = cmd_demo._make_executor('events', world.context, notes)
         executor.shutdown()
     assert kind == 'single' and 'SingleThreadedExecutor' in notes[0]
+
+
+@pytest.mark.slow
+def test_demo_with_gyro_channels_feeds_every_detector(tmp_path):
+    path = cmd_demo.demo_file(tmp_path, hours=0.1, gyro=True)
+    assert path.name.endswith('-gyro.csv')
+    lease = DomainLease()
+    try:
+        result = cmd_demo.run_demo(path, domain_id=lease.domain_id, live=False,
+                                   out=io.StringIO())
+    finally:
+        lease.release()
+    assert result.gyro_faults[0][:2] == ('gyro_y', 'drift')
+    assert result.gyro_faults[0][2] == pytest.approx(180.0, abs=0.1)
+    assert 'injected gyro fault: gyro_y drift from t=180.0 s' in cmd_demo.summary(result)

@@ -19,6 +19,8 @@ import sys
 import time
 from typing import Any, TextIO
 
+import numpy as np
+
 # Detector nodes the demo runs: one module name per line. A module that is not there
 # (yet) is skipped with a note. Each module names its node class in NODE_CLASS, or
 # defines exactly one rclpy Node subclass; the class takes rclpy Node keywords.
@@ -69,16 +71,23 @@ def cache_dir() -> pathlib.Path:
     return pathlib.Path(base) / 'rwa_monitor'
 
 
+def demo_name(hours: float, seed: int, gyro: bool = False) -> str:
+    """Return the file name of a generated demo record."""
+    return f'demo-4rw-{hours:g}h-seed{seed}{"-gyro" if gyro else ""}.csv'
+
+
 def demo_file(directory: pathlib.Path, hours: float = DEFAULT_HOURS,
-              seed: int = DEFAULT_SEED) -> pathlib.Path:
+              seed: int = DEFAULT_SEED, gyro: bool = False) -> pathlib.Path:
     """Return the demo telemetry file, generating it (seeded) on first use.
 
     Anomalies: a dry-friction step on rw2 at 1/3 of the record, a viscous step on rw3 at
     2/3 (sizes: 4 noise standard deviations of torque at the wheel's typical speed).
+    ``gyro`` adds the AOCS simulator's gyro, star-tracker and reference-rate channels with
+    a medium gyro drift on the y axis at half the record (input for the VSADC node).
     """
     from rwa_monitor.sim.friction import Anomaly, simulate_friction_with_truth
     from rwa_monitor.telemetry import write_telemetry
-    path = directory / f'demo-4rw-{hours:g}h-seed{seed}.csv'
+    path = directory / demo_name(hours, seed, gyro)
     if path.is_file():
         return path
     directory.mkdir(parents=True, exist_ok=True)
@@ -87,10 +96,28 @@ def demo_file(directory: pathlib.Path, hours: float = DEFAULT_HOURS,
         wheels=list(WHEELS), duration_s=duration, rate_hz=RATE_HZ, seed=seed,
         anomalies=[Anomaly('rw2', 'dry', round(duration / 3), delta_dry=2.0e-4),
                    Anomaly('rw3', 'viscous', round(2 * duration / 3), delta_viscous=1.0e-6)])
+    if gyro:
+        from rwa_monitor.sim.aocs import add_gyro_channels, named_fault
+        tele = add_gyro_channels(tele, fault=named_fault('medium', 'y', round(duration / 2)),
+                                 seed=seed)
     partial = path.with_suffix(f'.{os.getpid()}.part')
     write_telemetry(partial, tele)
     os.replace(partial, path)
     return path
+
+
+def gyro_faults(tele: Any) -> list[tuple[str, str, float]]:
+    """Return the injected gyro faults (axis, kind, start time) from the truth labels."""
+    faults = []
+    for axis in ('gyro_x', 'gyro_y', 'gyro_z'):
+        labels = tele.truth.get(axis)
+        if labels is None:
+            continue
+        changes = np.flatnonzero(np.diff(labels) != 0) + 1
+        for k in changes:
+            kind = {1: 'drift', 2: 'bias'}.get(int(labels[k]), 'healthy')
+            faults.append((axis, kind, float(tele.time[k])))
+    return faults
 
 
 @dataclasses.dataclass
@@ -108,6 +135,8 @@ class DemoResult:
     notes: list[str]
     repeats: list[Any] = dataclasses.field(default_factory=list)
     other_detectors: dict[str, int] = dataclasses.field(default_factory=dict)
+    other_events: list[dict[str, Any]] = dataclasses.field(default_factory=list)
+    gyro_faults: list[tuple[str, str, float]] = dataclasses.field(default_factory=list)
     wheels: int = len(WHEELS)
 
 
@@ -200,7 +229,10 @@ def run_demo(path: pathlib.Path, *, domain_id: int = 0, executor: str = 'events'
             node.destroy_node()
         rclpy.try_shutdown(context=context)
     others = {name: n for name, n in board.by_detector.items() if name != 'llr'}
-    return _evaluate(tele, events, wall, kind, notes, llr, others)
+    result = _evaluate(tele, events, wall, kind, notes, llr, others)
+    result.other_events = [e for e in board.events if e['fields'].get('detector') != 'llr']
+    result.gyro_faults = gyro_faults(tele)
+    return result
 
 
 def _evaluate(tele: Any, events: list[Any], wall: float, kind: str, notes: list[str],
@@ -267,9 +299,19 @@ def summary(result: DemoResult) -> str:
     lines.append(f'{result.rows} rows x {result.wheels} wheels in {result.wall_s:.1f} s '
                  f'({result.rows / max(result.wall_s, 1e-9):.0f} wheel messages/s, '
                  f'{result.executor} executor)')
+    for axis, kind, start in result.gyro_faults:
+        lines.append(f'injected gyro fault: {axis} {kind} from t={start:.1f} s')
     for name, count in sorted(result.other_detectors.items()):
-        lines.append(f'{name} detector: {count} events on the anomalies topic (see the log '
-                     'above; its truth is not part of this file)')
+        lines.append(f'{name} detector: {count} events on the anomalies topic:')
+        for event in result.other_events:
+            f = event['fields']
+            if f.get('detector') == name:
+                change, declared = f.get('change_time_s'), f.get('declaration_time_s')
+                lines.append(f'  {event["component"]} {f.get("kind", "?")}'
+                             + (f' change t={change:.1f} s' if isinstance(change, float)
+                                else '')
+                             + (f' declared t={declared:.1f} s'
+                                if isinstance(declared, float) else ''))
     for note in result.notes:
         lines.append(f'note: {note}')
     return '\n'.join(lines)
@@ -281,10 +323,10 @@ def run(args: argparse.Namespace) -> int:
         path = pathlib.Path(args.file)
     else:
         directory = pathlib.Path(args.cache_dir) if args.cache_dir else cache_dir()
-        if not (directory / f'demo-4rw-{args.hours:g}h-seed{args.seed}.csv').is_file():
+        if not (directory / demo_name(args.hours, args.seed, args.gyro)).is_file():
             print(f'first run: generating the seeded demo telemetry in {directory} ...',
                   flush=True)
-        path = demo_file(directory, args.hours, args.seed)
+        path = demo_file(directory, args.hours, args.seed, args.gyro)
     print(f'telemetry: {path}', flush=True)
     result = run_demo(path, domain_id=args.domain_id, executor=args.executor,
                       live=not args.quiet)
@@ -301,6 +343,9 @@ def register(subparsers: Any) -> None:
                         help=f'length of the generated record (default {DEFAULT_HOURS:g})')
     parser.add_argument('--seed', type=int, default=DEFAULT_SEED, help='simulator seed')
     parser.add_argument('--file', help='replay this telemetry file instead')
+    parser.add_argument('--gyro', action='store_true',
+                        help='add gyro, star-tracker and reference-rate channels with a gyro '
+                        'drift (input for the VSADC node; slower, see docs/nodes.md)')
     parser.add_argument('--cache-dir', help='where the generated file is kept '
                         '(default $RWA_MONITOR_CACHE or ~/.cache/rwa_monitor)')
     parser.add_argument('--executor', choices=('events', 'single'), default='events',
