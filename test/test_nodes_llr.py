@@ -136,7 +136,7 @@ def test_parameters_from_yaml_file(tmp_path, repo_root):
 @pytest.mark.parametrize('name,value', [
     ('window', 1), ('k_verif', -1), ('false_alarm_rate', 0.0), ('false_alarm_rate', 1.5),
     ('noise_std', -1.0), ('time_jump', 0.0), ('stale_timeout', 0.0),
-    ('diagnostic_period', 0.0), ('max_wheels', 0), ('window', 'big'),
+    ('diagnostic_period', 0.0), ('max_wheels', 0), ('window', 'big'), ('wheels', 5),
 ])
 def test_bad_start_up_parameter_is_named(name, value):
     with RosWorld() as world:
@@ -303,3 +303,15 @@ def test_replay_loop_time_jump_restarts_detector(tmp_path):
     assert all(count >= 1 for count in resets.values())
     per_pass = [_key(e) for e in expected]
     assert [_key(e) for e in got[:2 * len(expected)]] == per_pass + per_pass
+
+
+def test_undecodable_bytes_are_counted_not_fatal():
+    with RosWorld('events') as world:
+        detector = _detector(world)
+        feeder = _Feeder(world, detector)
+        feeder.pub.publish(b'\x00\x01\x00\x00\xff\xff\xff\x7f')
+        world.wait_until(lambda: detector.input_counters['undecodable'] == 1, 10.0,
+                         'the undecodable message to be counted')
+        feeder.send([messages.joint_state(1.0 + 0.1 * i, ['rw1'], [5.0], [1e-4])
+                     for i in range(5)])
+        assert detector.wheels['rw1'].samples == 5

@@ -145,6 +145,10 @@ def test_exit_when_done_shuts_the_context_down(tmp_path):
     ({'start_offset': 99999.0}, 'start_offset'),
     ({'burst': 0}, 'burst'),
     ({'loop': 'yes'}, 'loop'),
+    ({'min_subscribers': -1}, 'min_subscribers'),
+    ({'exit_when_done': 1}, 'exit_when_done'),
+    ({'frame_id': 5}, 'frame_id'),
+    ({'start_offset': -1.0}, 'start_offset'),
 ])
 def test_bad_parameters_at_start_up(tmp_path, params, fragment):
     path = tmp_path / 'tele.csv'
@@ -179,3 +183,19 @@ def test_console_script_reports_a_bad_file(capsys, monkeypatch):
         lease.release()
     assert code == 2
     assert 'file' in capsys.readouterr().err
+
+
+def test_parameters_from_yaml_file(tmp_path):
+    path = tmp_path / 'tele.csv'
+    write_telemetry(path, _telemetry(n=10))
+    params = tmp_path / 'params.yaml'
+    params.write_text('/**:\n  ros__parameters:\n    use_sim_time: true\n'
+                      'telemetry_replay:\n  ros__parameters:\n'
+                      f'    file: "{path}"\n    rate: 40\n    start_offset: 0.5\n'
+                      '    loop: true\n    burst: 7\n')
+    with RosWorld() as world:
+        replay = world.node(TelemetryReplay, cli_args=['--ros-args', '--params-file',
+                                                       str(params)])
+        assert replay.params['rate'] == 40.0 and replay.params['loop'] is True
+        assert replay.params['burst'] == 7 and replay.params['start_offset'] == 0.5
+        assert replay.next_row == 5 and replay.get_parameter('use_sim_time').value
