@@ -2,8 +2,8 @@
 
 On first run it generates (fixed seed) a 4-wheel, 10 Hz telemetry file of a few hours with
 friction anomalies injected on two wheels into a cache directory; then it runs the
-telemetry_replay node (as fast as the detectors take it) and every detector node of
-:data:`DETECTOR_NODES` in one process on rclpy's EventsExecutor (SingleThreadedExecutor
+telemetry_replay node (as fast as the detectors take it) and every detector node listed
+in DETECTOR_NODES in one process on rclpy's EventsExecutor (SingleThreadedExecutor
 as the fallback), draws a live view (progress bar, per-wheel health, anomaly log) and ends
 with a summary of the events against the injected truth.
 """
