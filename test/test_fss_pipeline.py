@@ -16,7 +16,6 @@ def model():
     return load_model()
 
 
-@pytest.mark.slow
 def test_seeded_windows_are_diagnosed(model):
     # One window per status, drawn apart from the training seed. With per-anomaly
     # detection >= 97 % and false flags <= 3 % (docs/results.md), the chance of two or
