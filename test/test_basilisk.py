@@ -8,6 +8,8 @@ within 5 / sqrt(n) of 0 with the same probability.
 """
 
 import math
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -192,3 +194,22 @@ def test_fault_scheduled_while_running_starts_at_the_next_sample():
 def test_run_rejects_a_duration_shorter_than_a_sample():
     with pytest.raises(ValueError, match='duration_s'):
         BasiliskBus().run(0.1)
+
+
+def test_bad_configuration_raises_before_the_simulator_sees_it():
+    """The wheel factory helper would exit(1); values are validated and it is not used."""
+    with pytest.raises(ValueError, match='wheel_inertia'):
+        BasiliskBus(BusConfig(wheel_inertia=-1.0))
+    with pytest.raises(ValueError, match='static'):
+        BasiliskBus(BusConfig(static=1e-5))
+
+
+def test_no_gravity_or_wheel_factory_helper_is_imported():
+    """The gravity helper makes a network request at import; neither helper is needed."""
+    code = ('import sys\n'
+            'import rwa_monitor.sim.basilisk as b\n'
+            'b.BasiliskBus().run(1.0)\n'
+            'bad = [m for m in sys.modules if m.endswith(("simIncludeGravBody", '
+            '"simIncludeRW"))]\n'
+            'assert not bad, bad\n')
+    subprocess.run([sys.executable, '-c', code], check=True)
