@@ -32,7 +32,7 @@ def test_colcon_build_installs_console_scripts_where_ros2_run_looks(tmp_path):
     assert colcon, 'colcon-common-extensions is in requirements.txt'
     src = tmp_path / 'ws' / 'src' / 'rwa_monitor'
     shutil.copytree(REPO, src, ignore=shutil.ignore_patterns(
-        '.venv', '.git', 'build', 'install', 'log', 'bench', '*.egg-info', '__pycache__'))
+        '.venv*', '.git', 'build', 'install', 'log', 'bench', '*.egg-info', '__pycache__'))
     env = dict(os.environ, PATH=f'{pathlib.Path(sys.executable).parent}:{os.environ["PATH"]}')
     result = subprocess.run([str(colcon), 'build', '--packages-select', 'rwa_monitor'],
                             cwd=tmp_path / 'ws', capture_output=True, text=True, env=env,
