@@ -126,8 +126,12 @@ def throughput(hours: float, executor: str) -> dict[str, Any]:
 def latency(passes: int, rate: float) -> dict[str, Any]:
     """Seconds from publishing the declaring row to receiving its anomaly message.
 
-    A 10-minute file with a dry step on every wheel is replayed in a loop (each pass
-    restarts the detectors: a time jump backwards), so every pass gives new events.
+    A 10-minute file with a dry step on each wheel (at 200, 300, 400 and 500 s, so that
+    declarations do not coincide) is replayed in a loop (each pass restarts the
+    detectors: a time jump backwards), so every pass gives new events. The delay is also
+    split at the detector's ``publish`` of the anomaly: row -> detector (executor queue
+    and the detector's work on that row) and detector -> subscriber (DDS delivery and
+    the executor queue in front of the subscriber).
     """
     from diagnostic_msgs.msg import DiagnosticArray
     from rclpy.node import Node
@@ -137,26 +141,40 @@ def latency(passes: int, rate: float) -> dict[str, Any]:
     from rwa_monitor.sim.friction import Anomaly, simulate_friction_with_truth
     tele, _ = simulate_friction_with_truth(
         wheels=list(WHEELS), duration_s=600.0, rate_hz=10.0, seed=3,
-        anomalies=[Anomaly(w, 'dry', 300.0, delta_dry=3.0e-4) for w in WHEELS])
+        anomalies=[Anomaly(w, 'dry', 200.0 + 100.0 * i, delta_dry=3.0e-4)
+                   for i, w in enumerate(WHEELS)])
     system = _System(tele, 'events', rate=rate, loop=True)
     published: dict[tuple[int, int], float] = {}
-    delays: list[float] = []
-    wheels_pub = system.replay._wheels_pub
-    plain_publish = wheels_pub.publish
+    detected: dict[tuple[int, int], float] = {}
+    delays: list[tuple[float, float, float]] = []
 
-    def timed_publish(msg: Any) -> None:
-        plain_publish(msg)
-        stamp = messages.decode_joint_state(msg)[0]
-        published[messages.split_seconds(stamp)] = time.perf_counter()
-    wheels_pub.publish = timed_publish
+    def wrap(publisher: Any, record: Any) -> None:
+        plain = publisher.publish
+
+        def timed(msg: Any) -> None:
+            record(msg, time.perf_counter())
+            plain(msg)
+        publisher.publish = timed
+
+    def row_published(msg: Any, now: float) -> None:
+        published[messages.split_seconds(messages.decode_joint_state(msg)[0])] = now
+
+    def declared(fields: dict[str, Any]) -> tuple[int, int]:
+        return messages.split_seconds(fields['declaration_time_s'])
+
+    def anomaly_published(msg: Any, now: float) -> None:
+        for status in msg.status:
+            detected[declared(messages.status_fields(status))] = now
+    wrap(system.replay._wheels_pub, row_published)
+    wrap(system.detector._anomaly_pub, anomaly_published)
 
     def received(msg: Any) -> None:
         now = time.perf_counter()
         for status in msg.status:
-            fields = messages.status_fields(status)
-            key = messages.split_seconds(fields['declaration_time_s'])
-            if key in published:
-                delays.append(now - published[key])
+            key = declared(messages.status_fields(status))
+            if key in published and key in detected:
+                delays.append((now - published[key], detected[key] - published[key],
+                               now - detected[key]))
     listener = Node('latency_listener', context=system.context)
     listener.create_subscription(DiagnosticArray, 'anomalies', received, EVENTS_QOS)
     system.add(listener)
@@ -164,11 +182,14 @@ def latency(passes: int, rate: float) -> dict[str, Any]:
         system.spin_until(lambda: system.replay.loops >= passes, 600.0)
     finally:
         system.close()
-    arr = np.array(delays)
-    return {'rate': rate, 'events': int(arr.size), 'passes': passes,
-            'p50_ms': float(np.percentile(arr, 50) * 1e3) if arr.size else None,
-            'p99_ms': float(np.percentile(arr, 99) * 1e3) if arr.size else None,
-            'max_ms': float(arr.max() * 1e3) if arr.size else None}
+    arr = np.array(delays).reshape(-1, 3) * 1e3
+    if not arr.size:
+        return {'rate': rate, 'events': 0, 'passes': passes}
+    return {'rate': rate, 'events': int(arr.shape[0]), 'passes': passes,
+            'p50_ms': float(np.percentile(arr[:, 0], 50)),
+            'p99_ms': float(np.percentile(arr[:, 0], 99)), 'max_ms': float(arr[:, 0].max()),
+            'to_detector_p50_ms': float(np.percentile(arr[:, 1], 50)),
+            'to_subscriber_p50_ms': float(np.percentile(arr[:, 2], 50))}
 
 
 def _rss_mb(field: str = 'VmRSS') -> float:
@@ -275,9 +296,12 @@ def markdown(results: dict[str, Any]) -> str:
                      f'runs: {runs}; {r["rows"]} msgs, {r["lost_samples"]} samples lost'])
     for r in results['latency']:
         label = 'rate 0 (saturated)' if r['rate'] == 0 else f'rate {r["rate"]:g}x real time'
+        split = (f'; p50 split: {r["to_detector_p50_ms"]:.1f} row -> detector publish, '
+                 f'{r["to_subscriber_p50_ms"]:.1f} -> subscriber'
+                 if 'to_detector_p50_ms' in r else '')
         rows.append([f'publish -> anomaly latency p50 / p99 / max (ms), {label}', '-',
                      f'{r["p50_ms"]:.1f} / {r["p99_ms"]:.1f} / {r["max_ms"]:.1f}'
-                     if r['events'] else 'n/a', '-', f'{r["events"]} events'])
+                     if r['events'] else 'n/a', '-', f'{r["events"]} events{split}'])
     mem = results['memory']
     trace = mem['trace']
     rows.append([f'resident memory over a {mem["hours"]:g} h replay (MB)', 'flat',
