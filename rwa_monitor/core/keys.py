@@ -41,3 +41,13 @@ WINDOW_END = 'window_end_s'
 BASE_DRY = 'base_dry_nm'
 VISCOUS = 'viscous_nms'
 SVM_DECISION = 'svm_decision'
+
+# VSADC gyro classifier (vsadc-gyro-drift paper): event details and axis health.
+GYRO_STATES = ('healthy', 'drift', 'bias')   # labels 0, 1, 2; events carry the new one
+PREVIOUS_KIND = 'previous_kind'
+STATE = 'state'
+READY = 'ready'
+DISTANCE = 'distance_rad_s'
+DISTANCE_SIGMA = 'distance_sigma_rad_s'
+SIGMA_LIM1 = 'sigma_lim1_rad_s'
+SIGMA_LIM2 = 'sigma_lim2_rad_s'

@@ -38,12 +38,13 @@ from dataclasses import dataclass
 import math
 from typing import Any, Sequence
 
+from rwa_monitor.core import keys
 from rwa_monitor.core.attitude import StarTrackerRate
 from rwa_monitor.core.events import AnomalyEvent
 from rwa_monitor.core.params import check_choice, check_int, check_real
 
 HEALTHY, DRIFT, BIAS = 0, 1, 2
-STATE_NAMES = ('healthy', 'drift', 'bias')
+STATE_NAMES = keys.GYRO_STATES
 AXES = ('x', 'y', 'z')
 DETECTOR = 'vsadc'
 _RESUM_EVERY = 4096
@@ -428,5 +429,5 @@ def make_event(axis: str, tr: Transition) -> AnomalyEvent:
         detector=DETECTOR, component=f'gyro_{axis}', kind=STATE_NAMES[tr.state],
         time=float(onset[0]), index=int(onset[1]), declared_time=float(tr.declared[0]),
         declared_index=int(tr.declared[1]),
-        details={'previous_kind': STATE_NAMES[tr.previous], 'distance_rad_s': tr.distance,
-                 'distance_sigma_rad_s': tr.sigma})
+        details={keys.PREVIOUS_KIND: STATE_NAMES[tr.previous], keys.DISTANCE: tr.distance,
+                 keys.DISTANCE_SIGMA: tr.sigma})

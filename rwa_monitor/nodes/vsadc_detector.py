@@ -274,7 +274,7 @@ class VsadcDetectorNode(Node):
                 status.message = f'recovered, at t={event.time:.3f} s'
             statuses.append(status)
             self.get_logger().warning(
-                f'{event.component}: {event.kind} (was {event.details["previous_kind"]}), '
+                f'{event.component}: {event.kind} (was {event.details[keys.PREVIOUS_KIND]}), '
                 f'change at t={event.time:.3f} s, declared at t={event.declared_time:.3f} s')
         out.status = statuses
         self._anomaly_pub.publish(out)
@@ -284,9 +284,10 @@ class VsadcDetectorNode(Node):
         channel = self.detector.channels[i]
         state = channel.state
         values: dict[str, Any] = {
-            'state': STATE_NAMES[state], 'ready': channel.ready, 'samples': channel.samples,
-            'distance_rad_s': channel.distance, 'distance_sigma_rad_s': channel.sigma,
-            'sigma_lim1_rad_s': channel.sigma_lim1, 'sigma_lim2_rad_s': channel.sigma_lim2}
+            keys.STATE: STATE_NAMES[state], keys.READY: channel.ready,
+            'samples': channel.samples, keys.DISTANCE: channel.distance,
+            keys.DISTANCE_SIGMA: channel.sigma, keys.SIGMA_LIM1: channel.sigma_lim1,
+            keys.SIGMA_LIM2: channel.sigma_lim2}
         component = f'gyro_{self.detector.axes[i]}'
         last = next((e for e in reversed(self.events) if e.component == component), None)
         if last is not None:

@@ -14,7 +14,7 @@ import numpy as np
 
 from rwa_monitor.core.events import AnomalyEvent
 from rwa_monitor.core.params import check_choice, check_int, check_real
-from rwa_monitor.core.vsadc import AXES, VsadcDetector
+from rwa_monitor.core.vsadc import AXES, STATE_NAMES, VsadcDetector
 from rwa_monitor.telemetry import Telemetry
 
 NODE = 'vsadc_detector'
@@ -94,8 +94,8 @@ def run_with_summary(tele: Telemetry, config: Mapping[str, Any]
     for i, axis in enumerate(det.axes):
         summary[f'gyro_{axis}'] = {
             'events': sum(e.component == f'gyro_{axis}' for e in events),
-            'final_state': ('healthy', 'drift', 'bias')[int(labels[-1, i])] if len(tele)
-            else 'healthy', 'ready': det.channels[i].ready}
+            'final_state': STATE_NAMES[int(labels[-1, i])] if len(tele) else STATE_NAMES[0],
+            'ready': det.channels[i].ready}
     summary['counters'] = det.counters()
     summary['runtime_s'] = runtime
     return events, summary
