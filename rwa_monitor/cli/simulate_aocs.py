@@ -10,10 +10,10 @@ from rwa_monitor.sim.aocs import (AocsConfig, AXES, DEFAULT_LEVEL, DRIFT_SLOPES,
                                   GyroFault, named_fault, simulate_aocs)
 from rwa_monitor.telemetry import write_telemetry
 
+_SLOPES = ', '.join(f'{k} {v:g}' for k, v in DRIFT_SLOPES.items())
 EPILOG = f'''\
-faults (on one gyro axis, from --fault-time on): {", ".join(
-    f"{k} drift {v:g} rad/s per s" for k, v in DRIFT_SLOPES.items())}, ramping to
---level (default {DEFAULT_LEVEL:g} rad/s) and then holding it (bias after the drift);
+faults (on one gyro axis, from --fault-time on): drifts of slope {_SLOPES} rad/s
+per s, ramping to --level (default {DEFAULT_LEVEL:g} rad/s) and then holding it;
 bias: a step of --level. --slope overrides the named drift slope.
 truth columns: truth_gyro_x/y/z = 0 healthy, 1 drift, 2 bias; truth_gyro_error_*,
 truth_rate_* (rad/s), truth_st_valid. Star-tracker dropouts are rows of NaN in q_*.
