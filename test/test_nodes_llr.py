@@ -315,3 +315,15 @@ def test_undecodable_bytes_are_counted_not_fatal():
         feeder.send([messages.joint_state(1.0 + 0.1 * i, ['rw1'], [5.0], [1e-4])
                      for i in range(5)])
         assert detector.wheels['rw1'].samples == 5
+
+
+def test_best_effort_option_hears_a_sensor_data_publisher():
+    from rclpy.qos import qos_profile_sensor_data
+    with RosWorld('events') as world:
+        detector = _detector(world, telemetry_reliability='best_effort')
+        source = world.node(Node, 'sensor_bus')
+        pub = source.create_publisher(JointState, 'telemetry/wheels', qos_profile_sensor_data)
+        world.wait_for_subscribers(pub)
+        pub.publish(messages.joint_state(1.0, ['rw1'], [5.0], [1e-4]))
+        world.wait_until(lambda: 'rw1' in detector.wheels, 10.0, 'the best-effort sample')
+        assert detector.describe_parameter('telemetry_reliability').read_only

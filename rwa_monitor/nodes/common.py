@@ -47,14 +47,21 @@ from rwa_monitor.exceptions import ConfigError
 TELEMETRY_DEPTH = 1000
 
 
-def telemetry_qos(depth: int = TELEMETRY_DEPTH, keep_all: bool = True) -> QoSProfile:
+def telemetry_qos(depth: int = TELEMETRY_DEPTH, keep_all: bool = True,
+                  reliable: bool = True) -> QoSProfile:
     """Return the telemetry QoS: RELIABLE, VOLATILE, KEEP_ALL (or KEEP_LAST ``depth``).
 
     Reliable and keep-all so that no sample is lost: a subscriber that lags keeps every
     sample until its history is full, then the publisher's ``publish`` fails and the replay
     offers the sample again later (docs/nodes.md). A reliable publisher also serves
     best-effort (sensor-data) subscribers; history does not affect compatibility.
+    ``reliable=False`` gives the best-effort, keep-last profile a subscriber needs to hear
+    a best-effort (sensor-data) publisher.
     """
+    if not reliable:
+        return QoSProfile(depth=depth, history=HistoryPolicy.KEEP_LAST,
+                          reliability=ReliabilityPolicy.BEST_EFFORT,
+                          durability=DurabilityPolicy.VOLATILE)
     return QoSProfile(depth=depth,
                       history=HistoryPolicy.KEEP_ALL if keep_all else HistoryPolicy.KEEP_LAST,
                       reliability=ReliabilityPolicy.RELIABLE,

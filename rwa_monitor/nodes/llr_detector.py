@@ -60,6 +60,10 @@ PARAMETERS = (
               low=0.0, low_open=True, read_only=True),
     ParamSpec('diagnostic_period', 1.0, 'Seconds between /diagnostics messages.',
               low=0.01, high=60.0, read_only=True),
+    ParamSpec('telemetry_reliability', 'reliable', 'QoS of the telemetry/wheels '
+              'subscription: reliable (keep all, no loss) or best_effort (to hear a '
+              'sensor-data publisher; samples may be lost).',
+              choices=('reliable', 'best_effort'), read_only=True),
 )
 
 
@@ -118,8 +122,10 @@ class LLRDetectorNode(Node):
         self._anomaly_pub = self.create_publisher(
             DiagnosticArray, 'anomalies', EVENTS_QOS,
             event_callbacks=qos_event_callbacks(self, 'anomalies', True))
+        reliable = self.params['telemetry_reliability'] == 'reliable'
         self.create_subscription(
-            JointState, 'telemetry/wheels', self.on_raw_wheels, telemetry_qos(),
+            JointState, 'telemetry/wheels', self.on_raw_wheels,
+            telemetry_qos(reliable=reliable),
             event_callbacks=qos_event_callbacks(self, 'telemetry/wheels'), raw=True)
 
     # ------------------------------------------------------------------- parameters
