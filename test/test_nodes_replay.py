@@ -199,3 +199,26 @@ def test_parameters_from_yaml_file(tmp_path):
         assert replay.params['rate'] == 40.0 and replay.params['loop'] is True
         assert replay.params['burst'] == 7 and replay.params['start_offset'] == 0.5
         assert replay.next_row == 5 and replay.get_parameter('use_sim_time').value
+
+
+def test_a_refused_sample_is_offered_again_not_lost(tmp_path):
+    from rwa_monitor.nodes.replay import RCLError
+    path = tmp_path / 'tele.csv'
+    write_telemetry(path, _telemetry(n=30))
+    with RosWorld() as world:
+        listen = _Listener(world)
+        replay = _replay(world, path, burst=4)
+        wheels_pub, calls = replay._wheels_pub, [0]
+        plain = wheels_pub.publish
+
+        def refuse_some(msg):
+            calls[0] += 1
+            if calls[0] in (5, 6, 17):  # a subscriber's history is full
+                raise RCLError('cannot publish data')
+            plain(msg)
+        wheels_pub.publish = refuse_some
+        world.wait_until(lambda: replay.done and len(listen.wheels) == len(listen.gyro) == 30,
+                         20.0, 'every row despite the refusals')
+    assert replay.back_pressure == 3
+    stamps = [messages.to_seconds(m.header.stamp) for m in listen.wheels.messages]
+    np.testing.assert_allclose(stamps, 10.0 + 0.1 * np.arange(30), atol=1e-9)

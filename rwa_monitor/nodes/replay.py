@@ -59,6 +59,7 @@ PARAMETERS = (
 RCLError = rclpy_implementation.RCLError
 _TICK = 0.005  # s of steady time between publishing turns at rate > 0
 _MAX_ROWS_PER_TICK = 2000
+_BACK_OFF = 0.05  # s of steady time without publishing after a subscriber refused a sample
 
 
 class TelemetryReplay(Node):
@@ -95,6 +96,8 @@ class TelemetryReplay(Node):
         self.done = False
         self.exit_code = 0
         self.back_pressure = 0
+        self._burst_cap = 1_000_000
+        self._resume_at: float | None = None
         self._pending: list[tuple[Any, Any]] = []
         self._started = False
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
@@ -165,10 +168,15 @@ class TelemetryReplay(Node):
                 return
             self._started = True
             self._restart_timer()
+        if self._resume_at is not None:
+            if self._steady_s() < self._resume_at:
+                return
+            self._resume_at = None
         if self._pending and not self._flush_pending():
             return
         if self.params['rate'] == 0.0:
-            end = min(self.next_row + self.params['burst'], len(self._time))
+            end = min(self.next_row + min(self.params['burst'], self._burst_cap),
+                      len(self._time))
         else:
             end = self._due_row()
         if end > self.next_row:
@@ -213,10 +221,29 @@ class TelemetryReplay(Node):
             try:
                 pub.publish(msg)
             except RCLError:
-                self.back_pressure += 1
+                self._back_off()
                 return False
             self._pending.pop(0)
         return True
+
+    def _steady_s(self) -> float:
+        return self._steady.now().nanoseconds * 1e-9
+
+    def _back_off(self) -> None:
+        """Pause after a refused sample, and publish one row per turn from now on.
+
+        A subscriber's history is full. The failed ``publish`` already blocked for the
+        middleware's blocking time; pausing another ``_BACK_OFF`` s lets a subscriber in
+        this process (same executor) drain its backlog. A backlog means bursts outrun the
+        subscriber, so the burst drops to 1. Nothing is lost; the refused sample is
+        offered again (docs/nodes.md).
+        """
+        self.back_pressure += 1
+        self._resume_at = self._steady_s() + _BACK_OFF
+        if self._burst_cap > 1:
+            self._burst_cap = 1
+            self.get_logger().warning('a subscriber is lagging (its history is full): '
+                                      'publishing one row per turn from now on')
 
     def _publish_rows(self, start: int, end: int) -> None:
         for i in range(start, end):
