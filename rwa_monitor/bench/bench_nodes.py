@@ -284,7 +284,9 @@ def markdown(results: dict[str, Any]) -> str:
              'per JointState, 10 Hz seeded telemetry (dry step on rw2, viscous on rw3), '
              'replay at rate 0 (as fast as the detector takes it). Load average of the '
              f'2-core machine: {results["load_average"]["before"]:.1f} before, '
-             f'{results["load_average"]["after"]:.1f} after (other jobs were running).', '']
+             f'{results["load_average"]["after"]:.1f} after'
+             f'{" (other jobs were running)" if results["load_average"]["before"] > 1.5 else ""}'
+             '.', '']
     rows = []
     for r in results['throughput']:
         runs = ', '.join(str(round(x)) for x in r['runs'])
