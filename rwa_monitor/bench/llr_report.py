@@ -73,6 +73,7 @@ def plots(out_dir: pathlib.Path, r: dict[str, Any]) -> None:
     ax.plot([m['n'] for m in mem], [m['rss_after_first_chunk_kb'] / 1024 for m in mem],
             '-s', label='RSS after the first 1e5 samples')
     ax.set_xscale('log')
+    ax.set_ylim(bottom=0)
     ax.set_xlabel('samples streamed')
     ax.set_ylabel('MB')
     ax.legend()
