@@ -13,6 +13,7 @@ from __future__ import annotations
 import math
 import multiprocessing
 import pathlib
+import subprocess
 import time
 from typing import Any, Callable
 
@@ -306,10 +307,23 @@ def memory(s: dict, stream_per_s: float) -> dict[str, Any]:
     return {'rows': rows, 'skipped': skipped, 'budget_s': MEMORY_BUDGET_S}
 
 
+def code_version() -> str:
+    """Return the commit of the code measured, marked if the detector's files differ."""
+    try:
+        head = subprocess.run(['git', 'rev-parse', '--short', 'HEAD'], capture_output=True,
+                              text=True, check=True).stdout.strip()
+        dirty = subprocess.run(['git', 'status', '--porcelain', '--', 'rwa_monitor/core',
+                                'rwa_monitor/pipelines', 'rwa_monitor/sim'],
+                               capture_output=True, text=True, check=True).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        return 'unknown (not a git checkout)'
+    return head + (' + uncommitted changes in core/pipelines/sim' if dirty else '')
+
+
 def run(out_dir: pathlib.Path, quick: bool) -> dict[str, Any]:
     """Run every section, write llr.json, the plots and the llr section of results.md."""
     s = _settings(quick)
-    results: dict[str, Any] = {'quick': quick, 'settings': s}
+    results: dict[str, Any] = {'quick': quick, 'settings': s, 'code': code_version()}
     started = time.perf_counter()
     print('throughput (single process)', flush=True)
     results['throughput'] = throughput(s)

@@ -96,7 +96,8 @@ def markdown(r: dict[str, Any]) -> str:
     """Return the llr section of docs/results.md."""
     s = r['settings']
     out = ['## LLR friction detector (llr-realtime paper)', '',
-           f'`rwa-monitor bench llr`, {r["bench_seconds"]:.0f} s; scaled units (noise std 1, '
+           f'`rwa-monitor bench llr` on code {r["code"]}, {r["bench_seconds"]:.0f} s; '
+           'scaled units (noise std 1, '
            'given to both detectors), change at k = 1500 of 3000-sample runs; a change is '
            'detected by a declaration whose estimated step is within +-500 samples. '
            'Offline peer: binary segmentation with a model (1) least-squares cost, '
