@@ -32,6 +32,7 @@ JSON_NAME = {CHANGE_TIME: 'time', CHANGE_INDEX: 'index',
 # LLR friction detector (llr-realtime paper): extra event details.
 Z_DRY = 'z_dry'
 Z_VISCOUS = 'z_viscous'
+KIND_CONFIRMED = 'kind_confirmed'   # False: the data cannot tell dry from viscous yet
 ARGMIN_INDEX = 'argmin_index'
 LOG10_P_VALUE = 'log10_p_value'
 

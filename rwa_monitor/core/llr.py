@@ -70,14 +70,16 @@ def validate_parameters(component: str = 'rw1', *, window: int = 500,
 
 def make_event(component: str, kind: str, rows: tuple[int, int, int],
                times: tuple[float, float], log_p: float, dx: np.ndarray,
-               z: tuple[float, float], s2: float, revision: int) -> AnomalyEvent:
+               z: tuple[float, float], s2: float, revision: int, confirmed: bool
+               ) -> AnomalyEvent:
     """Build the AnomalyEvent of a declaration or revision.
 
     ``rows = (change row, argmin row, declaration row)``, ``times = (change time,
-    declaration time)``.
+    declaration time)``; ``confirmed``: the data tell the kind apart (docs/llr.md).
     """
     details = {keys.DELTA_DRY: float(dx[0]), keys.DELTA_VISCOUS: float(dx[1]),
                keys.NOISE_STD: math.sqrt(s2), keys.Z_DRY: z[0], keys.Z_VISCOUS: z[1],
+               keys.KIND_CONFIRMED: bool(confirmed),
                keys.ARGMIN_INDEX: rows[1], keys.LOG10_P_VALUE: log_p / _LN10}
     return AnomalyEvent(detector='llr', component=component, kind=kind, time=times[0],
                         index=rows[0], declared_time=times[1], declared_index=rows[2],
@@ -85,15 +87,19 @@ def make_event(component: str, kind: str, rows: tuple[int, int, int],
 
 
 def declaration(prefix: np.ndarray, first: int, c: int, k_min: int, n: int,
-                cfg: Mapping[str, Any], z_thr: float) -> tuple[int, str, np.ndarray,
-                                                               tuple[float, float], float]:
-    """Return ``(change position, kind, dx, z, sigma^2)`` at a declaration.
+                cfg: Mapping[str, Any], z_thr: float) -> tuple[int, int, str, np.ndarray,
+                                                               tuple[float, float], float,
+                                                               bool]:
+    """Return ``(change position, restart, kind, dx, z, sigma^2, confirmed)`` at a declaration.
 
     ``prefix[i]`` is the prefix-sum row (reference start ``c``) at position ``first + i``,
     covering ``[max(c, k_min - window), n + 1]``. Change position ``tau``: the ML refinement
     (:func:`llr_stats.refine_change`) over ``k_min +- window`` if enabled, else ``k_min``
     (the argmin of p_k, Algorithm 1 line 15). Categorisation: before = ``[c, tau)``, after
-    = ``[tau, n]`` (:func:`llr_stats.categorise`). The new reference starts at ``tau``.
+    = ``[tau, n]`` (:func:`llr_stats.categorise`). The new reference starts at
+    ``max(tau, k_min)``, the later of the two change estimates, so that an estimate that
+    falls before the true change does not put pre-change samples in it (they would be
+    declared as the same change again).
     """
     p = cfg['regressors'].p
     noise_var = None if cfg['noise_std'] is None else cfg['noise_std'] ** 2
@@ -101,12 +107,12 @@ def declaration(prefix: np.ndarray, first: int, c: int, k_min: int, n: int,
     if cfg['refine_change']:
         w = cfg['window']
         tau = llr_stats.refine_change(prefix, first, c, n, k_min - w, k_min + w, p,
-                                      cfg['min_excitation'], k_min)
+                                      noise_var, z_thr, k_min)
     before = prefix[tau - first]
     after = prefix[n + 1 - first] - before
-    kind, dx, z, s2 = llr_stats.categorise(before, tau - c, after, n + 1 - tau, p,
-                                           noise_var, z_thr, cfg['min_excitation'])
-    return tau, kind, dx, z, s2
+    kind, dx, z, s2, confirmed = llr_stats.categorise(before, tau - c, after, p, noise_var,
+                                                      z_thr)
+    return tau, max(tau, k_min), kind, dx, z, s2, confirmed
 
 
 def checkpoints(start: int, n: int, count: int, window: int) -> list[int]:
@@ -438,28 +444,32 @@ class LLRDetector:
     def _declare(self, n: int) -> list[AnomalyEvent]:
         """Algorithm 1 lines 18-21: declare the change and restart the reference.
 
-        The paper restarts at ``k_min``; here at the refined change position ``tau``
-        (``k_min`` when refinement is off), so that the new reference holds post-change
-        samples only. Tests of the new reference whose window is already complete run at
-        once (possible when ``tau`` is well before ``k_min``; they cannot declare).
+        The paper restarts at ``k_min``; here at ``max(tau, k_min)`` (``tau`` the refined
+        change position), so that the new reference holds post-change samples only. The
+        kind is re-checked on ``[tau, j]`` (the gap ``[tau, start)`` is kept as one
+        prefix-sum row). Tests of the new reference whose window is already complete run
+        at once (never, since the start is at or after ``k_min``; kept for safety).
         """
         L = self._L
         c, k_min = self._c, self._kmin
         first = max(c, k_min - self._w)
         prefix = self._prefix_block(first, n + 1)
-        tau, kind, dx, z, s2 = declaration(prefix, first, c, k_min, n, self._cfg, self._z_thr)
+        tau, start, kind, dx, z, s2, confirmed = declaration(prefix, first, c, k_min, n,
+                                                             self._cfg, self._z_thr)
         rows = (self._rrow[tau % L], self._rrow[k_min % L], self._rrow[n % L])
         times = (self._rtime[tau % L], self._rtime[n % L])
-        event = make_event(self._component, kind, rows, times, self._logpmin, dx, z, s2, 0)
+        event = make_event(self._component, kind, rows, times, self._logpmin, dx, z, s2, 0,
+                           confirmed)
         self._cat = dict(before=prefix[tau - first].copy(), n_before=tau - c, kind=kind,
-                         revision=0, rows=rows, time=times[0], log_p=self._logpmin,
-                         start=tau)
+                         confirmed=confirmed, revision=0, rows=rows, time=times[0],
+                         log_p=self._logpmin, start=tau,
+                         gap=prefix[start - first] - prefix[tau - first])
         self._checks = checkpoints(tau, n, self._cfg['category_revisions'], self._w)
         self._checkpoint = self._checks.pop(0) if self._checks else -1
-        self._restart(tau, n)
+        self._restart(start, n)
         events = [event]
         test = self._test2 if self._p == 2 else self._test_general
-        for k in range(tau + self._w + 1, n - self._w + 2):
+        for k in range(start + self._w + 1, n - self._w + 2):
             if test(k, self._rpref[(k + self._w) % L]):
                 events.extend(self._declare(n))
         return events
@@ -488,18 +498,18 @@ class LLRDetector:
         """Re-check the kind of the last declared change at a checkpoint."""
         cat = self._cat
         self._checkpoint = self._checks.pop(0) if self._checks else -1
-        after = np.asarray(self._pref, dtype=float)
-        kind, dx, z, s2 = llr_stats.categorise(cat['before'], cat['n_before'], after,
-                                               j + 1 - cat['start'], self._p, self._noise_var,
-                                               self._z_thr, self._min_exc)
-        if kind == cat['kind']:
-            return []
+        after = cat['gap'] + np.asarray(self._pref, dtype=float)
+        kind, dx, z, s2, confirmed = llr_stats.categorise(
+            cat['before'], cat['n_before'], after, self._p, self._noise_var, self._z_thr)
+        if kind == cat['kind'] and (cat['confirmed'] or not confirmed):
+            return []   # revision: new kind, or the same kind now confirmed
         cat['kind'] = kind
+        cat['confirmed'] = confirmed
         cat['revision'] += 1
         rows = cat['rows'][:2] + (self._rrow[j % self._L],)
         times = (cat['time'], self._rtime[j % self._L])
         return [make_event(self._component, kind, rows, times, cat['log_p'], dx, z, s2,
-                           cat['revision'])]
+                           cat['revision'], confirmed)]
 
     # -- general model (p > 2): numpy per sample -------------------------------------
     def _update_general(self, row: int, t: float, f: float, h: np.ndarray

@@ -265,17 +265,17 @@ def detect_batch_with_counters(time, speed, friction, *, component: str = 'rw1',
         while checks and checks[0] <= upto:
             j = checks.pop(0)
             ref.extend(j + 1)
-            after = ref.at(j + 1)
-            kind, dx, z, s2 = llr_stats.categorise(
-                cat['before'], cat['n_before'], after, j + 1 - cat['start'], 2,
-                None if cfg['noise_std'] is None else cfg['noise_std'] ** 2, z_thr,
-                cfg['min_excitation'])
-            if kind != cat['kind']:
+            after = cat['gap'] + ref.at(j + 1)
+            kind, dx, z, s2, confirmed = llr_stats.categorise(
+                cat['before'], cat['n_before'], after, 2,
+                None if cfg['noise_std'] is None else cfg['noise_std'] ** 2, z_thr)
+            if kind != cat['kind'] or (confirmed and not cat['confirmed']):
                 cat['kind'] = kind
+                cat['confirmed'] = confirmed
                 cat['revision'] += 1
                 ev_rows = cat['rows'][:2] + (int(rows[j]),)
                 events.append(make_event(component, kind, ev_rows, (cat['time'], float(tv[j])),
-                                         cat['log_p'], dx, z, s2, cat['revision']))
+                                         cat['log_p'], dx, z, s2, cat['revision'], confirmed))
 
     c = 0
     while True:
@@ -299,15 +299,18 @@ def detect_batch_with_counters(time, speed, friction, *, component: str = 'rw1',
         first = max(c, k_min - win)
         ref.extend(n + 1)
         prefix = ref.at(np.arange(first, n + 2))
-        tau, kind, dx, z, s2 = declaration(prefix, first, c, k_min, n, cfg, z_thr)
+        tau, start, kind, dx, z, s2, confirmed = declaration(prefix, first, c, k_min, n, cfg,
+                                                             z_thr)
         ev_rows = (int(rows[tau]), int(rows[k_min]), int(rows[n]))
         times = (float(tv[tau]), float(tv[n]))
         events.append(make_event(component, kind, ev_rows, times, state['logp'], dx, z, s2,
-                                 0))
+                                 0, confirmed))
         cat = dict(before=prefix[tau - first].copy(), n_before=tau - c, kind=kind,
-                   revision=0, rows=ev_rows, time=times[0], log_p=state['logp'], start=tau)
+                   confirmed=confirmed, revision=0, rows=ev_rows, time=times[0],
+                   log_p=state['logp'], start=tau,
+                   gap=prefix[start - first] - prefix[tau - first])
         checks = checkpoints(tau, n, cfg['category_revisions'], win)
-        c = tau
+        c = start
     counters['ill_conditioned'] = state['ill']
     return events, counters
 

@@ -81,66 +81,118 @@ def segment_fit(row: np.ndarray, n: int, p: int, noise_var: float | None
     return x, pi, s2 if s2 > floor else floor
 
 
-def categorise(before: np.ndarray, n_before: int, after: np.ndarray, n_after: int, p: int,
-               noise_var: float | None, z_threshold: float, min_excitation: float
-               ) -> tuple[str, np.ndarray, tuple[float, float], float]:
-    """Return ``(kind, x_after - x_before, (z_dry, z_viscous), sigma^2)`` for one change.
+def _solve(m: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """Return ``m^+ r`` for stacked symmetric matrices (Jacobi-scaled pseudo-inverse).
+
+    Scaling by the diagonal first makes the cut-off relative to the correlation matrix;
+    an exactly collinear segment (constant speed, wheel at rest) gets the minimum-norm
+    solution, whose fitted values (and so residual) are still the least-squares ones.
+    """
+    diag = np.diagonal(m, axis1=-2, axis2=-1)
+    d = np.sqrt(np.where(diag > 0.0, diag, 1.0))
+    ms = m / (d[..., :, None] * d[..., None, :])
+    with np.errstate(all='ignore'):
+        inv = np.linalg.pinv(ms, rcond=1e-13, hermitian=True)
+    return np.einsum('...ij,...j->...i', inv, r / d) / d
+
+
+def change_fits(before: np.ndarray, after: np.ndarray, p: int
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """Return ``(explained, dx)`` of the three change hypotheses dry, viscous, both.
+
+    Not in the paper (categorisation, docs/llr.md). One least-squares fit of the before
+    segment (sums ``before``) and the after segment (``after``) together, with ``x``
+    before and ``x + dx`` after: ``dx = a e_0`` (dry only), ``dx = a e_1`` (viscous only)
+    or ``dx`` free (both: two separate fits). The reference estimate and its covariance
+    enter exactly through the joint fit. ``explained[..., h] = theta . r``, so that
+    ``RSS_h = E_before + E_after - explained_h`` (differences between hypotheses never
+    subtract the large ``E``); ``dx[..., h, :]`` is the estimated change. Leading axes are
+    kept (vectorised over candidate change positions).
+    """
+    pi_b, q_b, _ = unpack(before, p)
+    pi_a, q_a, _ = unpack(after, p)
+    lead = pi_b.shape[:-2]
+    x_b = _solve(pi_b, q_b)
+    x_a = _solve(pi_a, q_a)
+    explained = np.empty(lead + (3,))
+    dx = np.zeros(lead + (3, p))
+    explained[..., 2] = (np.einsum('...i,...i->...', x_b, q_b)
+                         + np.einsum('...i,...i->...', x_a, q_a))
+    dx[..., 2, :] = x_a - x_b
+    m = np.empty(lead + (p + 1, p + 1))
+    m[..., :p, :p] = pi_b + pi_a
+    r = np.empty(lead + (p + 1,))
+    r[..., :p] = q_b + q_a
+    for i in (0, 1):
+        m[..., :p, p] = pi_a[..., :, i]
+        m[..., p, :p] = pi_a[..., i, :]
+        m[..., p, p] = pi_a[..., i, i]
+        r[..., p] = q_a[..., i]
+        theta = _solve(m, r)
+        explained[..., i] = np.einsum('...i,...i->...', theta, r)
+        dx[..., i, i] = theta[..., p]
+    return explained, dx
+
+
+def categorise(before: np.ndarray, n_before: int, after: np.ndarray, p: int,
+               noise_var: float | None, z_threshold: float
+               ) -> tuple[str, np.ndarray, tuple[float, float], float, bool]:
+    """Return ``(kind, dx, (z_dry, z_viscous), sigma^2, confirmed)`` for one change.
 
     Not in the paper (which promises a categorisation but gives none); the design is in
-    docs/llr.md. ``dx = x_after - x_before`` has covariance ``sigma^2 (Pi_before^-1 +
-    Pi_after^-1)`` (independent segments, noise variance from the reference fit before the
-    change). ``z_i = dx_i / sd_i`` for i = dry, viscous. The dry-only model (``dx_viscous =
-    0``) is rejected when ``|z_viscous| > z_threshold`` and the viscous-only model when
-    ``|z_dry| > z_threshold`` (two-sided marginal tests at ``category_level``):
-    both rejected -> ``both``; one rejected -> the other kind; none rejected -> the kind
-    with the larger ``|z|`` (the single-component model that fits better). An
-    after-segment that cannot separate dry from viscous (speed barely varying) gives
-    ``both`` with the joint estimate undetermined (z = nan).
+    docs/llr.md. Nested likelihood-ratio tests on the joint fit of :func:`change_fits`,
+    ``sigma^2`` from the before fit: ``chi_v = (RSS_dry - RSS_both) / sigma^2`` rejects the
+    dry-only change when ``> z_threshold^2``, ``chi_d = (RSS_viscous - RSS_both) /
+    sigma^2`` the viscous-only change (1 degree of freedom each; when the after segment is
+    identifiable they equal the squared marginal z of ``dx``). ``z_dry = sign(dx_dry)
+    sqrt(chi_d)``, ``z_viscous`` likewise. Both rejected -> ``both``; one rejected -> the
+    other kind; these are *confirmed*. None rejected (the data cannot tell dry from
+    viscous, e.g. the speed barely varied after the change) -> the single-component kind
+    that fits better, *not confirmed*. ``dx`` is always the estimate of the reported
+    kind's hypothesis (constrained fit for a single component), never the free fit of an
+    unidentifiable segment.
     """
-    x_b, pi_b, s2 = segment_fit(before, n_before, p, noise_var)
-    pi_a, q_a, _ = unpack(after, p)
-    if not bool(well_conditioned(pi_a, min_excitation)):
-        nan = float('nan')
-        return 'both', np.full(p, nan), (nan, nan), s2
-    x_a = np.linalg.solve(pi_a, q_a)
-    dx = x_a - x_b
-    cov = s2 * (np.linalg.inv(pi_b) + np.linalg.inv(pi_a))
-    z_d = float(dx[0] / math.sqrt(cov[0, 0]))
-    z_v = float(dx[1] / math.sqrt(cov[1, 1]))
-    sig_d = abs(z_d) > z_threshold
-    sig_v = abs(z_v) > z_threshold
-    if sig_d and sig_v:
-        kind = 'both'
-    elif sig_d or sig_v:
-        kind = 'dry' if sig_d else 'viscous'
+    explained, dx = change_fits(np.asarray(before, dtype=float),
+                                np.asarray(after, dtype=float), p)
+    if noise_var is None:
+        pi_b, q_b, e_b = unpack(before, p)
+        rss = float(e_b) - float(_solve(pi_b, q_b) @ q_b)
+        floor = NOISE_FLOOR_REL * float(e_b) / n_before + NOISE_FLOOR_ABS
+        s2 = max(rss / (n_before - p), floor)
     else:
-        kind = 'dry' if abs(z_d) >= abs(z_v) else 'viscous'
-    return kind, dx, (z_d, z_v), s2
-
-
-def segment_rss(rows: np.ndarray, counts: np.ndarray, p: int, min_excitation: float
-                ) -> np.ndarray:
-    """Return the least-squares residual sum of squares of each segment (inf if singular)."""
-    pi, q, e = unpack(rows, p)
-    ok = well_conditioned(pi, min_excitation) & (counts > p)
-    out = np.full(rows.shape[0], np.inf)
-    if np.any(ok):
-        x = np.linalg.solve(pi[ok], q[ok][..., None])[..., 0]
-        out[ok] = e[ok] - np.einsum('ij,ij->i', x, q[ok])
-    return out
+        s2 = float(noise_var)
+    chi_v = max(float(explained[2] - explained[0]), 0.0) / s2
+    chi_d = max(float(explained[2] - explained[1]), 0.0) / s2
+    z_d = math.copysign(math.sqrt(chi_d), float(dx[2, 0]))
+    z_v = math.copysign(math.sqrt(chi_v), float(dx[2, 1]))
+    limit = z_threshold * z_threshold
+    no_dry_only = chi_v > limit
+    no_viscous_only = chi_d > limit
+    if no_dry_only and no_viscous_only:
+        h, confirmed = 2, True
+    elif no_dry_only or no_viscous_only:
+        h, confirmed = (1 if no_dry_only else 0), True
+    else:
+        h, confirmed = (0 if explained[0] >= explained[1] else 1), False
+    return KINDS[h], dx[h].copy(), (z_d, z_v), s2, confirmed
 
 
 def refine_change(prefix: np.ndarray, first: int, c: int, n: int, lo: int, hi: int, p: int,
-                  min_excitation: float, fallback: int) -> int:
+                  noise_var: float | None, z_threshold: float, fallback: int) -> int:
     """Return the maximum-likelihood single change position in ``[lo, hi]``.
 
     Not in the paper: after a declaration, the data of the reference segment ``[c, n]``
     (old reference, window and verification samples) are split at every ``tau`` in ``[lo,
-    hi]`` into ``[c, tau)`` and ``[tau, n]``, each fitted by least squares; the split with
-    the smallest total residual is the maximum-likelihood change point under one change
-    and Gaussian noise of common variance. ``prefix[i]`` is the prefix-sum row at position
-    ``first + i`` and must cover ``[lo, n + 1]``. O(hi - lo) once per declaration;
-    ``fallback`` (the argmin of p_k) is returned when no split is identifiable.
+    hi]`` into ``[c, tau)`` and ``[tau, n]`` and fitted jointly under each change
+    hypothesis of :func:`change_fits` (dry only, viscous only, both). Each hypothesis has
+    its ML position (largest explained sum); ``both`` is kept only if it beats the better
+    single-component hypothesis by more than ``z_threshold^2 sigma^2`` (nested test,
+    ``sigma^2`` the residual variance of the best ``both`` split, or ``noise_var``).
+    Constraining the change matters when the after segment spans few speeds: a free
+    after-fit then absorbs pre-change samples (two speed levels are fitted exactly by two
+    parameters) and the position is not identifiable. ``prefix[i]`` is the prefix-sum row
+    (from ``c``) at position ``first + i`` and must cover ``[lo, n + 1]``. O(hi - lo) once
+    per declaration; ``fallback`` (the argmin of p_k) is returned when no split exists.
     """
     lo = max(lo, c + p + 1)
     hi = min(hi, n - p)
@@ -149,12 +201,19 @@ def refine_change(prefix: np.ndarray, first: int, c: int, n: int, lo: int, hi: i
     taus = np.arange(lo, hi + 1)
     before = prefix[taus - first]
     total = prefix[n + 1 - first]
-    after = total[None, :] - before
-    rss = (segment_rss(before, taus - c, p, min_excitation)
-           + segment_rss(after, n + 1 - taus, p, min_excitation))
-    if not np.any(np.isfinite(rss)):
+    explained, _ = change_fits(before, total[None, :] - before, p)
+    explained = np.where(np.isfinite(explained), explained, -np.inf)
+    best = np.argmax(explained, axis=0)
+    top = explained[best, np.arange(3)]
+    if not np.all(np.isfinite(top)):
         return fallback
-    return int(taus[int(np.argmin(rss))])
+    if noise_var is None:
+        e_total = float(unpack(total, p)[2])
+        noise_var = max((e_total - float(top[2])) / (n + 1 - c - 2 * p),
+                        NOISE_FLOOR_REL * e_total / (n + 1 - c) + NOISE_FLOOR_ABS)
+    single = 0 if top[0] >= top[1] else 1
+    h = 2 if (top[2] - top[single]) / noise_var > z_threshold * z_threshold else single
+    return int(taus[int(best[h])])
 
 
 def z_threshold(level: float) -> float:
