@@ -86,10 +86,14 @@ def _pct(x: float) -> str:
     return '-' if x is None or (isinstance(x, float) and math.isnan(x)) else f'{100 * x:.1f} %'
 
 
+def _num(x: float, fmt: str) -> str:
+    return format(float(format(x, fmt)) + 0.0, fmt)  # no '-0'
+
+
 def _q(d: dict[str, float], fmt: str = '.0f') -> str:
     if d['median'] is None or math.isnan(d['median']):
         return '-'
-    return f'{d["median"]:{fmt}} [{d["q25"]:{fmt}}, {d["q75"]:{fmt}}]'
+    return f'{_num(d["median"], fmt)} [{_num(d["q25"], fmt)}, {_num(d["q75"], fmt)}]'
 
 
 def markdown(r: dict[str, Any]) -> str:
