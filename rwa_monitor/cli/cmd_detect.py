@@ -41,6 +41,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                              'ros__parameters; default: the installed config/rwa_monitor.yaml)')
     parser.add_argument('-o', '--output', type=pathlib.Path, metavar='FILE',
                         help='write the events JSON here (default: print a table)')
+    parser.add_argument('--friction-model', type=pathlib.Path, metavar='YAML',
+                        help='refined friction model for the LLR detector, as written by '
+                             'rwa-monitor identify (DIR/friction_model.yaml)')
     parser.set_defaults(func=run)
 
 
@@ -118,6 +121,9 @@ def run(args: argparse.Namespace) -> int:
     """Read the file, detect, and write the JSON or print the table."""
     tele = read_telemetry(args.file)
     config = load_config(args.config)
+    if args.friction_model is not None:
+        block = config.setdefault('llr_detector', {}).setdefault('ros__parameters', {})
+        block['friction_model_file'] = str(args.friction_model)
     events, summary = detect(tele, config)
     if args.output is not None:
         document = {'events': [e.to_json() for e in events], 'summary': summary}
