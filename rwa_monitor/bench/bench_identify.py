@@ -2,7 +2,7 @@
 
 1. Measured: every usable run of ../shared/data/measured/drum-coastdown (read in place;
    per-run reports go to a temporary folder outside the repository; only summary numbers
-   and one plot are kept). Source and licence: the folder's SOURCE.md.
+   and one plot are kept). Source: github.com/hpvdt/rolling_resistance_rig (SOURCE.md).
 2. Undeclared effects: simulated files (sim/undeclared.py), several seeds each.
 3. Speed: a 3-hour 10 Hz file (108,000 samples), prepare + identify, goal < 10 s.
 4. Closing demonstration: identify on a nominal file with undeclared drag, then run the
@@ -250,7 +250,7 @@ def _markdown(res: dict) -> str:
     if 'runs' in m:
         p = m['pooled']
         lines += ['### Measured coast-downs (drum-coastdown folder, read in place; source '
-                  'see its SOURCE.md)', '',
+                  'github.com/hpvdt/rolling_resistance_rig, see its SOURCE.md)', '',
                   f'Inertia from the pendulum swings: drum {m["inertia_kg_m2"]["drum"]:.2f} '
                   f'kg m^2 (SOURCE.md: about 26.4), wheel {m["inertia_kg_m2"]["wheel"]:.4f} '
                   f'kg m^2 (about 0.090). Friction = J dw/dt (local quadratic, 11 '
