@@ -343,9 +343,10 @@ def register(subparsers: Any) -> None:
                         help=f'length of the generated record (default {DEFAULT_HOURS:g})')
     parser.add_argument('--seed', type=int, default=DEFAULT_SEED, help='simulator seed')
     parser.add_argument('--file', help='replay this telemetry file instead')
-    parser.add_argument('--gyro', action='store_true',
+    parser.add_argument('--gyro', action=argparse.BooleanOptionalAction, default=True,
                         help='add gyro, star-tracker and reference-rate channels with a gyro '
-                        'drift (input for the VSADC node; slower, see docs/nodes.md)')
+                        'drift, input of the VSADC node (default; --no-gyro replays the '
+                        'wheels alone, about twice as fast: see docs/nodes.md)')
     parser.add_argument('--cache-dir', help='where the generated file is kept '
                         '(default $RWA_MONITOR_CACHE or ~/.cache/rwa_monitor)')
     parser.add_argument('--executor', choices=('events', 'single'), default='events',
