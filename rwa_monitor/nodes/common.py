@@ -264,6 +264,22 @@ STALE = DiagnosticStatus.STALE
 LEVEL_NAMES = {OK: 'OK', WARN: 'WARN', ERROR: 'ERROR', STALE: 'STALE'}
 
 
+def wheel_names(text: str) -> set[str] | None:
+    """Return the wheel ids of a comma-separated ``wheels`` parameter (None = any wheel)."""
+    names = {n.strip() for n in text.split(',') if n.strip()}
+    return names or None
+
+
+def wheel_refusal(wheel_id: str, allowed: set[str] | None, known: int,
+                  max_wheels: int) -> tuple[str, str] | None:
+    """Return (counter, message) if a new wheel must be ignored, else None."""
+    if allowed is not None and wheel_id not in allowed:
+        return 'unknown_wheel', f'ignoring wheel {wheel_id!r}: not in parameter wheels'
+    if known >= max_wheels:
+        return 'too_many_wheels', f'ignoring wheel {wheel_id!r}: max_wheels reached'
+    return None
+
+
 def key_values(values: Mapping[str, Any]) -> list[KeyValue]:
     """Return KeyValues; floats keep every digit (``repr``), so they read back exactly."""
     return [KeyValue(key=str(k), value=format_value(v)) for k, v in values.items()]

@@ -37,7 +37,7 @@ from rwa_monitor.core import keys
 from rwa_monitor.core.events import AnomalyEvent
 from rwa_monitor.core.fss.pipeline import diagnose, FssConfig, load_model, SlidingWindow
 from rwa_monitor.exceptions import ConfigError
-from rwa_monitor.nodes import messages
+from rwa_monitor.nodes import common, messages
 from rwa_monitor.nodes.common import (declare_parameters, DiagnosticsPublisher, EVENTS_QOS,
                                       OK, ParamSpec, qos_event_callbacks, run_node,
                                       telemetry_qos, WARN)
@@ -116,7 +116,7 @@ class FssDiagnoserNode(Node):
                                'duplicate_name': 0, 'unknown_wheel': 0, 'too_many_wheels': 0,
                                'out_of_order': 0, 'diagnosis_failed': 0}
         self._logged: set[tuple[str, str]] = set()
-        self._allowed = self._allowed_wheels()
+        self._allowed = common.wheel_names(self.params['wheels'])
         self._worker = concurrent.futures.ThreadPoolExecutor(
             max_workers=1, thread_name_prefix='fss_diagnoser')
         self._done: queue.Queue = queue.Queue()
@@ -141,15 +141,11 @@ class FssDiagnoserNode(Node):
     def _check_config(self, values: dict[str, Any]) -> None:
         self._make_config(values)
 
-    def _allowed_wheels(self) -> set[str] | None:
-        names = {n.strip() for n in self.params['wheels'].split(',') if n.strip()}
-        return names or None
-
     def _on_parameter(self, name: str, value: Any) -> None:
         if name in CONFIG_NAMES:
             self._config = self._make_config(self.params)
         elif name == 'wheels':
-            self._allowed = self._allowed_wheels()
+            self._allowed = common.wheel_names(self.params['wheels'])
         elif name == 'window_period':
             for wheel in self.wheels.values():
                 wheel.window.period = int(value)
@@ -194,13 +190,10 @@ class FssDiagnoserNode(Node):
         wheel = self.wheels.get(wheel_id)
         if wheel is not None:
             return wheel
-        if self._allowed is not None and wheel_id not in self._allowed:
-            self._count('unknown_wheel', wheel_id,
-                        f'ignoring wheel {wheel_id!r}: not in parameter wheels')
-            return None
-        if len(self.wheels) >= self.params['max_wheels']:
-            self._count('too_many_wheels', wheel_id,
-                        f'ignoring wheel {wheel_id!r}: max_wheels reached')
+        refusal = common.wheel_refusal(wheel_id, self._allowed, len(self.wheels),
+                                       self.params['max_wheels'])
+        if refusal is not None:
+            self._count(refusal[0], wheel_id, refusal[1])
             return None
         wheel = self.wheels[wheel_id] = _Wheel(self.params['window_length'],
                                                self.params['window_period'])

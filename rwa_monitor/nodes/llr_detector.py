@@ -29,7 +29,7 @@ from sensor_msgs.msg import JointState
 
 from rwa_monitor.core import keys
 from rwa_monitor.core.events import AnomalyEvent
-from rwa_monitor.nodes import messages
+from rwa_monitor.nodes import common, messages
 from rwa_monitor.nodes.common import (declare_parameters, DiagnosticsPublisher, EVENTS_QOS,
                                       OK, ParamSpec, qos_event_callbacks, run_node,
                                       telemetry_qos)
@@ -114,7 +114,7 @@ class LLRDetectorNode(Node):
         self.events: collections.deque[AnomalyEvent] = collections.deque(maxlen=MAX_KEPT)
         self._codec: messages.JointStateCodec | None = None
         self._logged: set[tuple[str, str]] = set()
-        self._allowed = self._allowed_wheels()
+        self._allowed = common.wheel_names(self.params['wheels'])
         self.diagnostics = DiagnosticsPublisher(
             self, period=self.params['diagnostic_period'],
             stale_timeout=self.params['stale_timeout'])
@@ -137,10 +137,6 @@ class LLRDetectorNode(Node):
         """Build a detector from ``values`` (ValueError naming a parameter if it fails)."""
         self._detector_class('check', **detector_kwargs(self._detector_config(values)))
 
-    def _allowed_wheels(self) -> set[str] | None:
-        names = {n.strip() for n in self.params['wheels'].split(',') if n.strip()}
-        return names or None
-
     def _on_parameter(self, name: str, value: Any) -> None:
         if name in DETECTOR_PARAMETERS:
             self._kwargs = detector_kwargs(self._detector_config())
@@ -149,7 +145,7 @@ class LLRDetectorNode(Node):
                 wheel.detector = self._new_detector(wheel_id)
             self.get_logger().info(f'{name} = {value}: every wheel detector restarted')
         elif name == 'wheels':
-            self._allowed = self._allowed_wheels()
+            self._allowed = common.wheel_names(self.params['wheels'])
 
     def _new_detector(self, wheel_id: str) -> Any:
         return self._detector_class(wheel_id, **self._kwargs)
@@ -217,13 +213,10 @@ class LLRDetectorNode(Node):
         wheel = self.wheels.get(wheel_id)
         if wheel is not None:
             return wheel
-        if self._allowed is not None and wheel_id not in self._allowed:
-            self._reject('unknown_wheel', wheel_id,
-                         f'ignoring wheel {wheel_id!r}: not in parameter wheels')
-            return None
-        if len(self.wheels) >= self.params['max_wheels']:
-            self._reject('too_many_wheels', wheel_id,
-                         f'ignoring wheel {wheel_id!r}: max_wheels reached')
+        refusal = common.wheel_refusal(wheel_id, self._allowed, len(self.wheels),
+                                       self.params['max_wheels'])
+        if refusal is not None:
+            self._reject(refusal[0], wheel_id, refusal[1])
             return None
         wheel = self.wheels[wheel_id] = _Wheel(self._new_detector(wheel_id))
         wheel.health = self.diagnostics.component(wheel_id, f'{wheel_id} friction')
