@@ -22,7 +22,7 @@ test: $(STAMP)
 	$(PY) -m pytest test
 
 bench: $(STAMP)
-	$(VENV)/bin/rwa-monitor bench
+	$(PY) -m bench
 
 lint: $(STAMP)
 	$(PY) -m flake8 rwa_monitor test setup.py launch
@@ -55,4 +55,4 @@ demo-bus: $(BSK_STAMP)
 	$(BSK_VENV)/bin/rwa-monitor detect data/generated/bus.csv
 
 bench-bus: $(BSK_STAMP)
-	$(BSK_VENV)/bin/rwa-monitor bench bus
+	$(BSK_PY) -m bench bus

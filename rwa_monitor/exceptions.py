@@ -29,3 +29,7 @@ class ConfigError(RwaMonitorError, ValueError):
 
 class NotIdentifiableError(RwaMonitorError, ValueError):
     """Data that cannot determine the parameters asked for (the message says which)."""
+
+
+class OutputError(RwaMonitorError, OSError):
+    """An output that cannot be written safely (names the path and the reason)."""

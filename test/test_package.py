@@ -21,7 +21,7 @@ def test_core_never_imports_rclpy():
 def test_cli_help_lists_commands():
     out = subprocess.run([sys.executable, '-m', 'rwa_monitor.cli.main', '--help'],
                          capture_output=True, text=True, check=True, cwd=REPO).stdout
-    assert 'simulate' in out and 'bench' in out
+    assert 'simulate' in out and 'detect' in out and 'bench' not in out
 
 
 @pytest.mark.slow
@@ -47,3 +47,11 @@ def test_colcon_build_installs_console_scripts_where_ros2_run_looks(tmp_path):
     assert (share / 'config' / 'rwa_monitor.yaml').is_file()
     marker = install / 'share' / 'ament_index' / 'resource_index' / 'packages' / 'rwa_monitor'
     assert marker.is_file()
+
+
+def test_benchmarks_live_outside_the_installed_package():
+    out = subprocess.run([sys.executable, '-m', 'bench', '--help'], capture_output=True,
+                         text=True, check=True, cwd=REPO).stdout
+    assert 'llr' in out and 'identify' in out
+    import rwa_monitor
+    assert not (pathlib.Path(rwa_monitor.__file__).parent / 'bench').exists()

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from rwa_monitor.bench.bench_vsadc import delay, scores
+from bench.bench_vsadc import delay, scores
 from rwa_monitor.core import baselines
 from rwa_monitor.sim.aocs import named_fault, simulate_aocs
 

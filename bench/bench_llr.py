@@ -1,4 +1,4 @@
-"""``rwa-monitor bench llr``: the llr-realtime paper's experiments (section III) and goals.
+"""``python -m bench llr``: the llr-realtime paper's experiments (section III) and goals.
 
 Sections: Fig. 3 (localisation, miss rate), Fig. 4 (detection probability vs size of a
 dry change, simulation vs Lemma 1), Fig. 5 (average run length to a false alarm),
@@ -19,7 +19,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from rwa_monitor.bench import llr_cases, report
+from bench import llr_cases, report
 
 WORKERS = 2
 TOL = 500            # a declaration within +-TOL samples of the change detects it
@@ -339,7 +339,7 @@ def run(out_dir: pathlib.Path, quick: bool) -> dict[str, Any]:
                                       for row in results['throughput']['rows']))
     results['goals'] = goals(results)
     results['bench_seconds'] = time.perf_counter() - started
-    from rwa_monitor.bench import llr_report
+    from bench import llr_report
     llr_report.plots(out_dir, results)
     for size in ('0.3', '0.5'):
         for who in ('llr', 'llr_noise_estimated', 'peer'):

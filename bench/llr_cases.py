@@ -7,7 +7,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from rwa_monitor.bench.llr_peer import detect_offline
+from bench.llr_peer import detect_offline
 from rwa_monitor.sim.friction import (Anomaly, parse_anomaly, REGIMES, simulate_friction,
                                       simulate_friction_with_truth)
 from rwa_monitor.sim.profiles import paper_profile

@@ -6,7 +6,7 @@ import math
 import pathlib
 from typing import Any
 
-from rwa_monitor.bench.report import table
+from bench.report import table
 
 PAPER_SPEED = 88_000 / 5.6   # llr-realtime paper, III-D: 88,000 points in 5.6 s
 
@@ -100,13 +100,13 @@ def markdown(r: dict[str, Any]) -> str:
     """Return the llr section of docs/results.md."""
     s = r['settings']
     out = ['## LLR friction detector (llr-realtime paper)', '',
-           f'`rwa-monitor bench llr` on code {r["code"]}, {r["bench_seconds"]:.0f} s; '
+           f'`python -m bench llr` on code {r["code"]}, {r["bench_seconds"]:.0f} s; '
            'scaled units (noise std 1, '
            'given to both detectors), change at k = 1500 of 3000-sample runs; a change is '
            'detected by a declaration whose estimated step is within +-500 samples. '
            'Offline peer: binary segmentation with a model (1) least-squares cost, '
            'penalty 3 ln(n) (BIC-like), min segment 50, step grid 5 '
-           '(`rwa_monitor/bench/llr_peer.py`). '
+           '(`bench/llr_peer.py`). '
            'Plots: `bench/results/llr_fig3.png`, `llr_fig4.png`, `llr_fig5.png`, '
            '`llr_memory.png`.', '']
     out += ['### Fig. 3: localisation (w_k = 20 - 10cos(pi k/1200), r = 1e-5, w = 500, '

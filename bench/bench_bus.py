@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from rwa_monitor.bench.report import table, update_section, write_json
+from bench.report import table, update_section, write_json
 from rwa_monitor.sim.basilisk_config import available, BusConfig, INSTALL_HINT
 
 NAME = 'bus'

@@ -6,7 +6,7 @@ import pathlib
 
 import numpy as np
 
-from rwa_monitor.bench.report import table
+from bench.report import table
 
 STATUSES = ('nominal', 'dry', 'viscous', 'fss1', 'fss2')
 ANOMALIES = ('dry', 'viscous', 'fss1', 'fss2')

@@ -12,7 +12,9 @@ from typing import Any
 
 import numpy as np
 
-RESULTS_MD = pathlib.Path('docs/results.md')
+REPO = pathlib.Path(__file__).resolve().parents[1]
+RESULTS_MD = REPO / 'docs' / 'results.md'
+RESULTS_DIR = REPO / 'bench' / 'results'
 
 
 def machine() -> dict[str, Any]:

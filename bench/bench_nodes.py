@@ -1,4 +1,4 @@
-"""``rwa-monitor bench nodes``: the ROS 2 nodes in one process (replay -> llr_detector).
+"""``python -m bench nodes``: the ROS 2 nodes in one process (replay -> llr_detector).
 
 Sections: throughput in wheel messages/s (JointState with 4 wheels each; EventsExecutor
 and the SingleThreadedExecutor fallback); latency from the replay publishing the row that
@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from rwa_monitor.bench import report
+from bench import report
 
 GOALS = {'throughput_per_s': 10_000}
 WHEELS = ('rw1', 'rw2', 'rw3', 'rw4')
@@ -280,7 +280,7 @@ def run(out_dir: pathlib.Path, quick: bool) -> dict[str, Any]:
 def markdown(results: dict[str, Any]) -> str:
     """Return the ``nodes`` section of docs/results.md."""
     lines = ['## ROS 2 nodes (replay -> llr_detector, one process)', '',
-             f'`rwa-monitor bench nodes`{" --quick" if results["quick"] else ""}; 4 wheels '
+             f'`python -m bench nodes`{" --quick" if results["quick"] else ""}; 4 wheels '
              'per JointState, 10 Hz seeded telemetry (dry step on rw2, viscous on rw3), '
              'replay at rate 0 (as fast as the detector takes it). Load average of the '
              f'2-core machine: {results["load_average"]["before"]:.1f} before, '

@@ -16,7 +16,7 @@ import time
 import numpy as np
 from scipy import stats
 
-from rwa_monitor.bench import report
+from bench import report
 from rwa_monitor.cli.cmd_fss import detection_matrix, train_model
 from rwa_monitor.core.fss.assign import assign_changepoints
 from rwa_monitor.core.fss.pipeline import extract, FssConfig
@@ -293,7 +293,7 @@ def run(out_dir: pathlib.Path, quick: bool) -> dict:
     }
     results['goals'] = goals(results)
     results['bench_seconds'] = time.perf_counter() - started
-    from rwa_monitor.bench import fss_report
+    from bench import fss_report
     fss_report.plots(out_dir, results)
     report.write_json(out_dir, 'fss', results)
     if quick:

@@ -21,7 +21,7 @@ import warnings
 
 import numpy as np
 
-from rwa_monitor.bench import report
+from bench import report
 from rwa_monitor.core import baselines
 from rwa_monitor.core.vsadc import VsadcAxis
 from rwa_monitor.pipelines import vsadc as pipeline

@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from rwa_monitor.bench.report import table, update_section, write_json
+from bench.report import table, update_section, write_json
 from rwa_monitor.cli.cmd_identify import (coastdown_runs, pendulum_inertia, read_coastdown,
                                           write_outputs)
 from rwa_monitor.core.identify.data import prepare
@@ -242,7 +242,7 @@ def run(out_dir: pathlib.Path, quick: bool) -> dict:
 
 def _markdown(res: dict) -> str:
     lines = ['## identify: closing the loop (issue 7)', '',
-             '`rwa-monitor bench identify`' + (' --quick (smoke run, not a result)'
+             '`python -m bench identify`' + (' --quick (smoke run, not a result)'
                                                if res['quick'] else '') + '. '
              'Method and decisions: docs/identify.md. RMSE in N m; "held out" = the '
              'interleaved blocks not used for fitting.', '']
