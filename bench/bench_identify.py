@@ -242,8 +242,8 @@ def run(out_dir: pathlib.Path, quick: bool) -> dict:
 
 def _markdown(res: dict) -> str:
     lines = ['## identify: closing the loop (issue 7)', '',
-             '`python -m bench identify`' + (' --quick (smoke run, not a result)'
-                                               if res['quick'] else '') + '. '
+             '`python -m bench identify`'
+             + (' --quick (smoke run, not a result)' if res['quick'] else '') + '. '
              'Method and decisions: docs/identify.md. RMSE in N m; "held out" = the '
              'interleaved blocks not used for fitting.', '']
     m = res['measured']
