@@ -22,6 +22,7 @@ import contextlib
 from dataclasses import dataclass
 import math
 import sys
+import textwrap
 import time
 from typing import Any, Callable, Iterator, Mapping, Sequence
 
@@ -444,8 +445,8 @@ def node_help(prog: str, description: str | None, specs: Sequence[Any] = ()) -> 
             default = getattr(spec, 'default', '')
             flags = ' (read-only)' if getattr(spec, 'read_only', False) else ''
             lines.append(f'  {spec.name} (default {default!r}){flags}')
-            text = ' '.join(str(getattr(spec, 'description', '')).split())
-            lines += [f'      {text[i:i + 80]}' for i in range(0, len(text), 80)]
+            lines += textwrap.wrap(str(getattr(spec, 'description', '')), 86,
+                                   initial_indent='      ', subsequent_indent='      ')
     lines += ['', 'Stops cleanly on Ctrl-C (SIGINT) and SIGTERM. docs/nodes.md has the topics, '
               'diagnostics and alarms.']
     return '\n'.join(lines)
@@ -458,7 +459,8 @@ def run_node(factory: Callable[[], Node], args: Sequence[str] | None = None,
 
     ``args`` (default ``sys.argv``) get ``use_sim_time`` true as a default (see
     :func:`with_sim_time`). ``-h``/``--help`` before ``--ros-args`` prints ``help_text``
-    (see :func:`node_help`) and returns 0 without starting ROS.
+    (default: :func:`node_help` of the docstring and ``PARAMETERS`` of the module that
+    defines ``factory``) and returns 0 without starting ROS.
 
     A :class:`ConfigError` at start-up (a bad parameter) is printed and gives 2; Ctrl-C,
     SIGTERM and an external shutdown end cleanly with 0 (an error raised by a call into a
@@ -470,7 +472,11 @@ def run_node(factory: Callable[[], Node], args: Sequence[str] | None = None,
     argv = sys.argv if args is None else list(args)
     if wants_help(argv):
         text = help_text() if callable(help_text) else help_text
-        print(text or node_help(str(argv[0]).rsplit('/', 1)[-1], None))
+        if text is None:   # the docstring and PARAMETERS of the module defining ``factory``
+            module = sys.modules.get(getattr(factory, '__module__', ''))
+            text = node_help(str(argv[0]).rsplit('/', 1)[-1], getattr(module, '__doc__', None),
+                             getattr(module, 'PARAMETERS', ()))
+        print(text)
         return 0
     rclpy.init(args=with_sim_time(argv))
     node = None

@@ -25,7 +25,7 @@ from std_srvs.srv import Trigger
 from rwa_monitor.core.events import AnomalyEvent
 from rwa_monitor.nodes import messages
 from rwa_monitor.nodes.common import DiagnosticsPublisher, LEVEL_NAMES, OK, ParamSpec
-from rwa_monitor.telemetry.alarms import AlarmStore
+from rwa_monitor.telemetry.alarms import AlarmStore, event_key
 
 ALARMS_ID = 'alarms'
 EVENTS_FILE = ParamSpec(
@@ -41,13 +41,13 @@ class LatchedAlarms:
     """Latched anomaly records of one node; see the module docstring."""
 
     def __init__(self, node: Node, publisher: Any, diagnostics: DiagnosticsPublisher,
-                 path: str = '', level_of: Callable[[str], bytes] = messages.event_level
-                 ) -> None:
+                 path: str = '', level_of: Callable[[str], bytes] = messages.event_level,
+                 key: Callable[[AnomalyEvent], str] = event_key) -> None:
         self._node = node
         self._pub = publisher
         self._diagnostics = diagnostics
         self._level_of = level_of
-        self.store = AlarmStore(str(path) if path else None)
+        self.store = AlarmStore(str(path) if path else None, key=key)
         reloaded = self.store.load()
         diagnostics.provide(ALARMS_ID, 'latched alarms', self._health)
         diagnostics.component(ALARMS_ID, 'latched alarms').stale_timeout = float('inf')

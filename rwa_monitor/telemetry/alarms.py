@@ -22,7 +22,7 @@ import math
 import os
 import pathlib
 import time
-from typing import Any, Iterable
+from typing import Any, Callable, Iterable
 
 from rwa_monitor.core import keys
 from rwa_monitor.core.events import AnomalyEvent
@@ -37,6 +37,11 @@ _CORE = (keys.DETECTOR, keys.COMPONENT, keys.KIND, keys.CHANGE_TIME, keys.CHANGE
 def event_key(event: AnomalyEvent) -> str:
     """Return the identity of the change an event belongs to (revisions share it)."""
     return f'{event.detector}/{event.component}/{event.index}'
+
+
+def kind_key(event: AnomalyEvent) -> str:
+    """Return an identity per change and kind (detectors that flag kinds separately)."""
+    return f'{event_key(event)}/{event.kind}'
 
 
 def event_record(event: AnomalyEvent) -> dict[str, Any]:
@@ -78,6 +83,8 @@ class Alarm:
 class AlarmStore:
     """The latched anomalies of one node, optionally journalled to a JSON Lines file.
 
+    ``key(event)`` names the record an event belongs to (:func:`event_key`: a change and
+    its revisions; :func:`kind_key`: one record per kind).
     ``declare(events)`` latches each event (a revision updates its record, a recovery
     kind clears the component's records); ``acknowledge(component)`` ends the records of
     one component (or all); ``active()`` lists the unacknowledged ones, oldest first. At
@@ -87,8 +94,10 @@ class AlarmStore:
     """
 
     def __init__(self, path: str | os.PathLike | None = None, *,
-                 max_alarms: int = MAX_ALARMS) -> None:
+                 max_alarms: int = MAX_ALARMS,
+                 key: Callable[[AnomalyEvent], str] = event_key) -> None:
         self.path = pathlib.Path(path) if path else None
+        self.key = key
         self.max_alarms = max_alarms
         self._alarms: dict[str, Alarm] = {}
         self.counters = {'declared': 0, 'acknowledged': 0, 'cleared': 0, 'dropped': 0,
@@ -161,7 +170,7 @@ class AlarmStore:
         touched = []
         for event in events:
             wall = time.time()
-            self._append({'record': 'event', 'key': event_key(event), 'wall_time_s': wall,
+            self._append({'record': 'event', 'key': self.key(event), 'wall_time_s': wall,
                           'event': event_record(event)})
             alarm = self._latch(event, wall, self.counters)
             if alarm is not None:
@@ -177,7 +186,7 @@ class AlarmStore:
                     if counters is not None:
                         counters['cleared'] += 1
             return None
-        key = event_key(event)
+        key = self.key(event)
         alarm = self._alarms.get(key)
         if alarm is None:
             alarm = self._alarms[key] = Alarm(key, event, wall)
