@@ -138,7 +138,8 @@ def test_detect_command_writes_vsadc_events(tmp_path, medium):
     config = tmp_path / 'p.yaml'
     config.write_text('vsadc_detector:\n  ros__parameters:\n    reference_window: 400\n')
     out = tmp_path / 'events.json'
-    assert cli_main(['detect', str(path), '--config', str(config), '-o', str(out)]) == 0
+    # Exit code 1: an anomaly was found (docs/usage.md).
+    assert cli_main(['detect', str(path), '--config', str(config), '-o', str(out)]) == 1
     doc = json.loads(out.read_text())
     gyro = [e for e in doc['events'] if e['detector'] == 'vsadc']
     assert gyro and gyro[0]['component'] == 'gyro_x' and gyro[0]['kind'] == 'drift'

@@ -18,6 +18,7 @@ from rwa_monitor.core.vsadc import AXES, STATE_NAMES, VsadcDetector
 from rwa_monitor.telemetry import Telemetry
 
 NODE = 'vsadc_detector'
+UNKNOWN = 'unknown'
 DEFAULTS: dict[str, Any] = {
     'window': 200, 'sigma_window': 200, 'distance_threshold': 1.5e-5,
     'reference_window': 1200, 'margin': 1.5, 'exit_limit': 'max', 'exit_margin': 1.25,
@@ -86,16 +87,24 @@ def label_series(tele: Telemetry, config: Mapping[str, Any]
 
 def run_with_summary(tele: Telemetry, config: Mapping[str, Any]
                      ) -> tuple[list[AnomalyEvent], dict[str, Any]]:
-    """Run VSADC on the three axes; return (events, per-axis summary with counters)."""
+    """Run VSADC on the three axes; return (events, per-axis summary with counters).
+
+    A bad value of one gyro axis is rejected on that axis only (``bad_axis_<a>``
+    counters); ``final_state`` is ``unknown`` for an axis that never became ready.
+    """
     start = _time.perf_counter()
     labels, events, det = label_series(tele, config)
     summary: dict[str, Any] = {}
     runtime = _time.perf_counter() - start
     for i, axis in enumerate(det.axes):
+        ready = det.channels[i].ready
+        # An axis that never became ready was not examined: its state is unknown, never
+        # "healthy" (issue 17).
+        state = STATE_NAMES[int(labels[-1, i])] if ready and len(tele) else UNKNOWN
         summary[f'gyro_{axis}'] = {
             'events': sum(e.component == f'gyro_{axis}' for e in events),
-            'final_state': STATE_NAMES[int(labels[-1, i])] if len(tele) else STATE_NAMES[0],
-            'ready': det.channels[i].ready}
+            'final_state': state, 'ready': ready,
+            'samples_used': det.channels[i].samples}
     summary['counters'] = det.counters()
     summary['runtime_s'] = runtime
     return events, summary
