@@ -314,7 +314,8 @@ class DiagnosticsPublisher:
     """Publish component health on ``/diagnostics`` the way diagnostic_updater does.
 
     Every ``period`` seconds of wall (steady) time, whatever the replay rate, one
-    DiagnosticArray holds a status per component, named ``"<node>: <check>"``; its
+    DiagnosticArray holds a status per component, named ``"<node>: <check>"`` (``"<ns>/<node>:
+    <check>"`` when the node runs in a namespace); its
     stamp is the node clock (sim time under a replay). A component whose input has not
     arrived for ``stale_timeout`` seconds (its own, if set) is reported STALE (its last
     level is kept in the KeyValue ``last_level``). Staleness is measured on the steady
@@ -330,6 +331,9 @@ class DiagnosticsPublisher:
         self.components: dict[str, ComponentHealth] = {}
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
         self.steady_clock = self._steady  # for the node's own wall-time timers
+        # "<node>" in the root namespace, "sat1/<node>" under /sat1 (the dashboard and
+        # diagnostic aggregators tell spacecraft apart by it).
+        self.prefix = node.get_fully_qualified_name().lstrip('/')
         self._started = self.now()
         self._last_publish = self._started
         self._pub = node.create_publisher(DiagnosticArray, topic, DIAGNOSTICS_QOS)
@@ -392,7 +396,7 @@ class DiagnosticsPublisher:
             values['last_level'] = LEVEL_NAMES[health.level]
             level, message = STALE, f'no input for {since:.1f} s; last: {health.message}'
         values['since_input_s'] = round(since, 3)
-        return DiagnosticStatus(level=level, name=f'{self._node.get_name()}: {health.check}',
+        return DiagnosticStatus(level=level, name=f'{self.prefix}: {health.check}',
                                 message=message, hardware_id=health.hardware_id,
                                 values=key_values(values))
 
