@@ -300,6 +300,7 @@ class FssDiagnoserNode(Node):
             details={keys.WINDOW_START: float(start), keys.WINDOW_END: float(end),
                      keys.BASE_DRY: est['base_dry_nm'], keys.VISCOUS: est['viscous_nms'],
                      keys.NOISE_STD: est['noise_std_nm']}) for kind in new]
+        self.alarms.record(found)   # journalled (fsynced) before it is published
         out = DiagnosticArray()
         out.header.stamp = messages.to_stamp(float(end))
         out.status = [messages.event_status(e, self.get_name()) for e in found]
@@ -308,7 +309,6 @@ class FssDiagnoserNode(Node):
             self.get_logger().warning(f'{wheel_id}: {event.kind} anomaly in the window '
                                       f't={start:.1f}..{end:.1f} s')
         self.events.extend(found)
-        self.alarms.record(found)
 
     # --------------------------------------------------------------------- health
     def _wheel_health(self, wheel: _Wheel) -> tuple[bytes, str, dict[str, Any]]:

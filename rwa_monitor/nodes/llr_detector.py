@@ -301,6 +301,7 @@ class LLRDetectorNode(Node):
 
     # --------------------------------------------------------------------- output
     def _publish_events(self, wheel: _Wheel, found: list[AnomalyEvent]) -> None:
+        self.alarms.record(found)   # journalled (fsynced) before it is published
         out = DiagnosticArray()
         out.header.stamp = messages.to_stamp(found[-1].declared_time)
         out.status = [messages.event_status(e, self.get_name()) for e in found]
@@ -312,7 +313,6 @@ class LLRDetectorNode(Node):
         wheel.events += len(found)
         wheel.last_event = found[-1]
         self.events.extend(found)
-        self.alarms.record(found)
 
     def _wheel_health(self, wheel: _Wheel) -> tuple[bytes, str, dict[str, Any]]:
         values: dict[str, Any] = {'samples': wheel.samples, 'events': wheel.events}

@@ -284,6 +284,7 @@ class VsadcDetectorNode(Node):
 
     # --------------------------------------------------------------------- output
     def _publish_events(self, found: list[AnomalyEvent]) -> None:
+        self.alarms.record(found)   # journalled (fsynced) before it is published
         out = DiagnosticArray()
         out.header.stamp = messages.to_stamp(found[-1].declared_time)
         statuses = []
@@ -301,7 +302,6 @@ class VsadcDetectorNode(Node):
         self.events.extend(found)
         for event in found:
             self._last_event[event.component] = event
-        self.alarms.record(found)
 
     def _axis_health(self, i: int) -> tuple[bytes, str, dict[str, Any]]:
         channel = self.detector.channels[i]
