@@ -228,9 +228,18 @@ def run(out_dir: pathlib.Path, quick: bool) -> dict[str, Any]:
                         not p.rss or time.monotonic() - p.rss[-1][0] > 5.0):
                     p.rss.append((time.monotonic(), _rss_mb(p.proc.pid)))
 
+    seen_nodes: set[str] = set()
+
+    def note_nodes(msg: Any) -> None:
+        seen_nodes.update(status.name.split(':', 1)[0] for status in msg.status)
+
+    monitor.create_subscription(DiagnosticArray, '/diagnostics', note_nodes, DIAGNOSTICS_QOS)
     for p in procs.values():
         p.start()
-    spin(5.0)
+    ready_by = time.monotonic() + 180.0      # start-up can be slow on a loaded machine
+    while not set(NODE_NAMES.values()) <= seen_nodes and time.monotonic() < ready_by:
+        spin(0.5)
+    results_startup = sorted(seen_nodes)
     replay.start()
     start = time.monotonic()
     duration = cfg['duration_s']
@@ -275,6 +284,8 @@ def run(out_dir: pathlib.Path, quick: bool) -> dict[str, Any]:
     llr_rows = got('llr', 'messages') - burst.get('telemetry/wheels', 0)
     results = {
         'settings': cfg, 'seed': SEED, 'wall_s': wall, 'rows_in_file': len(tele),
+        'nodes_up_before_replay': results_startup,
+        'load_average_1min_at_end': os.getloadavg()[0],
         'rows_published': published,
         'sustained_rows_per_s': llr_rows / wall,
         'messages_lost': {
@@ -317,6 +328,7 @@ def _section(r: dict[str, Any], quick: bool) -> None:
             ['crashes (must be 0)', len(r['crashes'])],
             *[[f'memory {k} start / end (MB)', f'{v["start"]:.0f} / {v["end"]:.0f}']
               for k, v in r['memory_mb'].items()],
+            ['load average (1 min) at the end, 2 cores', f'{r["load_average_1min_at_end"]:.1f}'],
             ['/diagnostics messages/s (statuses/s)',
              f'{r["diagnostics_messages_per_s"]:.2f} ({r["diagnostics_statuses_per_s"]:.1f})']]
     kind = 'quick smoke run, not a result' if quick else 'full run'

@@ -239,3 +239,21 @@ def test_identify_refuses_speeds_that_are_not_physical():
     tele = Telemetry(time=t, wheels={'rw1': Wheel(speed=w * 1e30, friction=f)})
     with pytest.raises(RwaMonitorError, match='not physical'):
         identify(prepare(tele, 'rw1'))
+
+
+def test_single_huge_friction_spike_is_dropped_not_declared():
+    """A 1e5 N m spike is outside the plausibility limit: counted, no 'both' anomaly."""
+    t, w, f = oscillating_wheel(50.0, 4, 600.0)
+    f = f.copy()
+    f[3000] = 1e5
+    events, counters = detect_batch_with_counters(t, w, f)
+    assert events == [] and counters['out_of_range'] == 1
+
+
+def test_persistent_implausible_input_is_a_sensor_fault():
+    from rwa_monitor.core.streams import SensorFaultMonitor
+    monitor = SensorFaultMonitor(min_samples=20, fraction=0.5)
+    assert monitor.update(100, 3) is None
+    assert 'sensor fault: 60 of the last 100' in monitor.update(200, 63)
+    assert monitor.update(205, 63) is not None      # too few new samples: unchanged
+    assert monitor.update(305, 63) is None

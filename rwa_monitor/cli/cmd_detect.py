@@ -132,6 +132,7 @@ EXIT_NOTHING_FOUND = 0
 EXIT_ANOMALY = 1
 EXIT_ERROR = 2
 EXIT_NOT_EXAMINED = 3
+SENSOR_FAULT_FRACTION = 0.5  # rejected share of a channel's samples that is a sensor fault
 DETECTOR_NEEDS = {'llr': 'needs <wheel>_speed and <wheel>_friction columns',
                   'vsadc': 'needs gyro_x/y/z and q_x/y/z/w columns'}
 
@@ -163,8 +164,13 @@ def coverage(tele: Any, summary: dict[str, Any]) -> dict[str, Any]:
             samples = entry.get('samples')
             if isinstance(rejected, dict) and samples:
                 unusable = sum(v for k, v in rejected.items() if k != 'ill_conditioned')
+                implausible = rejected.get('out_of_range', 0) + rejected.get('nonfinite', 0)
                 if unusable >= samples:
                     not_examined[component] = f'{name}: no usable sample'
+                elif implausible >= SENSOR_FAULT_FRACTION * samples:
+                    not_examined[component] = (
+                        f'{name}: sensor fault: {implausible} of {samples} samples '
+                        'implausible or not finite')
     summary['detectors'] = detectors
     summary['not_examined'] = not_examined
     return summary

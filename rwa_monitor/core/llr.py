@@ -34,7 +34,7 @@ def validate_parameters(component: str = 'rw1', *, window: int = 500,
                         regressors: RegressorSet | None = None,
                         min_excitation: float = 1e-6, category_level: float = 1e-3,
                         category_revisions: int = 3, refine_change: bool = True,
-                        max_abs_speed: float = 1e6, max_abs_friction: float = 1e6
+                        max_abs_speed: float = 1e5, max_abs_friction: float = 1e3
                         ) -> dict[str, Any]:
     """Check the detector's keyword parameters; return them normalised (ValueError if bad)."""
     if not isinstance(component, str) or not component:
@@ -139,7 +139,9 @@ class LLRDetector:
     ``category_revisions`` (re-checks of the kind as data arrive), ``refine_change`` (ML
     refinement of the change time), ``max_abs_speed`` / ``max_abs_friction`` (samples at or
     beyond are dropped and counted as ``out_of_range``: absurd values never reach the sums;
-    default 1e6 rad/s and 1e6 N m). Positions count accepted samples; events carry the row
+    default 1e5 rad/s and 1e3 N m, far beyond any reaction wheel yet above the normalised
+    units of the paper's examples: a single 1e5 N m spike is dropped, not declared).
+    Positions count accepted samples; events carry the row
     index (number of ``update`` calls before that sample since construction or reset).
     """
 

@@ -159,3 +159,30 @@ class SilenceTracker:
         if not self.timeout > 0.0:
             return []
         return [c for c, t in self._last.items() if now - t > self.timeout]
+
+
+class SensorFaultMonitor:
+    """Persistent implausible input of one channel: a sensor fault, not an anomaly.
+
+    ``update(seen, rejected)`` takes the running totals of samples seen and samples
+    rejected as implausible (outside the plausibility limits, or not finite) and returns
+    the fault text when, since the previous call, at least ``min_samples`` arrived and
+    at least ``fraction`` of them were rejected; else None.
+    """
+
+    def __init__(self, min_samples: int = 20, fraction: float = 0.5) -> None:
+        self.min_samples = min_samples
+        self.fraction = fraction
+        self._last = (0, 0)
+        self.fault: str | None = None
+
+    def update(self, seen: int, rejected: int) -> str | None:
+        """Return the fault text of the interval since the last call (None if healthy)."""
+        n, bad = seen - self._last[0], rejected - self._last[1]
+        if n < 0 or bad < 0:            # the totals restarted
+            n, bad = seen, rejected
+        self._last = (seen, rejected)
+        if n >= self.min_samples:
+            self.fault = (f'sensor fault: {bad} of the last {n} samples implausible or not '
+                          'finite' if bad >= self.fraction * n else None)
+        return self.fault

@@ -84,6 +84,7 @@ class _Wheel:
     def __init__(self, detector: Any, time_jump: float) -> None:
         self.detector = detector
         self.gate = streams.StampGate(time_jump)
+        self.sensor = streams.SensorFaultMonitor()
         self.counters = self.gate.counters
         self.samples = 0
         self.events = 0
@@ -332,6 +333,12 @@ class LLRDetectorNode(Node):
         except Exception:  # noqa: BLE001 - a health value never stops the node
             pass
         values['detector_failures'] = wheel.failures
+        rejected = wheel.rejected()
+        fault = wheel.sensor.update(wheel.samples, rejected.get('out_of_range', 0)
+                                    + rejected.get('nonfinite', 0))
+        if fault is not None:
+            level, message = ERROR, f'{fault}; {message}'
+            values['sensor_fault'] = True
         failure = wheel.last_failure
         if failure is not None and self.diagnostics.now() - failure[0] < ERROR_HOLD_S:
             level, message = ERROR, f'detector failed ({failure[1]}), restarted; {message}'

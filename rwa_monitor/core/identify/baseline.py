@@ -34,7 +34,7 @@ from rwa_monitor.exceptions import NotIdentifiableError
 RIDGE = 1e-9
 PEAKS = 3
 LOW_SPEED_QUANTILE = 0.1
-MAX_ABS_SPEED = 1e6  # rad/s: the LLR detector's max_abs_speed default
+MAX_ABS_SPEED = 1e5  # rad/s: the LLR detector's max_abs_speed default
 FLEX_ROWS = 20000  # the flexible background is fitted on at most about this many rows
 
 
