@@ -41,7 +41,7 @@ from typing import Any, Sequence
 from rwa_monitor.core import keys
 from rwa_monitor.core.attitude import StarTrackerRate
 from rwa_monitor.core.events import AnomalyEvent
-from rwa_monitor.core.params import check_choice, check_int, check_real
+from rwa_monitor.core.params import AUTO, check_choice, check_int, check_real
 
 HEALTHY, DRIFT, BIAS = 0, 1, 2
 STATE_NAMES = keys.GYRO_STATES
@@ -129,20 +129,22 @@ class VsadcAxis:
     """
 
     def __init__(self, *, window: int = 200, distance_threshold: float = 1.5e-5,
-                 sigma_window: int | None = None, reference_window: int | None = 1200,
+                 sigma_window: int | str = AUTO, reference_window: int | str = 1200,
                  margin: float = 1.5, exit_limit: str = 'max', exit_margin: float = 1.25,
                  hold: int = 1, nominal_tracking: int = 0,
                  freeze_fraction: float = 0.5, adaptive: bool = True,
                  recovery_fraction: float = 0.75) -> None:
         self.window = check_int('window', window, 2, 100_000)
         self.sigma_window = check_int(
-            'sigma_window', self.window if sigma_window is None else sigma_window, 2, 100_000)
+            'sigma_window', self.window if sigma_window in (None, AUTO) else sigma_window, 2,
+            100_000)
         self.exit_limit = check_choice('exit_limit', exit_limit, ('mean', 'max'))
         self.exit_margin = check_real('exit_margin', exit_margin, 0.0, low_open=True)
         self.distance_threshold = check_real('distance_threshold', distance_threshold, 0.0,
                                              low_open=True)
         self.reference_window = check_int(
-            'reference_window', self.window if reference_window is None else reference_window,
+            'reference_window',
+            self.window if reference_window in (None, AUTO) else reference_window,
             1, 1_000_000)
         self.margin = check_real('margin', margin, 0.0, low_open=True)
         self.hold = check_int('hold', hold, 1, 100_000)
