@@ -186,7 +186,7 @@ def one_run(name: str, seed: int, config: dict[str, Any]) -> dict[str, Any]:
                          'delay_s': delay(tele.time, labels[:, 0], FAULT_S)}
     out['onset_error_s'] = (first[0].time - FAULT_S) if first else float('nan')
     out['other_axes_alarm_pct'] = float(100.0 * np.mean(labels[:, 1:] != 0))
-    out['counters'] = det.counters()
+    out['counters'] = det.counters
     return out
 
 

@@ -15,14 +15,12 @@ import argparse
 import json
 import pathlib
 import sys
-import time
 from typing import Any
 
-from rwa_monitor import pipelines
 from rwa_monitor.core.events import AnomalyEvent
 from rwa_monitor.core.schema import help_text, LLR, SCHEMAS, VSADC
-from rwa_monitor.exceptions import ConfigError
-from rwa_monitor.telemetry import read_telemetry, Telemetry
+from rwa_monitor.pipelines import detect
+from rwa_monitor.telemetry import read_telemetry
 from rwa_monitor.telemetry.parameters_file import block_values, read_parameters_file
 
 
@@ -55,49 +53,6 @@ def load_config(path: pathlib.Path | None) -> dict[str, Any]:
 def node_parameters(config: dict[str, Any], node: str) -> dict[str, Any]:
     """Return the checked parameters of ``node``: its block over ``/**``, defaults filled."""
     return block_values(config, SCHEMAS[node])
-
-
-def detect(tele: Telemetry, config: dict[str, Any], where: Any = 'parameters'
-           ) -> tuple[list[AnomalyEvent], dict]:
-    """Run every applicable pipeline; return (events sorted by time, summary).
-
-    ``config`` holds the node blocks of a parameters file; ``where`` names it in errors.
-    """
-    events: list[AnomalyEvent] = []
-    summary: dict[str, Any] = {'samples': len(tele), 'source': tele.source, 'pipelines': {}}
-    for name, module in sorted(pipelines.available().items()):
-        if not module.applies(tele):
-            continue
-        params = block_values(config, module.SCHEMA, where)
-        start = time.perf_counter()
-        try:
-            if hasattr(module, 'run_with_summary'):
-                found, components = module.run_with_summary(tele, params)
-            else:
-                found, components = module.run(tele, params), {}
-        except ValueError as err:
-            raise ConfigError(f'{name}: {err}') from None
-        _count_kinds(found, components)
-        summary['pipelines'][name] = {'events': len(found), 'components': components,
-                                      'runtime_s': time.perf_counter() - start}
-        events.extend(found)
-    events.sort(key=lambda e: (e.time, e.component, e.revision))
-    summary['events'] = len(events)
-    return events, summary
-
-
-def _count_kinds(events: list[AnomalyEvent], components: dict[str, Any]) -> None:
-    """Add per component the number of changes and their kinds (latest revision)."""
-    latest: dict[tuple[str, int], AnomalyEvent] = {}
-    for e in events:
-        key = (e.component, e.index)
-        if key not in latest or e.revision >= latest[key].revision:
-            latest[key] = e
-    for (component, _), e in sorted(latest.items()):
-        entry = components.setdefault(component, {})
-        entry['changes'] = entry.get('changes', 0) + 1
-        kinds = entry.setdefault('by_kind', {})
-        kinds[e.kind] = kinds.get(e.kind, 0) + 1
 
 
 def run(args: argparse.Namespace) -> int:

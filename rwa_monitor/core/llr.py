@@ -184,6 +184,16 @@ class LLRDetector:
         return dict(self._cfg)
 
     @property
+    def params(self) -> dict[str, Any]:
+        """Validated keyword parameters (the detector protocol's name, core/protocol.py)."""
+        return dict(self._cfg)
+
+    @property
+    def last_event(self) -> AnomalyEvent | None:
+        """The latest event returned by :meth:`update` (declaration or revision), or None."""
+        return self._last_event
+
+    @property
     def component(self) -> str:
         """Wheel id."""
         return self._component
@@ -290,6 +300,7 @@ class LLRDetector:
         self._checks: list[int] = []
         self._cat: dict[str, Any] | None = None
         self._checkpoint = -1
+        self._last_event: AnomalyEvent | None = None
 
     def update(self, t: float, speed: float, friction: float,
                aux: Mapping[str, float] | None = None) -> list[AnomalyEvent]:
@@ -476,6 +487,7 @@ class LLRDetector:
         times = (self._rtime[tau % L], self._rtime[n % L])
         event = make_event(self._component, kind, rows, times, self._logpmin, dx, z, s2, 0,
                            confirmed)
+        self._last_event = event
         self._cat = dict(before=prefix[tau - first].copy(), n_before=tau - c, kind=kind,
                          confirmed=confirmed, revision=0, rows=rows, time=times[0],
                          log_p=self._logpmin, start=tau,
@@ -524,8 +536,9 @@ class LLRDetector:
         cat['revision'] += 1
         rows = cat['rows'][:2] + (self._rrow[j % self._L],)
         times = (cat['time'], self._rtime[j % self._L])
-        return [make_event(self._component, kind, rows, times, cat['log_p'], dx, z, s2,
-                           cat['revision'], confirmed)]
+        self._last_event = make_event(self._component, kind, rows, times, cat['log_p'], dx,
+                                      z, s2, cat['revision'], confirmed)
+        return [self._last_event]
 
     # -- general model (p > 2): numpy per sample -------------------------------------
     def _update_general(self, row: int, t: float, f: float, h: np.ndarray

@@ -230,7 +230,7 @@ class VsadcDetectorNode(Node):
 
     def _input_health(self) -> tuple[bytes, str, dict[str, Any]]:
         values = dict(self.counters)
-        values.update(self.detector.counters())
+        values.update(self.detector.counters)
         return OK, f'{self.samples} gyro samples, {self.detector.held} held', values
 
 

@@ -73,7 +73,7 @@ def run_with_summary(tele: Telemetry, config: Mapping[str, Any]
             'events': sum(e.component == f'gyro_{axis}' for e in events),
             'final_state': STATE_NAMES[int(labels[-1, i])] if len(tele) else STATE_NAMES[0],
             'ready': det.channels[i].ready}
-    summary['counters'] = det.counters()
+    summary['counters'] = det.counters
     summary['runtime_s'] = runtime
     return events, summary
 
