@@ -40,7 +40,8 @@ def load_params(path: str | None) -> dict:
 
 def run(args: argparse.Namespace) -> int:
     """Diagnose each wheel and write the JSON."""
-    from rwa_monitor.core.fss.pipeline import diagnose, load_model
+    from rwa_monitor.core.fss.pipeline import diagnose
+    from rwa_monitor.telemetry.fss_model import load_model
     params = load_params(args.params_file)
     try:
         config = fss_config(params)

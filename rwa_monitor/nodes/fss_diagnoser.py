@@ -35,13 +35,14 @@ from sensor_msgs.msg import JointState
 
 from rwa_monitor.core import keys
 from rwa_monitor.core.events import AnomalyEvent
-from rwa_monitor.core.fss.pipeline import diagnose, FssConfig, load_model, SlidingWindow
+from rwa_monitor.core.fss.pipeline import diagnose, FssConfig, SlidingWindow
 from rwa_monitor.core.schema import FSS, fss_config
 from rwa_monitor.exceptions import ConfigError
 from rwa_monitor.nodes import common, messages
 from rwa_monitor.nodes.common import (declare_parameters, DiagnosticsPublisher, EVENTS_QOS,
                                       OK, qos_event_callbacks, run_node,
                                       telemetry_qos, WARN)
+from rwa_monitor.telemetry.fss_model import load_model
 
 NODE_NAME = 'fss_diagnoser'
 INPUT_ID = 'telemetry/wheels'
