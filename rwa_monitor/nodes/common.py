@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import sys
 import time
-from typing import Any, Callable, Iterator, Mapping, Sequence
+from typing import Any, Callable, Iterator, Mapping, NamedTuple, Sequence
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
@@ -266,13 +266,20 @@ def wheel_names(text: str) -> set[str] | None:
     return names or None
 
 
+class Refusal(NamedTuple):
+    """Why a wheel is ignored: the input counter to increment and the log message."""
+
+    counter: str
+    message: str
+
+
 def wheel_refusal(wheel_id: str, allowed: set[str] | None, known: int,
-                  max_wheels: int) -> tuple[str, str] | None:
-    """Return (counter, message) if a new wheel must be ignored, else None."""
+                  max_wheels: int) -> Refusal | None:
+    """Return the refusal if a new wheel must be ignored, else None."""
     if allowed is not None and wheel_id not in allowed:
-        return 'unknown_wheel', f'ignoring wheel {wheel_id!r}: not in parameter wheels'
+        return Refusal('unknown_wheel', f'ignoring wheel {wheel_id!r}: not in parameter wheels')
     if known >= max_wheels:
-        return 'too_many_wheels', f'ignoring wheel {wheel_id!r}: max_wheels reached'
+        return Refusal('too_many_wheels', f'ignoring wheel {wheel_id!r}: max_wheels reached')
     return None
 
 

@@ -8,18 +8,27 @@ columns uses the ``reference_rate`` parameter (rad/s, 3 values).
 from __future__ import annotations
 
 import time as _time
-from typing import Any, Mapping
+from typing import Any, Mapping, NamedTuple
 
 import numpy as np
 
 from rwa_monitor.core.events import AnomalyEvent
 from rwa_monitor.core.schema import VSADC, vsadc_kwargs
 from rwa_monitor.core.vsadc import STATE_NAMES, VsadcDetector
+from rwa_monitor.pipelines import Detection
 from rwa_monitor.telemetry import Telemetry
 
 SCHEMA = VSADC
 NODE = VSADC.name
 DEFAULTS: dict[str, Any] = {name: VSADC[name].default for name in VSADC.names(('all',))}
+
+
+class LabelSeries(NamedTuple):
+    """The state of each axis after each row (n, axes), the events and the detector."""
+
+    labels: np.ndarray
+    events: list[AnomalyEvent]
+    detector: VsadcDetector
 
 
 def applies(tele: Telemetry) -> bool:
@@ -37,9 +46,8 @@ def reference_of(config: Mapping[str, Any]) -> np.ndarray:
     return np.array(VSADC.validate(config)['reference_rate'], dtype=float)
 
 
-def label_series(tele: Telemetry, config: Mapping[str, Any]
-                 ) -> tuple[np.ndarray, list[AnomalyEvent], VsadcDetector]:
-    """Run the streaming detector over the rows; return (labels (n, axes), events, detector).
+def label_series(tele: Telemetry, config: Mapping[str, Any]) -> LabelSeries:
+    """Run the streaming detector over the rows; return labels, events and the detector.
 
     Labels are the state after each row (held on rows the detector could not use).
     """
@@ -58,12 +66,11 @@ def label_series(tele: Telemetry, config: Mapping[str, Any]
             events.extend(found)
             state = [ch.state for ch in det.channels]
         labels[k] = state
-    return labels, events, det
+    return LabelSeries(labels, events, det)
 
 
-def run_with_summary(tele: Telemetry, config: Mapping[str, Any]
-                     ) -> tuple[list[AnomalyEvent], dict[str, Any]]:
-    """Run VSADC on the three axes; return (events, per-axis summary with counters)."""
+def run_with_summary(tele: Telemetry, config: Mapping[str, Any]) -> Detection:
+    """Run VSADC on the three axes; return the events and a per-axis summary."""
     start = _time.perf_counter()
     labels, events, det = label_series(tele, config)
     summary: dict[str, Any] = {}
@@ -75,9 +82,9 @@ def run_with_summary(tele: Telemetry, config: Mapping[str, Any]
             'ready': det.channels[i].ready}
     summary['counters'] = det.counters
     summary['runtime_s'] = runtime
-    return events, summary
+    return Detection(events, summary)
 
 
 def run(tele: Telemetry, config: Mapping[str, Any]) -> list[AnomalyEvent]:
     """Run VSADC on the three axes; return the events (DESIGN.md events contract)."""
-    return run_with_summary(tele, config)[0]
+    return run_with_summary(tele, config).events
