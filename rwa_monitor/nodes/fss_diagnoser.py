@@ -42,57 +42,26 @@ from sensor_msgs.msg import JointState
 
 from rwa_monitor.core import keys, streams
 from rwa_monitor.core.events import AnomalyEvent
-from rwa_monitor.core.fss.pipeline import diagnose, FssConfig, load_model, SlidingWindow
+from rwa_monitor.core.fss.pipeline import diagnose, FssConfig, SlidingWindow
+from rwa_monitor.core.schema import FSS, fss_config
 from rwa_monitor.exceptions import ConfigError
 from rwa_monitor.nodes import common, messages
 from rwa_monitor.nodes.common import (declare_parameters, DiagnosticsPublisher, ERROR,
-                                      EVENTS_QOS, node_help, OK, ParamSpec,
-                                      qos_event_callbacks, run_node, STALE, telemetry_qos,
-                                      WARN)
-from rwa_monitor.nodes.latched import EVENTS_FILE, LatchedAlarms, WHEEL_TIMEOUT
+                                      EVENTS_QOS, node_help, OK, qos_event_callbacks,
+                                      run_node, STALE, telemetry_qos, WARN)
+from rwa_monitor.nodes.latched import LatchedAlarms
 from rwa_monitor.telemetry.alarms import kind_key
+from rwa_monitor.telemetry.fss_model import load_model
 
 NODE_NAME = 'fss_diagnoser'
 INPUT_ID = 'telemetry/wheels'
 DETECTOR = 'fss'
 MAX_KEPT = 10_000  # events kept in memory for in-process users (demo, tests)
 ERROR_HOLD_S = 60.0  # a wheel whose diagnosis failed shows ERROR this long (wall time)
-RELIABILITY_PARAMETERS = (EVENTS_FILE, WHEEL_TIMEOUT)
 
-# Node parameter -> FssConfig field.
-CONFIG_NAMES = {'wglr_window': 'window', 'w_bias': 'w_bias', 'viscous_prior': 'viscous_prior',
-                'p_false': 'p_false', 'dk_error': 'dk_error', 'beam': 'beam',
-                'torque_scale_nm': 'torque_scale_nm', 'speed_scale_rad_s': 'speed_scale_rad_s'}
-PARAMETERS = (
-    ParamSpec('window_length', 80_000, 'Samples per diagnosed window (the paper: ~80,000, a '
-              'few hours).', low=200, high=10_000_000, read_only=True),
-    ParamSpec('window_period', 20_000, 'Samples between two diagnoses of a wheel.', low=1,
-              high=10_000_000),
-    ParamSpec('wglr_window', 20, 'Half-window w of the changepoint statistic (samples).',
-              low=2, high=100_000),
-    ParamSpec('w_bias', 1.0e-4, 'Weight W_b of the viscous prior, eq. (11b).', low=0.0),
-    ParamSpec('viscous_prior', 1.0, 'Prior viscous coefficient f~v (normalised units).'),
-    ParamSpec('p_false', 1.0e-9, 'False-positive probability per sample of the changepoint '
-              'threshold.', low=0.0, high=1.0, low_open=True, high_open=True),
-    ParamSpec('dk_error', 10, 'Samples left out each side of a changepoint in the least '
-              'squares.', low=0, high=100_000),
-    ParamSpec('beam', 256, 'Most DP states kept per changepoint (assignment bound).', low=1,
-              high=1_000_000),
-    ParamSpec('torque_scale_nm', 2.0e-4, 'One normalised torque unit (N m).', low=0.0,
-              low_open=True),
-    ParamSpec('speed_scale_rad_s', 400.0, 'One normalised speed unit (rad/s).', low=0.0,
-              low_open=True),
-    ParamSpec('model', '', 'Classifier model file (JSON from `rwa-monitor fss train`); '
-              'empty = the shipped model.', read_only=True),
-    ParamSpec('wheels', '', 'Comma-separated wheel ids to monitor; empty = every wheel '
-              'seen (up to max_wheels).'),
-    ParamSpec('max_wheels', 16, 'Most wheels monitored at once (bounds memory).', low=1,
-              high=256, read_only=True),
-    ParamSpec('stale_timeout', 3.0, 'Seconds without telemetry before health is STALE.',
-              low=0.0, low_open=True, read_only=True),
-    ParamSpec('diagnostic_period', 1.0, 'Seconds between /diagnostics messages.',
-              low=0.01, high=60.0, read_only=True),
-)
+# Parameters: core/schema.py FSS (the diagnoser's and the node-only ones).
+CONFIG_NAMES = FSS.names(('all',))
+PARAMETERS = FSS.for_node()
 
 
 class _Wheel:
@@ -118,9 +87,9 @@ class FssDiagnoserNode(Node):
     def __init__(self, **kwargs: Any) -> None:
         """Create the node (``kwargs`` go to rclpy's Node: context, cli_args, ...)."""
         super().__init__(NODE_NAME, **kwargs)
+        common.refuse_unknown_overrides(self, FSS)
         self.params = declare_parameters(self, PARAMETERS, self._on_parameter,
                                          self._check_config)
-        self.reliability = declare_parameters(self, RELIABILITY_PARAMETERS)
         self._config = self._make_config(self.params)
         try:
             self._model = load_model(self.params['model'] or None)
@@ -145,8 +114,8 @@ class FssDiagnoserNode(Node):
             DiagnosticArray, 'anomalies', EVENTS_QOS,
             event_callbacks=qos_event_callbacks(self, 'anomalies', True))
         self.alarms = LatchedAlarms(self, self._anomaly_pub, self.diagnostics,
-                                    self.reliability['events_file'], key=kind_key)
-        self._silence = streams.SilenceTracker(self.reliability['wheel_timeout'])
+                                    self.params['events_file'], key=kind_key)
+        self._silence = streams.SilenceTracker(self.params['wheel_timeout'])
         self._sweeper = self.create_timer(1.0, self._free_silent_wheels,
                                           clock=self.diagnostics.steady_clock)
         self.create_subscription(
@@ -158,7 +127,7 @@ class FssDiagnoserNode(Node):
     # ------------------------------------------------------------------- parameters
     @staticmethod
     def _make_config(values: Any) -> FssConfig:
-        return FssConfig(**{field: values[name] for name, field in CONFIG_NAMES.items()})
+        return fss_config(values)
 
     def _check_config(self, values: dict[str, Any]) -> None:
         self._make_config(values)
@@ -272,7 +241,7 @@ class FssDiagnoserNode(Node):
 
     def _free_silent_wheels(self) -> None:
         """Free the wheels silent for ``wheel_timeout`` s (timer on the steady clock)."""
-        self._silence.timeout = self.reliability['wheel_timeout']
+        self._silence.timeout = self.params['wheel_timeout']
         for wheel_id in self._silence.silent(self.diagnostics.now()):
             self._silence.forget(wheel_id)
             wheel = self.wheels.get(wheel_id)
@@ -358,7 +327,7 @@ NODE_CLASS = FssDiagnoserNode
 def main(args: Sequence[str] | None = None) -> int:
     """Run the FSS window diagnoser node (console script ``rwa-monitor-fss``)."""
     return run_node(lambda: FssDiagnoserNode(), args, help_text=lambda: node_help(
-        'rwa-monitor-fss', __doc__, PARAMETERS + RELIABILITY_PARAMETERS))
+        'rwa-monitor-fss', __doc__, PARAMETERS))
 
 
 if __name__ == '__main__':

@@ -24,17 +24,12 @@ from std_srvs.srv import Trigger
 
 from rwa_monitor.core.events import AnomalyEvent
 from rwa_monitor.nodes import messages
-from rwa_monitor.nodes.common import DiagnosticsPublisher, LEVEL_NAMES, OK, ParamSpec
+from rwa_monitor.nodes.common import DiagnosticsPublisher, LEVEL_NAMES, OK
 from rwa_monitor.telemetry.alarms import AlarmStore, event_key
 
 ALARMS_ID = 'alarms'
-EVENTS_FILE = ParamSpec(
-    'events_file', '', 'JSON Lines journal of every event and acknowledgement, flushed and '
-    'fsynced per line; its unacknowledged anomalies are reloaded at start. Empty = none '
-    '(anomalies are latched in memory only).', read_only=True)
-WHEEL_TIMEOUT = ParamSpec(
-    'wheel_timeout', 600.0, 'Seconds of wall time without input after which a wheel is '
-    'freed (its detector and state; latched anomalies stay); 0 = never.', low=0.0)
+# Its parameters events_file and wheel_timeout are in core/schema.py (EVENTS_FILE,
+# WHEEL_TIMEOUT), declared by each node with the rest of its schema.
 
 
 class LatchedAlarms:
