@@ -21,6 +21,7 @@ from typing import Any
 import yaml
 
 from rwa_monitor import paths, pipelines
+from rwa_monitor.cli.options import add_topics, INPUT_HELP
 from rwa_monitor.core.events import AnomalyEvent
 from rwa_monitor.exceptions import ConfigError
 from rwa_monitor.telemetry import read_telemetry, Telemetry
@@ -35,7 +36,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         description='Run every detector whose input columns the telemetry file has; '
                     'write the events JSON ({"events": [...], "summary": {...}}) or print '
                     'a table. Times are seconds of the file, torques N m.')
-    parser.add_argument('file', type=pathlib.Path, help='telemetry file (.csv or .mcap)')
+    parser.add_argument('file', type=pathlib.Path, help=INPUT_HELP)
+    add_topics(parser)
     parser.add_argument('--config', type=pathlib.Path, metavar='YAML',
                         help='parameters file in the node format (node blocks with '
                              'ros__parameters; default: the installed config/rwa_monitor.yaml)')
@@ -119,7 +121,7 @@ def _count_kinds(events: list[AnomalyEvent], components: dict[str, Any]) -> None
 
 def run(args: argparse.Namespace) -> int:
     """Read the file, detect, and write the JSON or print the table."""
-    tele = read_telemetry(args.file)
+    tele = read_telemetry(args.file, args.topics)
     config = load_config(args.config)
     if args.friction_model is not None:
         block = config.setdefault('llr_detector', {}).setdefault('ros__parameters', {})

@@ -8,6 +8,7 @@ import pathlib
 
 import numpy as np
 
+from rwa_monitor.cli.options import add_topics, INPUT_HELP
 from rwa_monitor.exceptions import ConfigError, RwaMonitorError
 from rwa_monitor.telemetry import read_telemetry
 
@@ -21,7 +22,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                          'fss2)',
         description='Run the four-stage FSS window diagnoser on the whole file, per wheel, '
                     'and write the JSON of DESIGN.md (docs/fss.md).')
-    parser.add_argument('file', help='telemetry file (.csv or .mcap)')
+    parser.add_argument('file', help=INPUT_HELP)
+    add_topics(parser)
     parser.add_argument('-o', '--output', required=True, help='output JSON file')
     parser.add_argument('--model', default=None,
                         help='classifier model (default: the shipped one)')
@@ -61,7 +63,7 @@ def run(args: argparse.Namespace) -> int:
         model = load_model(args.model or params.get('model') or None)
     except (ValueError, OSError) as err:
         raise ConfigError(str(err)) from None
-    tele = read_telemetry(args.file)
+    tele = read_telemetry(args.file, args.topics).only('wheels')
     wheels = {}
     for wheel_id, wheel in tele.wheels.items():
         if wheel.friction is None:

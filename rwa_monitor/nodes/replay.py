@@ -1,9 +1,10 @@
-"""Node ``telemetry_replay``: publish a telemetry file (CSV or MCAP) as ROS topics.
+"""Node ``telemetry_replay``: publish a telemetry file or recording as ROS topics.
 
 Topics (DESIGN.md): ``telemetry/wheels`` (JointState), ``telemetry/gyro`` (Imu),
 ``telemetry/star_tracker`` (QuaternionStamped), ``telemetry/reference_rate``
 (Vector3Stamped) for the channels the file has, every message stamped with the telemetry
-time; ``/clock`` (the telemetry time) for the sim-time detectors; progress on
+time; a recording's streams keep their own stamps and rates (parameter ``topics`` names
+the recording's topics); ``/clock`` (the telemetry time) for the sim-time detectors; progress on
 ``/diagnostics``. Pacing uses the steady clock, never the sim time it publishes.
 
 ``rate`` is the time factor (1.0 real time). ``rate`` 0 publishes as fast as the
@@ -38,8 +39,12 @@ from rwa_monitor.telemetry import read_telemetry, Telemetry
 NODE_NAME = 'telemetry_replay'
 
 PARAMETERS = (
-    ParamSpec('file', '', 'Telemetry file to replay (.csv, or .mcap written by rwa_monitor).',
-              read_only=True),
+    ParamSpec('file', '', 'Telemetry to replay: CSV file, rosbag2 folder, or bare .mcap or '
+              '.db3 file.', read_only=True),
+    ParamSpec('topics', '', 'Topics of the streams in a recording, as wheels=/a,gyro=/b,'
+              'star_tracker=/c,reference_rate=/d (streams not named: the DESIGN.md topics '
+              '/telemetry/wheels, /telemetry/gyro, /telemetry/star_tracker, '
+              '/telemetry/reference_rate).', read_only=True),
     ParamSpec('rate', 1.0, 'Time factor: 1.0 real time, 40.0 forty times faster, 0 as fast '
               'as the subscribers take it without loss.', low=0.0, high=1.0e6),
     ParamSpec('start_offset', 0.0, 'Seconds from the first sample where the replay (and every '
@@ -73,7 +78,7 @@ class TelemetryReplay(Node):
             if not self.params['file']:
                 raise ConfigError('parameter file: a telemetry file is required')
             try:
-                telemetry = read_telemetry(self.params['file'])
+                telemetry = read_telemetry(self.params['file'], self.params['topics'])
             except RwaMonitorError as err:
                 raise ConfigError(f'parameter file: {err}') from None
         if len(telemetry) == 0:
@@ -197,14 +202,15 @@ class TelemetryReplay(Node):
         """Return (publisher, serialised message) of every channel of row ``i``."""
         t = float(self._time[i])
         rows = self._rows
+        has = rows.has
         out = []
-        if self._wheels_pub is not None:
+        if self._wheels_pub is not None and has('wheels', i):
             out.append((self._wheels_pub, rows.wheels(i, t)))
-        if self._gyro_pub is not None:
+        if self._gyro_pub is not None and has('gyro', i):
             out.append((self._gyro_pub, self._imu.encode(t, rows.gyro[i].tolist())))
-        if self._star_pub is not None:
+        if self._star_pub is not None and has('star_tracker', i):
             out.append((self._star_pub, self._quaternion.encode(t, rows.attitude[i].tolist())))
-        if self._ref_pub is not None:
+        if self._ref_pub is not None and has('reference_rate', i):
             out.append((self._ref_pub, self._vector3.encode(t, rows.reference[i].tolist())))
         return out
 
@@ -288,9 +294,13 @@ class TelemetryReplay(Node):
 
 
 class _Rows:
-    """Row access to the telemetry arrays (each row converted when it is published)."""
+    """Row access to the telemetry arrays (each row converted when it is published).
+
+    A multi-rate recording has rows where a stream has no sample: :meth:`has` says which.
+    """
 
     def __init__(self, tele: Telemetry) -> None:
+        self._present = {k: m.tolist() for k, m in tele.present.items()}
         self.names = list(tele.wheels)
         nan = np.full(len(tele), np.nan)
         self.speed = np.column_stack([w.speed for w in tele.wheels.values()]) \
@@ -302,6 +312,11 @@ class _Rows:
         self.attitude = tele.attitude
         self.reference = tele.reference_rate
         self._codec = messages.JointStateCodec(self.names)
+
+    def has(self, stream: str, i: int) -> bool:
+        """Return True if ``stream`` has a sample on row ``i``."""
+        mask = self._present.get(stream)
+        return mask is None or mask[i]
 
     def wheels(self, i: int, t: float) -> bytes:
         """Return row ``i`` as a serialised JointState (``publish`` takes the bytes)."""

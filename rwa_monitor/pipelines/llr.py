@@ -74,6 +74,7 @@ def run_with_summary(tele: Telemetry, config: Mapping[str, Any]
     """
     from rwa_monitor.core.llr_batch import detect_batch_with_counters
     kwargs = detector_kwargs(config)
+    tele = tele.only('wheels')  # a multi-rate record: the wheel stream's own samples
     refined = friction_model(config.get(MODEL_KEY) or '', tele)
     events: list[AnomalyEvent] = []
     summary: dict[str, Any] = {}

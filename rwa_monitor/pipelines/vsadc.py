@@ -16,6 +16,7 @@ from rwa_monitor.core.events import AnomalyEvent
 from rwa_monitor.core.params import check_choice, check_int, check_real
 from rwa_monitor.core.vsadc import AXES, STATE_NAMES, VsadcDetector
 from rwa_monitor.telemetry import Telemetry
+from rwa_monitor.telemetry.streams import paired_gyro
 
 NODE = 'vsadc_detector'
 DEFAULTS: dict[str, Any] = {
@@ -26,6 +27,9 @@ DEFAULTS: dict[str, Any] = {
     'max_gap': 1.0,
     'norm_tolerance': 0.1, 'reference_rate': [0.0, 0.0, 0.0], 'axes': 'x,y,z',
 }
+# Seconds within which gyro and star-tracker stamps are one sample (multi-rate recordings;
+# the node's pair_tolerance parameter).
+PAIR_TOLERANCE = 1.0e-3
 
 
 def applies(tele: Telemetry) -> bool:
@@ -64,23 +68,26 @@ def label_series(tele: Telemetry, config: Mapping[str, Any]
                  ) -> tuple[np.ndarray, list[AnomalyEvent], VsadcDetector]:
     """Run the streaming detector over the rows; return (labels (n, axes), events, detector).
 
-    Labels are the state after each row (held on rows the detector could not use).
+    Labels are the state after each row (held on rows the detector could not use, and on
+    rows without a gyro sample in a multi-rate record). Event indices count gyro samples.
     """
     det = VsadcDetector(**detector_kwargs(config))
-    ref = tele.reference_rate
-    if ref is None:
-        ref = np.broadcast_to(reference_of(config), (len(tele), 3))
-    time, gyro, quat = tele.time.tolist(), tele.gyro.tolist(), tele.attitude.tolist()
-    ref_rows = ref.tolist()
+    rows, quat, ref_rows = paired_gyro(tele, reference_of(config), check_real(
+        'pair_tolerance', config.get('pair_tolerance', PAIR_TOLERANCE), 0.0))
+    time, gyro = tele.time.tolist(), tele.gyro.tolist()
     labels = np.zeros((len(tele), len(det.axes)), dtype=np.int8)
     events: list[AnomalyEvent] = []
     state = [0] * len(det.axes)
-    for k in range(len(time)):
-        found = det.update(time[k], gyro[k], quat[k], ref_rows[k], k)
+    last = 0
+    for index, (k, q, ref) in enumerate(zip(rows, quat, ref_rows)):
+        labels[last:k] = state
+        found = det.update(time[k], gyro[k], q, ref, index)
         if found:
             events.extend(found)
             state = [ch.state for ch in det.channels]
         labels[k] = state
+        last = k + 1
+    labels[last:] = state
     return labels, events, det
 
 
