@@ -130,6 +130,24 @@ def test_hand_codecs_are_canonical_cdr():
         header=hdr, vector=t['geometry_msgs/msg/Vector3'](x=1.0, y=2.0, z=3.0)),
         'geometry_msgs/msg/Vector3Stamped')
     assert bytes(vec) == codecs.vector3_codec().encode(12.000000005, [1.0, 2.0, 3.0])
+    quat = store.serialize_cdr(t['geometry_msgs/msg/QuaternionStamped'](
+        header=hdr, quaternion=t['geometry_msgs/msg/Quaternion'](x=0.5, y=0.5, z=0.5, w=0.5)),
+        'geometry_msgs/msg/QuaternionStamped')
+    assert bytes(quat) == codecs.quaternion_codec().encode(12.000000005, [0.5] * 4)
+    unknown = np.zeros(9)
+    unknown[0] = -1.0
+    vec3 = t['geometry_msgs/msg/Vector3']
+    imu = store.serialize_cdr(t['sensor_msgs/msg/Imu'](
+        header=hdr, orientation=t['geometry_msgs/msg/Quaternion'](x=0.0, y=0.0, z=0.0, w=1.0),
+        orientation_covariance=unknown, angular_velocity=vec3(x=1.0, y=2.0, z=3.0),
+        angular_velocity_covariance=np.zeros(9), linear_acceleration=vec3(x=0.0, y=0.0, z=0.0),
+        linear_acceleration_covariance=unknown), 'sensor_msgs/msg/Imu')
+    assert bytes(imu) == codecs.imu_codec().encode(12.000000005, [1.0, 2.0, 3.0])
+    hdr.frame_id = ''
+    columns = store.serialize_cdr(t['sensor_msgs/msg/JointState'](
+        header=hdr, name=['truth_a', 'b'], position=np.array([1.0, 2.0]), velocity=np.zeros(0),
+        effort=np.zeros(0)), 'sensor_msgs/msg/JointState')
+    assert bytes(columns) == codecs.encode_columns(12.000000005, ['truth_a', 'b'], [1.0, 2.0])
 
 
 def _write_bag(path, topics, storage=StoragePlugin.MCAP, raw=None):

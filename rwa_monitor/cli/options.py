@@ -8,6 +8,8 @@ from rwa_monitor.telemetry.rosbag_io import DEFAULT_TOPICS
 
 INPUT_HELP = ('telemetry: CSV file, rosbag2 folder (metadata.yaml with .mcap or .db3), or a '
               'bare .mcap or .db3 file')
+OUTPUT_HELP = ('output: a folder name without suffix writes a rosbag2 recording (MCAP '
+               'storage), .mcap or .db3 a bare recording file, .csv a CSV file')
 
 
 def add_topics(parser: argparse.ArgumentParser) -> None:

@@ -119,6 +119,16 @@ def _pad(buffer: bytearray, size: int) -> None:
 def encode_joint_state(seconds: float, names: Sequence[str], speeds: Sequence[float],
                        frictions: Sequence[float], frame_id: str = '') -> bytes:
     """Return the serialised ``telemetry/wheels`` JointState (``publish`` accepts bytes)."""
+    return _encode_joint(seconds, names, ((), speeds, frictions), frame_id)
+
+
+def encode_columns(seconds: float, names: Sequence[str], values: Sequence[float]) -> bytes:
+    """Return the serialised ``/rwa_monitor/columns`` JointState (values in ``position``)."""
+    return _encode_joint(seconds, names, (values, (), ()), '')
+
+
+def _encode_joint(seconds: float, names: Sequence[str], arrays: Sequence[Sequence[float]],
+                  frame_id: str) -> bytes:
     sec, nanosec = split_seconds(seconds)
     frame = frame_id.encode()
     out = bytearray(_CDR_LE)
@@ -129,7 +139,7 @@ def encode_joint_state(seconds: float, names: Sequence[str], speeds: Sequence[fl
         _pad(out, 4)
         raw = name.encode()
         out += _U32.pack(len(raw) + 1) + raw + b'\x00'
-    for values in ((), speeds, frictions):
+    for values in arrays:
         _pad(out, 4)
         out += _U32.pack(len(values))
         if len(values):

@@ -31,7 +31,7 @@ from typing import Any, Callable, Iterable, Mapping
 import numpy as np
 
 from rwa_monitor.exceptions import ConfigError, OutputError, TelemetrySchemaError
-from rwa_monitor.telemetry.codecs import split_seconds
+from rwa_monitor.telemetry import codecs
 from rwa_monitor.telemetry.schema import Telemetry, TRUTH_PREFIX, Wheel
 
 # Stream -> default topic (DESIGN.md topic names, absolute as a recorder stores them).
@@ -274,7 +274,7 @@ def _write_bag(bag: pathlib.Path, tele: Telemetry, storage: str) -> None:
     from rosbags.rosbag2 import StoragePlugin, Writer
     store = typestore()
     plugin = StoragePlugin.SQLITE3 if storage == 'sqlite3' else StoragePlugin.MCAP
-    streams = dict(_message_streams(tele, store))
+    streams = dict(_message_streams(tele))
     stamps = (np.round(tele.time * 1e9)).astype(np.int64)
     with Writer(bag, version=9, storage_plugin=plugin) as writer:
         conns = {stream: writer.add_connection(
@@ -288,56 +288,31 @@ def _write_bag(bag: pathlib.Path, tele: Telemetry, storage: str) -> None:
             writer.write(conns[stream], stamp, streams[stream](row))
 
 
-def _message_streams(tele: Telemetry, store: Any) -> Iterable[tuple[str, Callable]]:
-    """Yield (stream, row -> canonical CDR bytes) for every stream the record has."""
-    types = store.types
-    time_t = types['builtin_interfaces/msg/Time']
-    header_t = types['std_msgs/msg/Header']
-    joint_t = types['sensor_msgs/msg/JointState']
-    empty = np.zeros(0)
+def _message_streams(tele: Telemetry) -> Iterable[tuple[str, Callable[[int], bytes]]]:
+    """Yield (stream, row -> canonical CDR bytes) for every stream the record has.
 
-    def header(row: int, frame: str = '') -> Any:
-        sec, nanosec = split_seconds(float(tele.time[row]))
-        return header_t(stamp=time_t(sec=sec, nanosec=nanosec), frame_id=frame)
-
-    def serialise(msg: Any, stream: str) -> bytes:
-        return bytes(store.serialize_cdr(msg, MSG_TYPES[stream]))
-
+    The package's own encoders (telemetry/codecs.py) write canonical CDR; a test checks
+    their bytes against the type store's serialiser.
+    """
+    time = tele.time.tolist()
     if tele.wheels:
-        names = list(tele.wheels)
-        speed = np.column_stack([w.speed for w in tele.wheels.values()])
+        codec = codecs.JointStateCodec(list(tele.wheels))
+        speed = np.column_stack([w.speed for w in tele.wheels.values()]).tolist()
         friction = np.column_stack([np.full(len(tele), np.nan) if w.friction is None
-                                    else w.friction for w in tele.wheels.values()])
-        yield 'wheels', lambda row: serialise(joint_t(
-            header=header(row), name=names, position=empty, velocity=speed[row].copy(),
-            effort=friction[row].copy()), 'wheels')
-    if tele.gyro is not None:
-        imu_t, q_t, v_t = (types['sensor_msgs/msg/Imu'], types['geometry_msgs/msg/Quaternion'],
-                           types['geometry_msgs/msg/Vector3'])
-        unknown = np.zeros(9)
-        unknown[0] = -1.0  # orientation and linear acceleration not provided (REP 145)
-        zeros = np.zeros(9)
-        yield 'gyro', lambda row: serialise(imu_t(
-            header=header(row, _FRAME), orientation=q_t(x=0.0, y=0.0, z=0.0, w=1.0),
-            orientation_covariance=unknown, angular_velocity=v_t(*map(float, tele.gyro[row])),
-            angular_velocity_covariance=zeros, linear_acceleration=v_t(x=0.0, y=0.0, z=0.0),
-            linear_acceleration_covariance=unknown), 'gyro')
-    if tele.attitude is not None:
-        qs_t, q_t = (types['geometry_msgs/msg/QuaternionStamped'],
-                     types['geometry_msgs/msg/Quaternion'])
-        yield 'star_tracker', lambda row: serialise(qs_t(
-            header=header(row, _FRAME), quaternion=q_t(*map(float, tele.attitude[row]))),
-            'star_tracker')
-    if tele.reference_rate is not None:
-        vs_t, v_t = (types['geometry_msgs/msg/Vector3Stamped'],
-                     types['geometry_msgs/msg/Vector3'])
-        yield 'reference_rate', lambda row: serialise(vs_t(
-            header=header(row, _FRAME), vector=v_t(*map(float, tele.reference_rate[row]))),
-            'reference_rate')
+                                    else w.friction for w in tele.wheels.values()]).tolist()
+        yield 'wheels', lambda row: codec.encode(time[row], speed[row], friction[row])
+    for stream, values, make in (('gyro', tele.gyro, codecs.imu_codec),
+                                 ('star_tracker', tele.attitude, codecs.quaternion_codec),
+                                 ('reference_rate', tele.reference_rate, codecs.vector3_codec)):
+        if values is not None:
+            yield stream, _stamped(make(_FRAME), time, values.tolist())
     extra = {**tele.aux, **{TRUTH_PREFIX + k: v for k, v in tele.truth.items()}}
     if extra:
-        names_x = list(extra)
-        table = np.column_stack([np.asarray(c, dtype=float) for c in extra.values()])
-        yield 'columns', lambda row: serialise(joint_t(
-            header=header(row), name=names_x, position=table[row].copy(), velocity=empty,
-            effort=empty), 'columns')
+        names = list(extra)
+        table = np.column_stack([np.asarray(c, dtype=float) for c in extra.values()]).tolist()
+        yield 'columns', lambda row: codecs.encode_columns(time[row], names, table[row])
+
+
+def _stamped(codec: codecs.StampedCodec, time: list[float],
+             values: list[list[float]]) -> Callable[[int], bytes]:
+    return lambda row: codec.encode(time[row], values[row])
