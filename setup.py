@@ -32,6 +32,7 @@ setup(
             'rwa-monitor-vsadc = rwa_monitor.nodes.vsadc_detector:main',
             'rwa-monitor-fss = rwa_monitor.nodes.fss_diagnoser:main',
             'rwa-monitor-bus = rwa_monitor.nodes.basilisk_bus:main',
+            'rwa-monitor-record = rwa_monitor.nodes.recorder:main',
         ],
     },
 )

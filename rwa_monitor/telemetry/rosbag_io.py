@@ -316,3 +316,87 @@ def _message_streams(tele: Telemetry) -> Iterable[tuple[str, Callable[[int], byt
 def _stamped(codec: codecs.StampedCodec, time: list[float],
              values: list[list[float]]) -> Callable[[int], bytes]:
     return lambda row: codec.encode(time[row], values[row])
+
+
+class RecordingWriter:
+    """Write messages of any Jazzy type into a rosbag2 folder (MCAP storage), atomically.
+
+    Messages are built in a temporary folder beside ``path`` and renamed onto it by
+    :meth:`close`; :meth:`abort` removes them. Payloads are re-serialised in canonical CDR
+    (padding zeroed), so what is recorded does not depend on the sender's serialiser.
+    """
+
+    def __init__(self, path: str | os.PathLike) -> None:
+        """Open the temporary recording beside ``path`` (OutputError if impossible)."""
+        from rosbags.rosbag2 import StoragePlugin, Writer
+        self.path = pathlib.Path(path)
+        if self.path.suffix:
+            raise OutputError(f'{self.path}: a recording folder needs a name without suffix')
+        try:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            self._work = pathlib.Path(tempfile.mkdtemp(prefix=f'.{self.path.name}.',
+                                                       dir=self.path.parent))
+        except OSError as err:
+            raise OutputError(f'{self.path}: cannot write in {self.path.parent}: '
+                              f'{err.strerror or err}') from None
+        self._writer = Writer(self._work / self.path.name, version=9,
+                              storage_plugin=StoragePlugin.MCAP)
+        self._writer.open()
+        self._store = typestore()
+        self._connections: dict[tuple[str, str], Any] = {}
+        self.counts: dict[str, int] = {}
+
+    def write(self, topic: str, msgtype: str, stamp_ns: int | None, data: bytes) -> None:
+        """Record one serialised message (either encoding of empty sequences).
+
+        ``stamp_ns`` None: the message's ``header.stamp`` (0 for a message without one).
+        """
+        key = (topic, msgtype)
+        if key not in self._connections:
+            self._connections[key] = self._writer.add_connection(topic, msgtype,
+                                                                 typestore=self._store)
+        msg = _Decoder()(data, msgtype, os.fspath(self.path), topic)
+        if not hasattr(msg, '__msgtype__'):  # decoded by rclpy (padded empty sequences)
+            msg = self._from_rclpy(msg, msgtype)
+        if stamp_ns is None:
+            stamp = getattr(getattr(msg, 'header', None), 'stamp', None)
+            stamp_ns = 0 if stamp is None else stamp.sec * 1_000_000_000 + stamp.nanosec
+        self._writer.write(self._connections[key], stamp_ns,
+                           bytes(self._store.serialize_cdr(msg, msgtype)))
+        self.counts[topic] = self.counts.get(topic, 0) + 1
+
+    def _from_rclpy(self, msg: Any, msgtype: str) -> Any:
+        """Return the type store's message with the fields of an rclpy message."""
+        cls = self._store.types[msgtype]
+        values = {}
+        for name in cls.__dataclass_fields__:
+            if name == '__msgtype__':
+                continue
+            value = getattr(msg, name)
+            if hasattr(value, 'get_fields_and_field_types'):
+                value = self._from_rclpy(value, _type_name(value))
+            elif isinstance(value, (list, tuple)) and value and hasattr(
+                    value[0], 'get_fields_and_field_types'):
+                value = [self._from_rclpy(v, _type_name(v)) for v in value]
+            elif not isinstance(value, (str, bytes, int, float, bool)):
+                value = np.asarray(value)
+            values[name] = value
+        return cls(**values)
+
+    def close(self) -> None:
+        """Finish the recording and rename it onto ``path``."""
+        try:
+            self._writer.close()
+            _replace_folder(self._work / self.path.name, self.path)
+        finally:
+            shutil.rmtree(self._work, ignore_errors=True)
+
+    def abort(self) -> None:
+        """Drop the recording (``path`` is left as it was)."""
+        shutil.rmtree(self._work, ignore_errors=True)
+
+
+def _type_name(msg: Any) -> str:
+    """Return ``pkg/msg/Type`` of an rclpy message."""
+    module = type(msg).__module__.split('.')[0]
+    return f'{module}/msg/{type(msg).__name__}'
