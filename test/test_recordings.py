@@ -324,3 +324,24 @@ def test_undecodable_files_give_one_line_naming_the_file(tmp_path):
         assert run.returncode != 0
         lines = run.stderr.strip().splitlines()
         assert len(lines) == 1 and str(path) in lines[0] and 'not a CSV text file' in lines[0]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize('name', ['interrupted_bag', 'interrupted.mcap', 'interrupted.csv'])
+def test_an_interrupted_simulate_leaves_no_half_written_output(tmp_path, name):
+    """SIGINT while the output is being written: no output and no temporary are left."""
+    import signal
+    import time
+    command = [sys.executable, '-m', 'rwa_monitor.cli.main', 'simulate', 'friction',
+               '--hours', '2', '--seed', '2', '-o', str(tmp_path / name)]
+    proc = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    end = time.monotonic() + 120
+    while not any(tmp_path.iterdir()) and proc.poll() is None and time.monotonic() < end:
+        time.sleep(0.005)
+    assert proc.poll() is None, 'the run ended before its output was being written'
+    temporaries = [p.name for p in tmp_path.iterdir()]
+    proc.send_signal(signal.SIGINT)
+    proc.wait(timeout=60)
+    assert temporaries and all(t.startswith(f'.{name}.') for t in temporaries)
+    assert proc.returncode == 130, proc.stderr.read()
+    assert list(tmp_path.iterdir()) == []

@@ -11,6 +11,7 @@ import numpy as np
 from rwa_monitor.cli.options import add_topics, INPUT_HELP
 from rwa_monitor.exceptions import ConfigError, RwaMonitorError
 from rwa_monitor.telemetry import read_telemetry
+from rwa_monitor.telemetry.atomic import write_text_atomic
 
 NODE_BLOCK = 'fss_diagnoser'
 
@@ -76,9 +77,7 @@ def run(args: argparse.Namespace) -> int:
         wheels[wheel_id] = diagnose(speed, friction, time, model, config)
     if not wheels:
         raise RwaMonitorError(f'{args.file}: no wheel with both speed and friction columns')
-    with open(args.output, 'w') as handle:
-        json.dump({'wheels': wheels}, handle, indent=1)
-        handle.write('\n')
+    write_text_atomic(args.output, json.dumps({'wheels': wheels}, indent=1) + '\n')
     for wheel_id, result in wheels.items():
         flags = result.get('anomalies', {})
         found = [k for k, v in flags.items() if v] or ['none']
