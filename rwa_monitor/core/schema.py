@@ -397,9 +397,13 @@ IDENTIFY = Schema('identify', (
 # ------------------------------------------------------------------------------- replay
 
 REPLAY = Schema('telemetry_replay', (
-    Param('file', '', 'Telemetry file to replay (.csv, or .mcap written by rwa_monitor); '
-          'required, give it with -p file:=PATH (never in a parameters file, where it would '
-          'beat the command line).', read_only=True, required=True, scope='node'),
+    Param('file', '', 'Telemetry to replay: CSV file, rosbag2 folder, or bare .mcap or .db3 '
+          'file; required, give it with -p file:=PATH (never in a parameters file, where it '
+          'would beat the command line).', read_only=True, required=True, scope='node'),
+    Param('topics', '', 'Topics of the streams in a recording, as wheels=/a,gyro=/b,'
+          'star_tracker=/c,reference_rate=/d; streams not named keep the DESIGN.md topics '
+          '(/telemetry/wheels, /telemetry/gyro, /telemetry/star_tracker, '
+          '/telemetry/reference_rate).', read_only=True, scope='node'),
     Param('rate', 1.0, 'Time factor: 1.0 real time, 40.0 forty times faster, 0.0 as fast as '
           'the subscribers take it without loss.', low=0.0, high=1.0e6, scope='node'),
     Param('start_offset', 0.0, 'Seconds from the first sample where the replay (and every '
