@@ -8,8 +8,8 @@ import pytest
 from rwa_monitor.core import keys
 from rwa_monitor.core.friction import dry_column, RegressorSet, viscous_column
 from rwa_monitor.core.gchi2 import gchi2_isf
-from rwa_monitor.core.llr import LLRDetector
-from rwa_monitor.core.llr_batch import _stats, detect_batch, detect_batch_with_counters
+from rwa_monitor.core.llr import detect_batch, detect_batch_with_counters, LLRDetector
+from rwa_monitor.core.llr_common import window_statistics as _stats
 
 
 def paper_speed(n: int, profile: str = 'fig3') -> np.ndarray:

@@ -17,6 +17,7 @@ checkpoint, never per sample.
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 
@@ -81,7 +82,7 @@ def segment_fit(row: np.ndarray, n: int, p: int, noise_var: float | None
     return x, pi, s2 if s2 > floor else floor
 
 
-def _solve(m: np.ndarray, r: np.ndarray) -> np.ndarray:
+def solve_scaled(m: np.ndarray, r: np.ndarray) -> np.ndarray:
     """Return ``m^+ r`` for stacked symmetric matrices (Jacobi-scaled pseudo-inverse).
 
     Scaling by the diagonal first makes the cut-off relative to the correlation matrix;
@@ -112,8 +113,8 @@ def change_fits(before: np.ndarray, after: np.ndarray, p: int
     pi_b, q_b, _ = unpack(before, p)
     pi_a, q_a, _ = unpack(after, p)
     lead = pi_b.shape[:-2]
-    x_b = _solve(pi_b, q_b)
-    x_a = _solve(pi_a, q_a)
+    x_b = solve_scaled(pi_b, q_b)
+    x_a = solve_scaled(pi_a, q_a)
     explained = np.empty(lead + (3,))
     dx = np.zeros(lead + (3, p))
     explained[..., 2] = (np.einsum('...i,...i->...', x_b, q_b)
@@ -128,16 +129,25 @@ def change_fits(before: np.ndarray, after: np.ndarray, p: int
         m[..., p, :p] = pi_a[..., i, :]
         m[..., p, p] = pi_a[..., i, i]
         r[..., p] = q_a[..., i]
-        theta = _solve(m, r)
+        theta = solve_scaled(m, r)
         explained[..., i] = np.einsum('...i,...i->...', theta, r)
         dx[..., i, i] = theta[..., p]
     return explained, dx
 
 
+class Category(NamedTuple):
+    """Kind of one change, its estimate, the component z values and the noise variance."""
+
+    kind: str
+    dx: np.ndarray
+    z: tuple[float, float]
+    noise_var: float
+    confirmed: bool
+
+
 def categorise(before: np.ndarray, n_before: int, after: np.ndarray, p: int,
-               noise_var: float | None, z_threshold: float
-               ) -> tuple[str, np.ndarray, tuple[float, float], float, bool]:
-    """Return ``(kind, dx, (z_dry, z_viscous), sigma^2, confirmed)`` for one change.
+               noise_var: float | None, z_threshold: float) -> Category:
+    """Return the :class:`Category` (kind, dx, z, sigma^2, confirmed) of one change.
 
     Not in the paper (which promises a categorisation but gives none); the design is in
     docs/llr.md. Nested likelihood-ratio tests on the joint fit of :func:`change_fits`,
@@ -156,7 +166,7 @@ def categorise(before: np.ndarray, n_before: int, after: np.ndarray, p: int,
                                 np.asarray(after, dtype=float), p)
     if noise_var is None:
         pi_b, q_b, e_b = unpack(before, p)
-        rss = float(e_b) - float(_solve(pi_b, q_b) @ q_b)
+        rss = float(e_b) - float(solve_scaled(pi_b, q_b) @ q_b)
         floor = NOISE_FLOOR_REL * float(e_b) / n_before + NOISE_FLOOR_ABS
         s2 = max(rss / (n_before - p), floor)
     else:
@@ -174,7 +184,7 @@ def categorise(before: np.ndarray, n_before: int, after: np.ndarray, p: int,
         h, confirmed = (1 if no_dry_only else 0), True
     else:
         h, confirmed = (0 if explained[0] >= explained[1] else 1), False
-    return KINDS[h], dx[h].copy(), (z_d, z_v), s2, confirmed
+    return Category(KINDS[h], dx[h].copy(), (z_d, z_v), s2, confirmed)
 
 
 def refine_change(prefix: np.ndarray, first: int, c: int, n: int, lo: int, hi: int, p: int,

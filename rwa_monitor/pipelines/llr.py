@@ -72,7 +72,7 @@ def run_with_summary(tele: Telemetry, config: Mapping[str, Any]
     The summary per wheel holds the number of events, samples, the detector's counters
     of rejected samples and its run time.
     """
-    from rwa_monitor.core.llr_batch import detect_batch_with_counters
+    from rwa_monitor.core.llr import detect_batch_with_counters
     kwargs = detector_kwargs(config)
     refined = friction_model(config.get(MODEL_KEY) or '', tele)
     events: list[AnomalyEvent] = []
