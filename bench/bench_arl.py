@@ -32,8 +32,8 @@ def _settings(quick: bool) -> dict[str, Any]:
     if quick:
         return {'runs': 2, 'n': 100_000, 'paper_runs': 1, 'temp_runs': 1, 'temp_n': 20_000,
                 'det_runs': 4, 'det_temp_runs': 2}
-    return {'runs': 20, 'n': 500_000, 'paper_runs': 4, 'temp_runs': 6, 'temp_n': 100_000,
-            'det_runs': 100, 'det_temp_runs': 20}
+    return {'runs': 10, 'n': 400_000, 'paper_runs': 2, 'temp_runs': 3, 'temp_n': 100_000,
+            'det_runs': 50, 'det_temp_runs': 10}
 
 
 def lower_bound(samples: int, alarms: int, level: float = 0.95) -> float:

@@ -454,8 +454,8 @@ class LLRDetector:
         times = (self._rtime[tau % L], self._rtime[n % L])
         event = make_event(self._component, cat, rows, times, self._logpmin, 0)
         self._cat = dict(before=prefix[tau - first].copy(), n_before=tau - base,
-                         kind=cat.kind, confirmed=cat.confirmed, revision=0, rows=rows,
-                         time=times[0], log_p=self._logpmin, start=tau,
+                         kind=cat.kind, guess=cat.guess, confirmed=cat.confirmed,
+                         revision=0, rows=rows, time=times[0], log_p=self._logpmin, start=tau,
                          gap=prefix[start - first] - prefix[tau - first])
         self._checks = checkpoints(tau, n, self._cfg['category_revisions'], self._w)
         self._checkpoint = self._checks.pop(0) if self._checks else -1
@@ -494,9 +494,11 @@ class LLRDetector:
         after = cat['gap'] + np.asarray(self._pref, dtype=float)
         new = llr_stats.categorise(cat['before'], cat['n_before'], after, self._p,
                                    self._noise_var, self._z_thr)
-        if new.kind == cat['kind'] and (cat['confirmed'] or not new.confirmed):
-            return []   # revision: new kind, or the same kind now confirmed
+        if ((new.kind, new.guess) == (cat['kind'], cat['guess'])
+                and (cat['confirmed'] or not new.confirmed)):
+            return []   # revision: new kind or guess, or the same kind now confirmed
         cat['kind'] = new.kind
+        cat['guess'] = new.guess
         cat['confirmed'] = new.confirmed
         cat['revision'] += 1
         rows = cat['rows'][:2] + (self._rrow[j % self._L],)

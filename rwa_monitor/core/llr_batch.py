@@ -237,8 +237,10 @@ def detect_paper_model(t: np.ndarray, w: np.ndarray, f: np.ndarray, cfg: Mapping
             after = cat['gap'] + ref.at(j + 1)
             new = llr_stats.categorise(cat['before'], cat['n_before'], after, 2, noise_var,
                                        z_thr)
-            if new.kind != cat['kind'] or (new.confirmed and not cat['confirmed']):
+            if ((new.kind, new.guess) != (cat['kind'], cat['guess'])
+                    or (new.confirmed and not cat['confirmed'])):
                 cat['kind'] = new.kind
+                cat['guess'] = new.guess
                 cat['confirmed'] = new.confirmed
                 cat['revision'] += 1
                 ev_rows = cat['rows'][:2] + (int(rows[j]),)
@@ -275,7 +277,8 @@ def detect_paper_model(t: np.ndarray, w: np.ndarray, f: np.ndarray, cfg: Mapping
         times = (float(tv[tau]), float(tv[n]))
         events.append(make_event(component, category, ev_rows, times, state['logp'], 0))
         cat = dict(before=prefix[tau - first].copy(), n_before=tau - base,
-                   kind=category.kind, confirmed=category.confirmed, revision=0,
+                   kind=category.kind, guess=category.guess,
+                   confirmed=category.confirmed, revision=0,
                    rows=ev_rows, time=times[0], log_p=state['logp'], start=tau,
                    gap=prefix[start - first] - prefix[tau - first])
         checks = checkpoints(tau, n, cfg['category_revisions'], win)

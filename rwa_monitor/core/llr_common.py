@@ -97,7 +97,10 @@ def make_event(component: str, category: llr_stats.Category, rows: tuple[int, in
     details = {keys.DELTA_DRY: float(dx[0]), keys.DELTA_VISCOUS: float(dx[1]),
                keys.NOISE_STD: math.sqrt(category.noise_var), keys.Z_DRY: z[0],
                keys.Z_VISCOUS: z[1], keys.KIND_CONFIRMED: bool(category.confirmed),
-               keys.ARGMIN_INDEX: rows[1], keys.LOG10_P_VALUE: log_p / _LN10}
+               keys.ARGMIN_INDEX: rows[1], keys.LOG10_P_VALUE: log_p / _LN10,
+               keys.KIND_GUESS: category.guess,
+               keys.DETECTABLE_DRY: category.detectable[0],
+               keys.DETECTABLE_VISCOUS: category.detectable[1]}
     return AnomalyEvent(detector='llr', component=component, kind=category.kind,
                         time=times[0], index=rows[0], declared_time=times[1],
                         declared_index=rows[2], p_value=math.exp(log_p), revision=revision,
