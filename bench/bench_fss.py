@@ -211,7 +211,7 @@ def changepoint_truth(path: pathlib.Path, manifest: dict, count: int) -> dict:
         hit = d.min(axis=0) <= 3 if d is not None else np.zeros(0, bool)
         missed.append(int(np.sum(~hit)))
         gaps = np.diff(np.concatenate(([0], true, [speed.size])))
-        isolated = (gaps[:-1] > 2 * config.window) & (gaps[1:] > 2 * config.window)
+        isolated = (gaps[:-1] > 2 * config.wglr_window) & (gaps[1:] > 2 * config.wglr_window)
         big_missed.append(int(np.sum(~hit & isolated)))
         sigma = estimate_sigma(friction, speed, 1.0)
         ext = extract(speed, friction, config)

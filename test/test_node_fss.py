@@ -123,7 +123,7 @@ def test_parameters(repo_root):
             _node(world, model='/nonexistent/model.json')
         node = world.node(FssDiagnoserNode, cli_args=[
             '--ros-args', '--params-file', str(repo_root / 'config' / 'rwa_monitor.yaml')])
-        assert node.params['window_length'] == 80_000 and node._config.window == 20
+        assert node.params['window_length'] == 80_000 and node._config.wglr_window == 20
         result = node.set_parameters([Parameter('beam', value=0)])[0]
         assert not result.successful and 'beam' in result.reason
         assert node.set_parameters([Parameter('beam', value=64)])[0].successful

@@ -18,12 +18,14 @@ from scipy import linalg
 
 from rwa_monitor.core import llr_batch, llr_stats
 from rwa_monitor.core.events import AnomalyEvent
+from rwa_monitor.core.friction import RegressorSet
 from rwa_monitor.core.gchi2 import (gchi2_logsf_general, log_sf2, log_sf2_t,
                                     skip_threshold)
 from rwa_monitor.core.llr_common import (candidate_log_p2, checkpoints, COUNTER_NAMES,
                                          declaration, fit_noise_model, make_event,
                                          NoiseModel, reference_base, validate_parameters,
                                          window_statistics)
+from rwa_monitor.core.params import AUTO
 
 __all__ = ['candidate_log_p2', 'COUNTER_NAMES', 'detect_batch', 'detect_batch_with_counters',
            'LLRDetector', 'NoiseModel', 'validate_parameters']
@@ -32,10 +34,10 @@ __all__ = ['candidate_log_p2', 'COUNTER_NAMES', 'detect_batch', 'detect_batch_wi
 class LLRDetector:
     """Streaming LLR detector of friction changes for one wheel (Algorithm 1).
 
-    Keyword parameters: ``window`` w (look-ahead samples, >= 10), ``k_verif``
-    (verification samples, default ``window // 2``, in ``[0, window - 1]``),
-    ``false_alarm_rate`` r in (0, 1), ``noise_std`` (N m; None: estimated from the
-    reference fit), ``regressors`` (a RegressorSet; None: the paper's eq. (1)),
+    Keyword parameters (core/schema.py LLR, docs/parameters.md): ``window`` w (look-ahead
+    samples, >= 10), ``k_verif`` (verification samples in ``[0, window - 1]``; ``'auto'``:
+    ``window // 2``), ``false_alarm_rate`` r in (0, 1), ``noise_std`` (N m; ``'auto'``:
+    estimated from the reference fit), ``regressors`` (a RegressorSet; None: the paper's eq. (1)),
     ``min_excitation`` (smallest ``det(corr(Pi_P))``, in [0, 1): below it the test is
     skipped and counted), ``category_level`` (level of each dry / viscous test, default
     1e-3; None: r),
@@ -52,8 +54,21 @@ class LLRDetector:
     construction or reset). docs/llr.md "Noise beyond white" and "Slow drifts".
     """
 
-    def __init__(self, component: str = 'rw1', **params: Any):
-        self._cfg = validate_parameters(component, **params)
+    def __init__(self, component: str = 'rw1', *, window: int = 500,
+                 k_verif: int | str = AUTO, false_alarm_rate: float = 1e-5,
+                 noise_std: float | str = AUTO, regressors: RegressorSet | None = None,
+                 min_excitation: float = 1e-6, category_level: float = 1e-3,
+                 category_revisions: int = 3, refine_change: bool = True,
+                 max_abs_speed: float = 1e6, max_abs_friction: float = 1e6,
+                 noise_ar_max_order: int | str = AUTO, noise_fit_samples: int | str = AUTO,
+                 reference_max: int | None = 0) -> None:
+        self._cfg = validate_parameters(
+            component, window=window, k_verif=k_verif, false_alarm_rate=false_alarm_rate,
+            noise_std=noise_std, regressors=regressors, min_excitation=min_excitation,
+            category_level=category_level, category_revisions=category_revisions,
+            refine_change=refine_change, max_abs_speed=max_abs_speed,
+            max_abs_friction=max_abs_friction, noise_ar_max_order=noise_ar_max_order,
+            noise_fit_samples=noise_fit_samples, reference_max=reference_max)
         cfg = self._cfg
         self._component = cfg['component']
         self._w = cfg['window']
@@ -78,6 +93,16 @@ class LLRDetector:
     def parameters(self) -> dict[str, Any]:
         """Validated keyword parameters, defaults filled in."""
         return dict(self._cfg)
+
+    @property
+    def params(self) -> dict[str, Any]:
+        """Validated keyword parameters (the detector protocol's name, core/protocol.py)."""
+        return dict(self._cfg)
+
+    @property
+    def last_event(self) -> AnomalyEvent | None:
+        """The latest event returned by :meth:`update` (declaration or revision), or None."""
+        return self._last_event
 
     @property
     def component(self) -> str:
@@ -204,6 +229,7 @@ class LLRDetector:
         self._fitting = self._ar_max > 0
         self._buffer: list[tuple[int, float, float, Any]] = []
         self._plain = self._default and not self._fitting
+        self._last_event: AnomalyEvent | None = None
 
     def update(self, t: float, speed: float, friction: float,
                aux: Mapping[str, float] | None = None) -> list[AnomalyEvent]:
@@ -453,6 +479,7 @@ class LLRDetector:
         rows = (self._rrow[tau % L], self._rrow[k_min % L], self._rrow[n % L])
         times = (self._rtime[tau % L], self._rtime[n % L])
         event = make_event(self._component, cat, rows, times, self._logpmin, 0)
+        self._last_event = event
         self._cat = dict(before=prefix[tau - first].copy(), n_before=tau - base,
                          kind=cat.kind, guess=cat.guess, confirmed=cat.confirmed,
                          revision=0, rows=rows, time=times[0], log_p=self._logpmin, start=tau,
@@ -503,7 +530,9 @@ class LLRDetector:
         cat['revision'] += 1
         rows = cat['rows'][:2] + (self._rrow[j % self._L],)
         times = (cat['time'], self._rtime[j % self._L])
-        return [make_event(self._component, new, rows, times, cat['log_p'], cat['revision'])]
+        self._last_event = make_event(self._component, new, rows, times, cat['log_p'],
+                                      cat['revision'])
+        return [self._last_event]
 
     # -- general model (p > 2): numpy per sample -------------------------------------
     def _update_general(self, row: int, t: float, f: float, h: np.ndarray

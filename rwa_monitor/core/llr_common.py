@@ -19,7 +19,7 @@ from rwa_monitor.core import keys, llr_stats
 from rwa_monitor.core.events import AnomalyEvent
 from rwa_monitor.core.friction import coulomb_viscous, RegressorSet
 from rwa_monitor.core.gchi2 import log_lower_bound, log_lower_bound_array, log_sf2, log_sf2_t
-from rwa_monitor.core.params import check_int, check_real
+from rwa_monitor.core.params import AUTO, check_int, check_real
 
 COUNTER_NAMES = ('nonfinite', 'out_of_range', 'non_increasing_time', 'missing_aux',
                  'ill_conditioned')
@@ -31,16 +31,22 @@ DEFAULT_AR_ORDER = 3
 
 
 def validate_parameters(component: str = 'rw1', *, window: int = 500,
-                        k_verif: int | None = None, false_alarm_rate: float = 1e-5,
-                        noise_std: float | None = None,
+                        k_verif: int | str | None = AUTO, false_alarm_rate: float = 1e-5,
+                        noise_std: float | str | None = AUTO,
                         regressors: RegressorSet | None = None,
                         min_excitation: float = 1e-6, category_level: float = 1e-3,
                         category_revisions: int = 3, refine_change: bool = True,
                         max_abs_speed: float = 1e6, max_abs_friction: float = 1e6,
-                        noise_ar_max_order: int | None = None,
-                        noise_fit_samples: int | None = None,
-                        reference_max: int | None = None) -> dict[str, Any]:
-    """Check the detector's keyword parameters; return them normalised (ValueError if bad)."""
+                        noise_ar_max_order: int | str | None = AUTO,
+                        noise_fit_samples: int | str | None = AUTO,
+                        reference_max: int | None = 0) -> dict[str, Any]:
+    """Check the detector's keyword parameters; return them normalised (ValueError if bad).
+
+    :data:`AUTO` (core/schema.py) or None: ``k_verif`` becomes ``window // 2``,
+    ``noise_std`` None (estimated), ``noise_ar_max_order`` 3 (0 with a given
+    ``noise_std``), ``noise_fit_samples`` ``2 window + 1``; ``reference_max`` 0 or None
+    becomes None (growing reference).
+    """
     if not isinstance(component, str) or not component:
         raise ValueError(f'component must be a non-empty string, got {component!r}')
     if regressors is None:
@@ -49,10 +55,12 @@ def validate_parameters(component: str = 'rw1', *, window: int = 500,
         raise ValueError(f'regressors must be a RegressorSet or None, got {regressors!r}')
     p = regressors.p
     window = check_int('window', window, max(10, p + 2))
-    if k_verif is None:
+    if k_verif is None or k_verif == AUTO:
         k_verif = window // 2
     k_verif = check_int('k_verif', k_verif, 0, window - 1)
     r = check_real('false_alarm_rate', false_alarm_rate, 0.0, 1.0, True, True)
+    if noise_std == AUTO:
+        noise_std = None
     if noise_std is not None:
         noise_std = check_real('noise_std', noise_std, 0.0, math.inf, True, True)
     min_excitation = check_real('min_excitation', min_excitation, 0.0, 1.0, False, True)
@@ -65,16 +73,18 @@ def validate_parameters(component: str = 'rw1', *, window: int = 500,
     max_abs_speed = check_real('max_abs_speed', max_abs_speed, 0.0, math.inf, True, True)
     max_abs_friction = check_real('max_abs_friction', max_abs_friction, 0.0, math.inf, True,
                                   True)
-    if noise_ar_max_order is None:
+    if noise_ar_max_order is None or noise_ar_max_order == AUTO:
         noise_ar_max_order = DEFAULT_AR_ORDER if noise_std is None else 0
     noise_ar_max_order = check_int('noise_ar_max_order', noise_ar_max_order, 0, AR_ORDER_LIMIT)
     if noise_std is not None and noise_ar_max_order > 0:
         raise ValueError('noise_ar_max_order must be 0 when noise_std is given (a known noise '
                          f'level means white noise), got {noise_ar_max_order}')
-    if noise_fit_samples is None:
+    if noise_fit_samples is None or noise_fit_samples == AUTO:
         noise_fit_samples = 2 * window + 1
     noise_fit_samples = check_int('noise_fit_samples', noise_fit_samples,
                                   max(p + 2 * noise_ar_max_order + 10, 20), 10**7)
+    if reference_max == 0:
+        reference_max = None
     if reference_max is not None:
         reference_max = check_int('reference_max', reference_max, window + 1, 10**7)
     return dict(component=component, window=window, k_verif=k_verif,
