@@ -272,6 +272,15 @@ LLR = Schema('llr_detector', (
           'out_of_range.', low=0.0, low_open=True, unit='rad/s'),
     Param('max_abs_friction', 1.0e6, 'Samples at or beyond this friction are dropped and '
           'counted out_of_range.', low=0.0, low_open=True, unit='N m'),
+    Param('noise_ar_max_order', AUTO, 'Largest order of the AR noise model fitted on the '
+          'first samples and used to prewhiten them (docs/llr.md); auto = 3 with an '
+          'estimated noise level, 0 with noise_std given (white noise, the paper).', low=0,
+          high=10, auto=True, kind=int),
+    Param('noise_fit_samples', AUTO, 'Samples that fit the AR noise model; auto = '
+          '2 window + 1.', low=20, high=10_000_000, auto=True, kind=int, unit='samples'),
+    Param('reference_max', 0, 'Longest reference segment (sliding reference that follows '
+          'slow drifts, docs/llr.md); 0 = growing reference (the paper).', low=0,
+          high=10_000_000, unit='samples'),
     Param('friction_model_file', '', 'Refined friction model written by `rwa-monitor '
           'identify` (friction_model.yaml); empty = model (1).', scope='file'),
     _wheels(),
