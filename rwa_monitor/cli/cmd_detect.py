@@ -25,6 +25,7 @@ import sys
 from typing import Any
 
 from rwa_monitor import pipelines
+from rwa_monitor.cli.options import add_topics, INPUT_HELP
 from rwa_monitor.cli.output import check_output, quiet_broken_pipe, STDOUT, write_output
 from rwa_monitor.core.events import AnomalyEvent
 from rwa_monitor.core.schema import help_text, LLR, SCHEMAS, VSADC
@@ -42,7 +43,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                     'a table. Times are seconds of the file, torques N m.',
         epilog=f'{help_text(LLR)}\n{help_text(VSADC)}',
         formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument('file', type=pathlib.Path, help='telemetry file (.csv or .mcap)')
+    parser.add_argument('file', type=pathlib.Path, help=INPUT_HELP)
+    add_topics(parser)
     parser.add_argument('--config', type=pathlib.Path, metavar='YAML',
                         help='parameters file in the node format (node blocks with '
                              'ros__parameters; default: the installed config/rwa_monitor.yaml)')
@@ -71,7 +73,6 @@ EXIT_NOTHING_FOUND = 0
 EXIT_ANOMALY = 1
 EXIT_ERROR = 2
 EXIT_NOT_EXAMINED = 3
-SENSOR_FAULT_FRACTION = 0.5  # rejected share of a channel's samples that is a sensor fault
 DETECTOR_NEEDS = {'llr': 'needs <wheel>_speed and <wheel>_friction columns',
                   'vsadc': 'needs gyro_x/y/z and q_x/y/z/w columns'}
 
@@ -103,13 +104,8 @@ def coverage(tele: Any, summary: dict[str, Any]) -> dict[str, Any]:
             samples = entry.get('samples')
             if isinstance(rejected, dict) and samples:
                 unusable = sum(v for k, v in rejected.items() if k != 'ill_conditioned')
-                implausible = rejected.get('out_of_range', 0) + rejected.get('nonfinite', 0)
                 if unusable >= samples:
                     not_examined[component] = f'{name}: no usable sample'
-                elif implausible >= SENSOR_FAULT_FRACTION * samples:
-                    not_examined[component] = (
-                        f'{name}: sensor fault: {implausible} of {samples} samples '
-                        'implausible or not finite')
     summary['detectors'] = detectors
     summary['not_examined'] = not_examined
     return summary
@@ -127,7 +123,7 @@ def exit_code(events: list[AnomalyEvent], summary: dict[str, Any]) -> int:
 def run(args: argparse.Namespace) -> int:
     """Read the file, detect, and write the JSON or print the table."""
     check_output(args.output, args.file, args.config, args.friction_model)
-    tele = read_telemetry(args.file)
+    tele = read_telemetry(args.file, args.topics)
     config = load_config(args.config)
     if args.friction_model is not None:
         block = config.setdefault('llr_detector', {}).setdefault('ros__parameters', {})

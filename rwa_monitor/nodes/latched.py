@@ -28,8 +28,6 @@ from rwa_monitor.nodes.common import DiagnosticsPublisher, LEVEL_NAMES, OK
 from rwa_monitor.telemetry.alarms import AlarmStore, event_key
 
 ALARMS_ID = 'alarms'
-# Its parameters events_file and wheel_timeout are in core/schema.py (EVENTS_FILE,
-# WHEEL_TIMEOUT), declared by each node with the rest of its schema.
 
 
 class LatchedAlarms:
