@@ -108,7 +108,9 @@ def test_health_transitions_then_stale(tmp_path):
     # OK until the first event, then the level of each event in turn, then STALE.
     expected = [DiagnosticStatus.OK, *(messages.event_level(e.kind) for e in rw2_events),
                 DiagnosticStatus.STALE]
-    assert compact(sequence) == compact(expected)
+    # /diagnostics is published on wall time (once per diagnostic_period): a fast replay
+    # may declare before the first status, so the leading OK may not be seen.
+    assert compact(sequence) in (compact(expected), compact(expected)[1:])
     alarm = messages.event_level(first.kind)
     alarm_values = messages.status_fields(statuses[sequence.index(alarm)])
     assert alarm_values['kind'] == first.kind
