@@ -80,7 +80,9 @@ def test_nodes_and_replay_stop_cleanly_on_signals(tmp_path, sig):
                 pytest.fail(f'{name} did not stop on {sig.name}')
             text = log.read_text(errors='replace')
             assert 'Traceback' not in text and 'RCLError' not in text, text
-            assert code == 0, (name, code, text)
+            # A process still importing its modules (a loaded machine) has no handler
+            # yet and ends by the signal's default action: no traceback, nothing to clean.
+            assert code == 0 or (code == -sig and not text.strip()), (name, code, text)
 
 
 @pytest.mark.ros
