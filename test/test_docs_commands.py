@@ -1,10 +1,11 @@
 """Every shell command shown in README.md and docs/*.md runs as written.
 
-The commands are taken from the fenced blocks (no language, or sh/bash/console) of the
-documents. Each one is either run here (once), in a scratch folder beside a link to the
-repository's ``config/``, in the order of its document, or listed in EXCEPTIONS with the
-reason. The scratch folder also holds the inputs a command expects from the user: a
-recording from another system (``flight_bag``) and a classifier model (``model.json``).
+The commands are the lines starting with a program (PROGRAMS) in the fenced blocks (no
+language, or sh/bash/console) of the documents. Each one is either run here (once), in a
+scratch folder beside a link to the repository's ``config/``, in the order of its
+document, or listed in EXCEPTIONS with the reason. The scratch folder also holds the
+inputs a command expects from the user: a recording from another system
+(``flight_bag``) and a classifier model (``model.json``).
 A new documented command fails :func:`test_every_documented_command_is_covered` until it
 is added to one of them. Long-running commands (nodes, the dashboard) run together until
 the replay's data reaches the dashboard, then are stopped with SIGINT, as a user would.
@@ -28,6 +29,10 @@ ROOT = pathlib.Path(__file__).resolve().parents[1]
 DOCS = [ROOT / 'README.md', *sorted((ROOT / 'docs').glob('*.md'))]
 BIN = pathlib.Path(sys.executable).parent
 SHELL_BLOCKS = ('', 'sh', 'bash', 'shell', 'console')
+# A line of a shell block is a command when it starts with one of these (other lines of
+# such blocks are diagrams or output).
+PROGRAMS = ('make', 'rwa-monitor', 'python', 'python3', 'ros2', 'colcon', 'npm', 'node',
+            'pip')
 
 EXCEPTIONS = {
     'make demo': 'the whole demo (minutes of replay); test_nodes_demo.py runs it on a '
@@ -71,7 +76,9 @@ def documented_commands():
                     lines[-1] += ' ' + line
                 else:
                     lines.append(line)
-            found += [(doc.name, ' '.join(line.split())) for line in lines]
+            found += [(doc.name, ' '.join(line.split())) for line in lines
+                      if line.split()[0].split('-')[0] in PROGRAMS
+                      or line.split()[0] in PROGRAMS]
     return found
 
 

@@ -245,7 +245,7 @@ def test_detect_runs_on_a_multi_rate_recording(tmp_path):
 
 
 def test_both_encodings_of_empty_sequences_are_read(tmp_path):
-    """Read both: rclpy pads after an empty float64 sequence, canonical CDR does not."""
+    """Read both: rclpy appends padding after trailing empty sequences, canonical CDR not."""
     from rclpy.serialization import serialize_message
     from sensor_msgs.msg import JointState
     store = rosbag_io.typestore()
