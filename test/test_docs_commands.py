@@ -77,9 +77,12 @@ def documented_commands():
                 else:
                     lines.append(line)
             found += [(doc.name, ' '.join(line.split())) for line in lines
-                      if line.split()[0].split('-')[0] in PROGRAMS
-                      or line.split()[0] in PROGRAMS]
+                      if _is_program(line.split()[0])]
     return found
+
+
+def _is_program(word):
+    return any(word == p or word.startswith(p + '-') for p in PROGRAMS)
 
 
 def test_every_documented_command_is_covered():
