@@ -239,7 +239,7 @@ def test_detect_runs_on_a_multi_rate_recording(tmp_path):
     run = subprocess.run([sys.executable, '-m', 'rwa_monitor.cli.main', 'detect', str(path),
                           '--topics', TOPICS, '-o', str(out)], capture_output=True,
                          text=True, timeout=120)
-    assert run.returncode == 0, run.stderr
+    assert run.returncode in (0, 1, 3), run.stderr  # detect's result codes, 2 = error
     summary = json.loads(out.read_text())['summary']
     assert 'llr' in json.dumps(summary) and 'vsadc' in json.dumps(summary)
 
