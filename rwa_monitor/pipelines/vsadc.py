@@ -1,18 +1,26 @@
-"""VSADC on a file: gyro drift/bias events per axis from gyro_*, q_* and ref_* columns.
+"""Gyro drift/bias diagnosis on a file: events per axis from gyro_* and q_* columns.
 
 Parameters are the ``vsadc_detector`` node's block of config/rwa_monitor.yaml, same names
-(see :data:`DEFAULTS`); other keys of the block (node-only ones) are ignored. A file
-without ``ref_*`` columns uses the ``reference_rate`` parameter (rad/s, 3 values).
+(see :data:`DEFAULTS`); other keys of the block (node-only ones) are ignored.
+``feature`` chooses the detector: ``residual`` (default) the gyro-minus-star-tracker
+diagnosis of :mod:`rwa_monitor.core.gyro_diagnosis`, which needs no guidance reference;
+``paper`` the two residuals of the paper against ``ref_*`` (or the ``reference_rate``
+parameter) in :class:`rwa_monitor.core.vsadc.VsadcDetector`. ``calibration_file`` names a
+calibration.yaml whose ``gyro:`` block sets the residual thresholds (DESIGN.md).
 """
 
 from __future__ import annotations
 
+import pathlib
 import time as _time
 from typing import Any, Mapping
 
 import numpy as np
+import yaml
 
 from rwa_monitor.core.events import AnomalyEvent
+from rwa_monitor.core.gyro_diagnosis import AXIS_DEFAULTS, DEFAULT_SATURATION_RAD_S, \
+    GyroDiagnosis
 from rwa_monitor.core.params import check_choice, check_int, check_real
 from rwa_monitor.core.vsadc import AXES, STATE_NAMES, VsadcDetector
 from rwa_monitor.telemetry import Telemetry
@@ -25,7 +33,11 @@ DEFAULTS: dict[str, Any] = {
     'recovery_fraction': 0.75,
     'max_gap': 1.0,
     'norm_tolerance': 0.1, 'reference_rate': [0.0, 0.0, 0.0], 'axes': 'x,y,z',
+    'feature': 'residual', 'calibration_file': '',
+    'saturation_rad_s': DEFAULT_SATURATION_RAD_S,
+    **{f'residual_{k}': v for k, v in AXIS_DEFAULTS.items()},
 }
+FEATURES = ('residual', 'paper')
 
 
 def applies(tele: Telemetry) -> bool:
@@ -52,6 +64,52 @@ def detector_kwargs(config: Mapping[str, Any]) -> dict[str, Any]:
         norm_tolerance=p['norm_tolerance'], axes=axes)
 
 
+def load_gyro_calibration(path: str | pathlib.Path) -> dict[str, dict[str, Any]]:
+    """Return the ``calibration.gyro`` block (axis -> dict) of a calibration.yaml file.
+
+    ValueError with the file name when it cannot be read or has no gyro block.
+    """
+    try:
+        data = yaml.safe_load(pathlib.Path(path).read_text())
+    except OSError as err:
+        raise ValueError(f'{path}: cannot read: {err.strerror}') from None
+    except yaml.YAMLError as err:
+        raise ValueError(f'{path}: not valid YAML: {err}') from None
+    block = ((data or {}).get('calibration') or {}).get('gyro') if isinstance(data, dict) \
+        else None
+    if not isinstance(block, dict) or not block:
+        raise ValueError(f'{path}: no calibration.gyro block')
+    bad = [a for a in block if a not in AXES or not isinstance(block[a], dict)]
+    if bad:
+        raise ValueError(f'{path}: calibration.gyro: unknown axis entries {bad}')
+    return block
+
+
+def make_detector(config: Mapping[str, Any],
+                  calibration: Mapping[str, Any] | None = None
+                  ) -> GyroDiagnosis | VsadcDetector:
+    """Return the configured gyro detector (``feature``: residual or paper).
+
+    ``calibration`` (axis -> dict of calibrate_gyro) wins over the ``calibration_file``
+    parameter; both apply to the residual feature only.
+    """
+    p = {**DEFAULTS, **{k: v for k, v in config.items() if k in DEFAULTS}}
+    feature = check_choice('feature', p['feature'], FEATURES)
+    if feature == 'paper':
+        return VsadcDetector(**detector_kwargs(config))
+    if calibration is None and p['calibration_file']:
+        calibration = load_gyro_calibration(p['calibration_file'])
+    axes = tuple(a.strip() for a in str(p['axes']).split(',') if a.strip())
+    for a in axes:
+        check_choice('axes', a, AXES)
+    return GyroDiagnosis(
+        calibration=calibration,
+        saturation_rad_s=check_real('saturation_rad_s', p['saturation_rad_s'], 0.0,
+                                    low_open=True),
+        max_gap=p['max_gap'], norm_tolerance=p['norm_tolerance'], axes=axes,
+        **{k: p[f'residual_{k}'] for k in AXIS_DEFAULTS})
+
+
 def reference_of(config: Mapping[str, Any]) -> np.ndarray:
     """Return the constant reference rate parameter as a checked (3,) array (rad/s)."""
     ref = config.get('reference_rate', DEFAULTS['reference_rate'])
@@ -60,13 +118,14 @@ def reference_of(config: Mapping[str, Any]) -> np.ndarray:
     return np.array([check_real('reference_rate', v) for v in ref])
 
 
-def label_series(tele: Telemetry, config: Mapping[str, Any]
-                 ) -> tuple[np.ndarray, list[AnomalyEvent], VsadcDetector]:
+def label_series(tele: Telemetry, config: Mapping[str, Any],
+                 calibration: Mapping[str, Any] | None = None
+                 ) -> tuple[np.ndarray, list[AnomalyEvent], GyroDiagnosis | VsadcDetector]:
     """Run the streaming detector over the rows; return (labels (n, axes), events, detector).
 
     Labels are the state after each row (held on rows the detector could not use).
     """
-    det = VsadcDetector(**detector_kwargs(config))
+    det = make_detector(config, calibration)
     ref = tele.reference_rate
     if ref is None:
         ref = np.broadcast_to(reference_of(config), (len(tele), 3))
@@ -84,11 +143,12 @@ def label_series(tele: Telemetry, config: Mapping[str, Any]
     return labels, events, det
 
 
-def run_with_summary(tele: Telemetry, config: Mapping[str, Any]
+def run_with_summary(tele: Telemetry, config: Mapping[str, Any],
+                     calibration: Mapping[str, Any] | None = None
                      ) -> tuple[list[AnomalyEvent], dict[str, Any]]:
-    """Run VSADC on the three axes; return (events, per-axis summary with counters)."""
+    """Run the gyro diagnosis on the three axes; return (events, per-axis summary)."""
     start = _time.perf_counter()
-    labels, events, det = label_series(tele, config)
+    labels, events, det = label_series(tele, config, calibration)
     summary: dict[str, Any] = {}
     runtime = _time.perf_counter() - start
     for i, axis in enumerate(det.axes):
@@ -101,6 +161,7 @@ def run_with_summary(tele: Telemetry, config: Mapping[str, Any]
     return events, summary
 
 
-def run(tele: Telemetry, config: Mapping[str, Any]) -> list[AnomalyEvent]:
-    """Run VSADC on the three axes; return the events (DESIGN.md events contract)."""
-    return run_with_summary(tele, config)[0]
+def run(tele: Telemetry, config: Mapping[str, Any],
+        calibration: Mapping[str, Any] | None = None) -> list[AnomalyEvent]:
+    """Run the gyro diagnosis on the three axes; return the events (DESIGN.md contract)."""
+    return run_with_summary(tele, config, calibration)[0]
