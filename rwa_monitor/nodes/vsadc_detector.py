@@ -4,9 +4,12 @@ Subscribes ``telemetry/gyro`` (sensor_msgs/Imu, angular_velocity), ``telemetry/s
 (geometry_msgs/QuaternionStamped) and ``telemetry/reference_rate`` (Vector3Stamped; when
 it has sent nothing for ``reference_timeout`` s of data time, the ``reference_rate``
 parameter is used). Gyro and star-tracker samples are paired by stamp (within
-``pair_tolerance`` s) and fed in stamp order to :class:`rwa_monitor.core.vsadc.VsadcDetector`
-with the keywords of :func:`rwa_monitor.pipelines.vsadc.detector_kwargs` (one
-implementation and one parameter meaning for node, ``detect`` and benchmarks).
+``pair_tolerance`` s) and fed in stamp order to the detector of
+:func:`rwa_monitor.pipelines.vsadc.make_detector` (``feature`` residual: the
+gyro-minus-star-tracker diagnosis with the ``calibration_file`` thresholds; paper: VSADC
+as in Algorithm 1); one implementation and one parameter meaning for node, ``detect``
+and benchmarks. A gyro rate at or above ``saturation_rad_s`` is held and the axis
+reported WARN "saturated", never diagnosed.
 
 Publishes an event on ``anomalies`` at every state change of an axis (kind ``drift``,
 ``bias``, or ``healthy`` for a recovery) and each axis's health on ``/diagnostics``:
@@ -33,13 +36,13 @@ from sensor_msgs.msg import Imu
 from rwa_monitor.core import keys
 from rwa_monitor.core.events import AnomalyEvent
 from rwa_monitor.core.params import check_real
-from rwa_monitor.core.vsadc import STATE_NAMES, VsadcDetector
+from rwa_monitor.core.vsadc import STATE_NAMES
 from rwa_monitor.exceptions import ConfigError
 from rwa_monitor.nodes import messages
 from rwa_monitor.nodes.common import (declare_parameters, DiagnosticsPublisher, ERROR,
                                       EVENTS_QOS, OK, ParamSpec, qos_event_callbacks,
                                       run_node, telemetry_qos, WARN)
-from rwa_monitor.pipelines.vsadc import DEFAULTS, detector_kwargs
+from rwa_monitor.pipelines.vsadc import DEFAULTS, FEATURES, make_detector
 
 NODE_NAME = 'vsadc_detector'
 INPUT_ID = 'gyro_star_tracker'
@@ -48,8 +51,17 @@ HEALTH_LEVEL = {0: OK, 1: ERROR, 2: WARN}
 DETECTOR_PARAMETERS = ('window', 'sigma_window', 'distance_threshold', 'reference_window',
                        'margin', 'exit_limit', 'exit_margin', 'hold', 'nominal_tracking',
                        'freeze_fraction', 'adaptive', 'recovery_fraction', 'max_gap',
-                       'norm_tolerance', 'axes')
+                       'norm_tolerance', 'axes', 'feature', 'calibration_file',
+                       'saturation_rad_s')
 PARAMETERS = (
+    ParamSpec('feature', DEFAULTS['feature'], 'residual: gyro minus star-tracker rate '
+              '(works under guidance); paper: the two residuals of Algorithm 1.',
+              choices=FEATURES),
+    ParamSpec('calibration_file', DEFAULTS['calibration_file'], 'calibration.yaml whose '
+              'gyro block sets the residual thresholds; empty: defaults.'),
+    ParamSpec('saturation_rad_s', DEFAULTS['saturation_rad_s'], 'A gyro rate at or above '
+              'this (rad/s) is saturated: held and reported, never diagnosed.', low=0.0,
+              low_open=True),
     ParamSpec('window', DEFAULTS['window'], 'SW: samples of the nominal batch and of the '
               'evolving window (vsadc paper, Algorithm 1).', low=2, high=100_000),
     ParamSpec('sigma_window', DEFAULTS['sigma_window'], 'Distances in the sigma of line 22; '
@@ -130,7 +142,10 @@ class VsadcDetectorNode(Node):
         self._star: deque = deque()
         self._refs: deque = deque(maxlen=64)
         self._last_fed = -math.inf
-        self.detector = VsadcDetector(**detector_kwargs(self._detector_config()))
+        try:
+            self.detector = make_detector(self._detector_config())
+        except ValueError as err:
+            raise ConfigError(f'parameter {err}') from None
         self.diagnostics = DiagnosticsPublisher(
             self, period=self.params['diagnostic_period'],
             stale_timeout=self.params['stale_timeout'])
@@ -153,7 +168,7 @@ class VsadcDetectorNode(Node):
         return {name: values[name] for name in DETECTOR_PARAMETERS}
 
     def _check_detector(self, values: dict[str, Any]) -> None:
-        VsadcDetector(**detector_kwargs(self._detector_config(values)))
+        make_detector(self._detector_config(values))
 
     def _check_reference_param(self, params: list) -> SetParametersResult:
         for p in params:
@@ -166,7 +181,7 @@ class VsadcDetectorNode(Node):
 
     def _on_parameter(self, name: str, value: Any) -> None:
         if name in DETECTOR_PARAMETERS:
-            self.detector = VsadcDetector(**detector_kwargs(self._detector_config()))
+            self.detector = make_detector(self._detector_config())
             self._axis_checks()
             self.get_logger().info(f'{name} = {value}: detector restarted')
 
@@ -292,6 +307,8 @@ class VsadcDetectorNode(Node):
         last = next((e for e in reversed(self.events) if e.component == component), None)
         if last is not None:
             values[keys.CHANGE_TIME] = last.time
+        if getattr(self.detector, 'saturated_now', {}).get(self.detector.axes[i]):
+            return WARN, 'gyro saturated: samples held, not diagnosed', values
         if not channel.ready:
             return OK, 'learning the nominal class', values
         message = STATE_NAMES[state] if last is None else \

@@ -95,8 +95,9 @@ def make_detector(config: Mapping[str, Any],
     """
     p = {**DEFAULTS, **{k: v for k, v in config.items() if k in DEFAULTS}}
     feature = check_choice('feature', p['feature'], FEATURES)
+    paper = VsadcDetector(**detector_kwargs(config))    # checks the whole block either way
     if feature == 'paper':
-        return VsadcDetector(**detector_kwargs(config))
+        return paper
     if calibration is None and p['calibration_file']:
         calibration = load_gyro_calibration(p['calibration_file'])
     axes = tuple(a.strip() for a in str(p['axes']).split(',') if a.strip())
