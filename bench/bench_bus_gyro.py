@@ -242,6 +242,7 @@ def run(out_dir: pathlib.Path, quick: bool) -> dict[str, Any]:
         runs = []
         for (scn, _, s), fut in zip(jobs, futures):
             runs.append(fut.result())
+            write_json(out_dir / 'bus_gyro_runs', f'{scn}_{s}', runs[-1])   # raw, rescorable
             found = [(e['component'], e['kind'], round(e['declared_time']))
                      for e in runs[-1]['events']]
             print(f'  {scn} {s}: {found}', flush=True)

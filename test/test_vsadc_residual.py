@@ -176,3 +176,13 @@ def test_mekf_estimates_the_bias_and_cusum_sees_a_step():
     assert alarms and alarms[0]['axis'] == 0
     assert 1500.0 <= alarms[0]['time'] < 1600.0
     assert 1400.0 <= alarms[0]['onset'] <= alarms[0]['time']
+
+
+def test_bus_slew_and_thermal_inputs_are_validated():
+    from rwa_monitor.sim.basilisk_config import BusConfig
+    cfg = BusConfig(slew_rate=0.0175, gyro_thermal_amplitude=1e-5).validated()
+    assert cfg.slew_duration >= 2 * cfg.slew_ramp
+    with pytest.raises(ValueError, match='slew_duration'):
+        BusConfig(slew_duration=10.0, slew_ramp=20.0).validated()
+    with pytest.raises(ValueError, match='gyro_thermal_amplitude'):
+        BusConfig(gyro_thermal_amplitude=-1.0).validated()
