@@ -132,17 +132,21 @@ def mekf_bias(time: np.ndarray, gyro: np.ndarray, quaternions: np.ndarray, *,
 
 def cusum_alarms(bias: np.ndarray, time: np.ndarray, *, block: int = 40,
                  spread_rad_s: float, drift_k: float = 0.5, threshold: float = 8.0,
-                 nominal_blocks: int = 6, tracking_blocks: int = 30,
-                 warmup_blocks: int = 30) -> list[dict[str, Any]]:
+                 nominal_blocks: int = 6, tracking_blocks: int = 30, guard_blocks: int = 3,
+                 freeze_rad_s: float = 1.4e-5, warmup_blocks: int = 30
+                 ) -> list[dict[str, Any]]:
     """Two-sided CUSUM on the block-sampled bias estimate of each axis; return alarms.
 
     Every ``block`` rows after ``warmup_blocks`` (the estimate converging from zero),
-    ``z = (b - b_ref) / spread_rad_s`` with ``b_ref`` the mean of the first ``nominal_blocks``
-    samples, then a running mean over ``tracking_blocks`` while
-    both sums are zero (frozen otherwise); ``S+ = max(0, S+ + z - k)``,
+    ``z = (b - b_ref) / spread_rad_s``; ``S+ = max(0, S+ + z - k)``,
     ``S- = max(0, S- - z - k)``; an alarm when either exceeds ``threshold``, after which
-    the sums and the reference restart. Alarms: ``axis`` (0-2), ``time`` (s),
-    ``onset`` (s, the last time the alarming sum was zero), ``statistic``.
+    the sums and the reference restart. The reference is tracked as the residual
+    diagnosis tracks its nominal (:mod:`rwa_monitor.core.gyro_diagnosis`), so that the
+    two differ by their statistic only: the mean of the first ``nominal_blocks`` samples,
+    then a running mean over ``tracking_blocks`` of the sample ``guard_blocks`` back while
+    the last ``guard_blocks + 1`` samples lie within ``freeze_rad_s`` of it. Alarms:
+    ``axis`` (0-2), ``time`` (s), ``onset`` (s, the last time the alarming sum was zero),
+    ``statistic``.
     """
     block = check_int('block', block, 1)
     check_real('spread_rad_s', spread_rad_s, 0.0, low_open=True)
@@ -177,6 +181,7 @@ def cusum_alarms(bias: np.ndarray, time: np.ndarray, *, block: int = 40,
                 hi = lo = 0.0
                 ref, n_ref = 0.0, 0
                 continue
-            if hi == 0.0 and lo == 0.0 and tracking_blocks:
-                ref += (b[j] - ref) / tracking_blocks
+            recent = b[max(j - guard_blocks, 0):j + 1]
+            if tracking_blocks and np.all(np.abs(recent - ref) < freeze_rad_s):
+                ref += (recent[0] - ref) / tracking_blocks
     return alarms
