@@ -39,20 +39,19 @@ from rwa_monitor.core import gyro_calibration as gc
 from rwa_monitor.core.attitude import StarTrackerRate
 from rwa_monitor.core.events import AnomalyEvent
 from rwa_monitor.core.params import check_int, check_real
-from rwa_monitor.core.vsadc import AXES, BIAS, DRIFT, HEALTHY, make_event, Transition
+from rwa_monitor.core.schema import RESIDUAL_PARAMETERS, VSADC, vsadc_kwargs
+from rwa_monitor.core.vsadc import AXES, BIAS, DRIFT, HEALTHY, make_event, Transition, \
+    VsadcDetector
 
 #: Block-mean spread without a calibration (rad/s): the largest of the three axes measured
 #: by calibrate_gyro on the bus development seeds 1-3 (docs/vsadc.md), rounded up.
 DEFAULT_BLOCK_STD = 4.0e-6
 #: |gyro| at or above this (rad/s) is a saturated sample: held and counted, never a fault.
-DEFAULT_SATURATION_RAD_S = 0.35
-
+DEFAULT_SATURATION_RAD_S = VSADC['saturation_rad_s'].default
+#: Axis keywords and defaults: the ``residual_*`` parameters of the VSADC schema.
 AXIS_DEFAULTS: dict[str, Any] = {
-    'block': gc.DEFAULT_BLOCK, 'nominal_blocks': 6, 'tracking_blocks': 30,
-    'guard_blocks': 3, 'fit_blocks': gc.DEFAULT_FIT_BLOCKS, 'decide_blocks': 24,
-    'confirm_blocks': 2, 'max_wait_blocks': 6, 'decide_chi2': 9.0,
-    'freeze_fraction': 0.5, 'recovery_fraction': 0.5,
-}
+    name[len('residual_'):]: VSADC[name].default
+    for name in RESIDUAL_PARAMETERS if name.startswith('residual_')}
 
 
 def axis_thresholds(calibration: Mapping[str, Any] | None, block: int,
@@ -94,13 +93,13 @@ class ResidualAxis:
             raise ValueError(f'unknown gyro diagnosis parameter(s): {", ".join(bad)}')
         p = {**AXIS_DEFAULTS, **params}
         self.block = check_int('block', p['block'], 2, 100_000)
-        self.nominal_blocks = check_int('nominal_blocks', p['nominal_blocks'], 1)
-        self.tracking_blocks = check_int('tracking_blocks', p['tracking_blocks'], 0)
-        self.guard_blocks = check_int('guard_blocks', p['guard_blocks'], 0)
-        self.fit_blocks = check_int('fit_blocks', p['fit_blocks'], 3)
-        self.decide_blocks = check_int('decide_blocks', p['decide_blocks'], 3)
-        self.confirm_blocks = check_int('confirm_blocks', p['confirm_blocks'], 1)
-        self.max_wait_blocks = check_int('max_wait_blocks', p['max_wait_blocks'], 0)
+        self.nominal_blocks = check_int('nominal_blocks', p['nominal_blocks'], 1, 100_000)
+        self.tracking_blocks = check_int('tracking_blocks', p['tracking_blocks'], 0, 1_000_000)
+        self.guard_blocks = check_int('guard_blocks', p['guard_blocks'], 0, 1000)
+        self.fit_blocks = check_int('fit_blocks', p['fit_blocks'], 3, 10_000)
+        self.decide_blocks = check_int('decide_blocks', p['decide_blocks'], 3, 10_000)
+        self.confirm_blocks = check_int('confirm_blocks', p['confirm_blocks'], 1, 1000)
+        self.max_wait_blocks = check_int('max_wait_blocks', p['max_wait_blocks'], 0, 1000)
         self.decide_chi2 = check_real('decide_chi2', p['decide_chi2'], 0.0)
         self.freeze_fraction = check_real('freeze_fraction', p['freeze_fraction'], 0.0, 1.0)
         self.recovery_fraction = check_real('recovery_fraction', p['recovery_fraction'],
@@ -318,12 +317,25 @@ class GyroDiagnosis:
         self._last_time = -math.inf
         self._prev_gyro: tuple[float, float, float] | None = None
         self._prev_time = -math.inf
+        self._last_event: AnomalyEvent | None = None
 
     @property
     def states(self) -> dict[str, int]:
         """Return axis -> current label."""
         return {a: ch.state for a, ch in zip(self.axes, self.channels)}
 
+    @property
+    def params(self) -> dict[str, Any]:
+        """Return the axis parameters (the first axis's; all axes share them)."""
+        ch = self.channels[0]
+        return {k: getattr(ch, k) for k in AXIS_DEFAULTS}
+
+    @property
+    def last_event(self) -> AnomalyEvent | None:
+        """Return the last event returned by :meth:`update` (None before any)."""
+        return self._last_event
+
+    @property
     def counters(self) -> dict[str, int]:
         """Return the bad-input counters: rows seen, accepted, held and rejected by cause."""
         st = self.star_tracker
@@ -373,4 +385,23 @@ class GyroDiagnosis:
             tr = ch.update(0.5 * (now + before) - rate[i], time, stamp)
             if tr is not None:
                 events.append(make_event(axis, tr))
+        if events:
+            self._last_event = events[-1]
         return events
+
+
+def make_gyro_detector(values: Mapping[str, Any],
+                       calibration: Mapping[str, Mapping[str, Any]] | None = None
+                       ) -> GyroDiagnosis | VsadcDetector:
+    """Return the detector of checked VSADC schema values (``feature`` residual or paper).
+
+    ``calibration`` (axis -> dict of calibrate_gyro) applies to the residual feature; the
+    paper's VsadcDetector is built either way, so that every value of the block is checked.
+    """
+    paper = VsadcDetector(**vsadc_kwargs(values))
+    if values['feature'] == 'paper':
+        return paper
+    return GyroDiagnosis(
+        calibration=calibration, saturation_rad_s=values['saturation_rad_s'],
+        max_gap=values['max_gap'], norm_tolerance=values['norm_tolerance'], axes=paper.axes,
+        **{k: values[f'residual_{k}'] for k in AXIS_DEFAULTS})
