@@ -52,7 +52,8 @@ demo-bus: $(BSK_STAMP)
 	$(BSK_VENV)/bin/rwa-monitor simulate basilisk --hours 1 --seed 1 --null-speed 40 \
 	  --guidance-scale 0.1 --fault friction:rw2:1800:dry=3e-4 \
 	  --fault gyro:x:2400:drift=1e-6,level=2e-4 -o data/generated/bus.csv
-	$(BSK_VENV)/bin/rwa-monitor detect data/generated/bus.csv
+	# exit code 1 = anomaly found (docs/usage.md): expected here, the bus has faults
+	$(BSK_VENV)/bin/rwa-monitor detect data/generated/bus.csv; test $$? -le 1
 
 bench-bus: $(BSK_STAMP)
 	$(BSK_PY) -m bench bus

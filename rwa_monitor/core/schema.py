@@ -231,6 +231,15 @@ DIAGNOSTIC_PERIOD = Param('diagnostic_period', 1.0, 'Seconds between /diagnostic
                           scope='node')
 
 
+EVENTS_FILE = Param('events_file', '', 'JSON Lines journal of every event and '
+                    'acknowledgement, flushed and fsynced per line; its unacknowledged '
+                    'anomalies are reloaded at start. Empty = none (anomalies are latched '
+                    'in memory only).', read_only=True, scope='node')
+WHEEL_TIMEOUT = Param('wheel_timeout', 600.0, 'Seconds of wall time without input after '
+                      'which a wheel is freed (its detector and state; latched anomalies '
+                      'stay); 0 = never.', low=0.0, unit='s', scope='node')
+
+
 def _time_jump(what: str) -> Param:
     return Param('time_jump', 1.0, f'A stamp more than this before the last one restarts '
                  f'{what} (replay loop); smaller steps back are dropped.', low=0.0,
@@ -271,6 +280,8 @@ LLR = Schema('llr_detector', (
     _time_jump("the wheel's detector"),
     STALE_TIMEOUT,
     DIAGNOSTIC_PERIOD,
+    EVENTS_FILE,
+    WHEEL_TIMEOUT,
     Param('telemetry_reliability', 'reliable', 'QoS of the telemetry/wheels subscription: '
           'reliable (keep all, no loss) or best_effort (hears a sensor-data publisher; '
           'samples may be lost).', choices=('reliable', 'best_effort'), read_only=True,
@@ -305,6 +316,8 @@ FSS = Schema('fss_diagnoser', (
     MAX_WHEELS,
     STALE_TIMEOUT,
     DIAGNOSTIC_PERIOD,
+    EVENTS_FILE,
+    WHEEL_TIMEOUT,
 ), 'FSS window diagnoser (physics-informed FSS paper); docs/fss.md.',
     lambda values: fss_config(values))
 
@@ -367,6 +380,7 @@ VSADC = Schema('vsadc_detector', (
     _time_jump('the detector'),
     STALE_TIMEOUT,
     DIAGNOSTIC_PERIOD,
+    EVENTS_FILE,
 ), 'VSADC gyro drift/bias classifier (vsadc paper, Algorithm 1); docs/vsadc.md. Samples '
    'are star-tracker/gyro pairs.', lambda values: _vsadc_detector(values))
 

@@ -20,6 +20,7 @@ from rwa_monitor.telemetry import Telemetry
 
 SCHEMA = VSADC
 NODE = VSADC.name
+UNKNOWN = 'unknown'
 DEFAULTS: dict[str, Any] = {name: VSADC[name].default for name in VSADC.names(('all',))}
 
 
@@ -70,16 +71,24 @@ def label_series(tele: Telemetry, config: Mapping[str, Any]) -> LabelSeries:
 
 
 def run_with_summary(tele: Telemetry, config: Mapping[str, Any]) -> Detection:
-    """Run VSADC on the three axes; return the events and a per-axis summary."""
+    """Run VSADC on the three axes; return the events and a per-axis summary.
+
+    A bad value of one gyro axis is rejected on that axis only (``bad_axis_<a>``
+    counters); ``final_state`` is ``unknown`` for an axis that never became ready.
+    """
     start = _time.perf_counter()
     labels, events, det = label_series(tele, config)
     summary: dict[str, Any] = {}
     runtime = _time.perf_counter() - start
     for i, axis in enumerate(det.axes):
+        ready = det.channels[i].ready
+        # An axis that never became ready was not examined: its state is unknown, never
+        # "healthy" (issue 17).
+        state = STATE_NAMES[int(labels[-1, i])] if ready and len(tele) else UNKNOWN
         summary[f'gyro_{axis}'] = {
             'events': sum(e.component == f'gyro_{axis}' for e in events),
-            'final_state': STATE_NAMES[int(labels[-1, i])] if len(tele) else STATE_NAMES[0],
-            'ready': det.channels[i].ready}
+            'final_state': state, 'ready': ready,
+            'samples_used': det.channels[i].samples}
     summary['counters'] = det.counters
     summary['runtime_s'] = runtime
     return Detection(events, summary)
