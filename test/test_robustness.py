@@ -196,7 +196,7 @@ def test_fss_diagnosis_never_raises(window):
     from rwa_monitor.core.fss.pipeline import diagnose, FssConfig
     t, w, f = window
     with np.errstate(all='ignore'):
-        result = diagnose(w, f, t, _fss_model(), FssConfig(window=10, dk_error=2))
+        result = diagnose(w, f, t, _fss_model(), FssConfig(wglr_window=10, dk_error=2))
     assert set(result['anomalies']) and all(isinstance(v, bool)
                                             for v in result['anomalies'].values())
 
@@ -205,7 +205,7 @@ _MODEL = []
 
 
 def _fss_model():
-    from rwa_monitor.core.fss.pipeline import load_model
+    from rwa_monitor.telemetry.fss_model import load_model
     if not _MODEL:
         _MODEL.append(load_model(None))
     return _MODEL[0]
