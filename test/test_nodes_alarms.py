@@ -18,8 +18,7 @@ from rwa_monitor.telemetry import write_telemetry
 
 pytestmark = pytest.mark.ros
 
-CONFIG = {'window': 200, 'k_verif': 'auto', 'false_alarm_rate': 1.0e-5,
-          'noise_std': 'auto'}
+CONFIG = {'window': 200, 'k_verif': 'auto', 'false_alarm_rate': 1.0e-5, 'noise_std': 'auto'}
 
 
 def _seeded(tmp_path, n=3000):

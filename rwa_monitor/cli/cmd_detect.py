@@ -25,6 +25,7 @@ import sys
 from typing import Any
 
 from rwa_monitor import pipelines
+from rwa_monitor.cli.options import add_topics, INPUT_HELP
 from rwa_monitor.cli.output import check_output, quiet_broken_pipe, STDOUT, write_output
 from rwa_monitor.core.events import AnomalyEvent
 from rwa_monitor.core.schema import help_text, LLR, SCHEMAS, VSADC
@@ -42,7 +43,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                     'a table. Times are seconds of the file, torques N m.',
         epilog=f'{help_text(LLR)}\n{help_text(VSADC)}',
         formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument('file', type=pathlib.Path, help='telemetry file (.csv or .mcap)')
+    parser.add_argument('file', type=pathlib.Path, help=INPUT_HELP)
+    add_topics(parser)
     parser.add_argument('--config', type=pathlib.Path, metavar='YAML',
                         help='parameters file in the node format (node blocks with '
                              'ros__parameters; default: the installed config/rwa_monitor.yaml)')
@@ -121,7 +123,7 @@ def exit_code(events: list[AnomalyEvent], summary: dict[str, Any]) -> int:
 def run(args: argparse.Namespace) -> int:
     """Read the file, detect, and write the JSON or print the table."""
     check_output(args.output, args.file, args.config, args.friction_model)
-    tele = read_telemetry(args.file)
+    tele = read_telemetry(args.file, args.topics)
     config = load_config(args.config)
     if args.friction_model is not None:
         block = config.setdefault('llr_detector', {}).setdefault('ros__parameters', {})

@@ -8,6 +8,7 @@ import sys
 
 import numpy as np
 
+from rwa_monitor.cli.options import add_topics, INPUT_HELP
 from rwa_monitor.cli.output import check_output, quiet_broken_pipe, STDOUT, write_output
 from rwa_monitor.core.schema import FSS, fss_config, help_text
 from rwa_monitor.exceptions import ConfigError, RwaMonitorError
@@ -23,7 +24,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         description='Run the four-stage FSS window diagnoser on the whole file, per wheel, '
                     'and write the JSON of DESIGN.md (docs/fss.md).',
         epilog=help_text(FSS), formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument('file', help='telemetry file (.csv or .mcap)')
+    parser.add_argument('file', help=INPUT_HELP)
+    add_topics(parser)
     parser.add_argument('-o', '--output', required=True,
                         help='output JSON file, written atomically (- = standard output; an '
                              'input file is refused)')
@@ -53,7 +55,7 @@ def run(args: argparse.Namespace) -> int:
         model = load_model(args.model or params['model'] or None)
     except (ValueError, OSError) as err:
         raise ConfigError(str(err)) from None
-    tele = read_telemetry(args.file)
+    tele = read_telemetry(args.file, args.topics).only('wheels')
     wheels = {}
     for wheel_id, wheel in tele.wheels.items():
         if wheel.friction is None:

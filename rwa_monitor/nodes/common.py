@@ -26,7 +26,7 @@ import textwrap
 import time
 from typing import Any, Callable, Iterator, Mapping, NamedTuple, Sequence
 
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
                                 SetParametersResult)
 import rclpy
@@ -43,6 +43,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from rwa_monitor.core.params import AUTO
 from rwa_monitor.core.schema import Param, Schema, SCHEMAS, SHARED_NAMES
 from rwa_monitor.exceptions import ConfigError
+from rwa_monitor.telemetry.codecs import format_value, key_values  # noqa: F401
 
 # --------------------------------------------------------------------------------- QoS
 
@@ -283,20 +284,6 @@ def wheel_refusal(wheel_id: str, allowed: set[str] | None, known: int,
     if known >= max_wheels:
         return Refusal('too_many_wheels', f'ignoring wheel {wheel_id!r}: max_wheels reached')
     return None
-
-
-def key_values(values: Mapping[str, Any]) -> list[KeyValue]:
-    """Return KeyValues; floats keep every digit (``repr``), so they read back exactly."""
-    return [KeyValue(key=str(k), value=format_value(v)) for k, v in values.items()]
-
-
-def format_value(value: Any) -> str:
-    """Return a KeyValue value string: ``repr`` of floats (exact), ``str`` otherwise."""
-    if isinstance(value, float):
-        return repr(value)
-    if isinstance(value, bool):
-        return 'true' if value else 'false'
-    return str(value)
 
 
 class ComponentHealth:

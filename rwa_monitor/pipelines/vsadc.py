@@ -17,6 +17,7 @@ from rwa_monitor.core.schema import VSADC, vsadc_kwargs
 from rwa_monitor.core.vsadc import STATE_NAMES, VsadcDetector
 from rwa_monitor.pipelines import Detection
 from rwa_monitor.telemetry import Telemetry
+from rwa_monitor.telemetry.streams import paired_gyro
 
 SCHEMA = VSADC
 NODE = VSADC.name
@@ -50,23 +51,27 @@ def reference_of(config: Mapping[str, Any]) -> np.ndarray:
 def label_series(tele: Telemetry, config: Mapping[str, Any]) -> LabelSeries:
     """Run the streaming detector over the rows; return labels, events and the detector.
 
-    Labels are the state after each row (held on rows the detector could not use).
+    Labels are the state after each row (held on rows the detector could not use, and on
+    rows without a gyro sample in a multi-rate record). Event indices count gyro samples.
     """
     det = VsadcDetector(**detector_kwargs(config))
-    ref = tele.reference_rate
-    if ref is None:
-        ref = np.broadcast_to(reference_of(config), (len(tele), 3))
-    time, gyro, quat = tele.time.tolist(), tele.gyro.tolist(), tele.attitude.tolist()
-    ref_rows = ref.tolist()
+    tolerance = VSADC['pair_tolerance'].default  # the node's pairing rule (multi-rate)
+    rows, quat, ref_rows = paired_gyro(tele, reference_of(config),
+                                       float(config.get('pair_tolerance', tolerance)))
+    time, gyro = tele.time.tolist(), tele.gyro.tolist()
     labels = np.zeros((len(tele), len(det.axes)), dtype=np.int8)
     events: list[AnomalyEvent] = []
     state = [0] * len(det.axes)
-    for k in range(len(time)):
-        found = det.update(time[k], gyro[k], quat[k], ref_rows[k], k)
+    last = 0
+    for index, (k, q, ref) in enumerate(zip(rows, quat, ref_rows)):
+        labels[last:k] = state
+        found = det.update(time[k], gyro[k], q, ref, index)
         if found:
             events.extend(found)
             state = [ch.state for ch in det.channels]
         labels[k] = state
+        last = k + 1
+    labels[last:] = state
     return LabelSeries(labels, events, det)
 
 
