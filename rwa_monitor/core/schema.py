@@ -20,6 +20,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 import difflib
 import math
+import textwrap
 from typing import Any, Callable, Iterator, Mapping, Sequence
 
 from rwa_monitor.core import gyro_calibration as gc
@@ -539,7 +540,9 @@ def help_text(schema: Schema, scopes: Sequence[str] = ('all', 'file')) -> str:
     for p in schema:
         if p.scope in scopes:
             unit = f' [{p.unit}]' if p.unit else ''
-            lines.append(f'  {p.name} = {default_text(p)}{unit}: {p.description}')
+            lines.append(textwrap.fill(f'{p.name} = {default_text(p)}{unit}: {p.description}',
+                                       width=88, initial_indent='  ',
+                                       subsequent_indent='      '))
     return '\n'.join(lines)
 
 
