@@ -51,7 +51,7 @@ def test_detect_round_trip_finds_the_step(simulated):
     for event in events:
         assert EVENT_FIELDS <= set(event)
         assert event['detector'] == 'llr'
-        assert event['kind'] in ('dry', 'viscous', 'both')
+        assert event['kind'] in ('dry', 'viscous', 'both', 'undecided')
     assert {e['component'] for e in events} == {'rw2'}
     first = [e for e in events if e['revision'] == 0]
     assert len(first) == 1
