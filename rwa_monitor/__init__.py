@@ -31,7 +31,7 @@ _EXPORTS = {
     'Telemetry': 'rwa_monitor.telemetry',
     'read_telemetry': 'rwa_monitor.telemetry',
     'write_telemetry': 'rwa_monitor.telemetry',
-    'load_fss_model': 'rwa_monitor.core.fss.pipeline:load_model',
+    'load_fss_model': 'rwa_monitor.telemetry.fss_model:load_model',
     'detect_file': 'rwa_monitor.pipelines:detect',
 }
 

@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 
 from rwa_monitor.cli.main import main
-from rwa_monitor.core.fss.pipeline import (diagnose, extract, FssConfig, load_model,
-                                           SlidingWindow)
+from rwa_monitor.core.fss.pipeline import diagnose, extract, FssConfig, SlidingWindow
 from rwa_monitor.core.schema import FSS, fss_config
 from rwa_monitor.sim import fss
+from rwa_monitor.telemetry.fss_model import load_model
 
 
 @pytest.fixture(scope='module')

@@ -10,12 +10,13 @@ from rclpy.parameter import Parameter
 from ros_harness import Collector, RosWorld
 from sensor_msgs.msg import JointState
 
-from rwa_monitor.core.fss.pipeline import diagnose, FssConfig, load_model
+from rwa_monitor.core.fss.pipeline import diagnose, FssConfig
 from rwa_monitor.exceptions import ConfigError
 from rwa_monitor.nodes import fss_diagnoser, messages
 from rwa_monitor.nodes.common import DIAGNOSTICS_QOS, EVENTS_QOS
 from rwa_monitor.nodes.fss_diagnoser import FssDiagnoserNode
 from rwa_monitor.sim.fss import simulate_fss
+from rwa_monitor.telemetry.fss_model import load_model
 
 pytestmark = pytest.mark.ros
 

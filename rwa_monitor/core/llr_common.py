@@ -192,8 +192,13 @@ def candidate_log_p2(y: float, tr: float, dm: float, log_p_min: float,
     disc = half * half - dm
     lam1 = half + math.sqrt(disc) if disc > 0.0 else half
     lam2 = dm / lam1
+    # Clamp to 0 <= l2 <= l1: with two nearly equal eigenvalues rounding gives disc < 0
+    # and l2 > l1 (a correlation rho above 1, hence a < 0 and a square root of a negative
+    # number in the tail bound); the exact eigenvalues satisfy it.
     if lam2 < 0.0:
         lam2 = 0.0
+    elif lam2 > lam1:
+        lam2 = lam1
     b = y / (2.0 * lam1)
     rho = lam2 / lam1
     a = b * (1.0 - rho)

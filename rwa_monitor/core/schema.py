@@ -230,6 +230,15 @@ DIAGNOSTIC_PERIOD = Param('diagnostic_period', 1.0, 'Seconds between /diagnostic
                           scope='node')
 
 
+EVENTS_FILE = Param('events_file', '', 'JSON Lines journal of every event and '
+                    'acknowledgement, flushed and fsynced per line; its unacknowledged '
+                    'anomalies are reloaded at start. Empty = none (anomalies are latched '
+                    'in memory only).', read_only=True, scope='node')
+WHEEL_TIMEOUT = Param('wheel_timeout', 600.0, 'Seconds of wall time without input after '
+                      'which a wheel is freed (its detector and state; latched anomalies '
+                      'stay); 0 = never.', low=0.0, unit='s', scope='node')
+
+
 def _time_jump(what: str) -> Param:
     return Param('time_jump', 1.0, f'A stamp more than this before the last one restarts '
                  f'{what} (replay loop); smaller steps back are dropped.', low=0.0,
@@ -279,6 +288,8 @@ LLR = Schema('llr_detector', (
     _time_jump("the wheel's detector"),
     STALE_TIMEOUT,
     DIAGNOSTIC_PERIOD,
+    EVENTS_FILE,
+    WHEEL_TIMEOUT,
     Param('telemetry_reliability', 'reliable', 'QoS of the telemetry/wheels subscription: '
           'reliable (keep all, no loss) or best_effort (hears a sensor-data publisher; '
           'samples may be lost).', choices=('reliable', 'best_effort'), read_only=True,
@@ -313,6 +324,8 @@ FSS = Schema('fss_diagnoser', (
     MAX_WHEELS,
     STALE_TIMEOUT,
     DIAGNOSTIC_PERIOD,
+    EVENTS_FILE,
+    WHEEL_TIMEOUT,
 ), 'FSS window diagnoser (physics-informed FSS paper); docs/fss.md.',
     lambda values: fss_config(values))
 
@@ -375,6 +388,7 @@ VSADC = Schema('vsadc_detector', (
     _time_jump('the detector'),
     STALE_TIMEOUT,
     DIAGNOSTIC_PERIOD,
+    EVENTS_FILE,
 ), 'VSADC gyro drift/bias classifier (vsadc paper, Algorithm 1); docs/vsadc.md. Samples '
    'are star-tracker/gyro pairs.', lambda values: _vsadc_detector(values))
 
@@ -392,9 +406,13 @@ IDENTIFY = Schema('identify', (
 # ------------------------------------------------------------------------------- replay
 
 REPLAY = Schema('telemetry_replay', (
-    Param('file', '', 'Telemetry file to replay (.csv, or .mcap written by rwa_monitor); '
-          'required, give it with -p file:=PATH (never in a parameters file, where it would '
-          'beat the command line).', read_only=True, required=True, scope='node'),
+    Param('file', '', 'Telemetry to replay: CSV file, rosbag2 folder, or bare .mcap or .db3 '
+          'file; required, give it with -p file:=PATH (never in a parameters file, where it '
+          'would beat the command line).', read_only=True, required=True, scope='node'),
+    Param('topics', '', 'Topics of the streams in a recording, as wheels=/a,gyro=/b,'
+          'star_tracker=/c,reference_rate=/d; streams not named keep the DESIGN.md topics '
+          '(/telemetry/wheels, /telemetry/gyro, /telemetry/star_tracker, '
+          '/telemetry/reference_rate).', read_only=True, scope='node'),
     Param('rate', 1.0, 'Time factor: 1.0 real time, 40.0 forty times faster, 0.0 as fast as '
           'the subscribers take it without loss.', low=0.0, high=1.0e6, scope='node'),
     Param('start_offset', 0.0, 'Seconds from the first sample where the replay (and every '

@@ -13,12 +13,19 @@ import importlib
 import pkgutil
 import time
 from types import ModuleType
-from typing import Any
+from typing import Any, NamedTuple
 
 from rwa_monitor.core.events import AnomalyEvent
 from rwa_monitor.exceptions import ConfigError
 from rwa_monitor.telemetry import Telemetry
 from rwa_monitor.telemetry.parameters_file import block_values
+
+
+class Detection(NamedTuple):
+    """Events of a run (sorted by change time) and its summary (JSON-ready facts)."""
+
+    events: list[AnomalyEvent]
+    summary: dict[str, Any]
 
 
 def available() -> dict[str, ModuleType]:
@@ -28,7 +35,7 @@ def available() -> dict[str, ModuleType]:
 
 
 def detect(tele: Telemetry, config: dict[str, Any], where: Any = 'parameters'
-           ) -> tuple[list[AnomalyEvent], dict]:
+           ) -> Detection:
     """Run every applicable pipeline; return (events sorted by time, summary).
 
     ``config`` holds the node blocks of a parameters file; ``where`` names it in errors.
@@ -53,7 +60,7 @@ def detect(tele: Telemetry, config: dict[str, Any], where: Any = 'parameters'
         events.extend(found)
     events.sort(key=lambda e: (e.time, e.component, e.revision))
     summary['events'] = len(events)
-    return events, summary
+    return Detection(events, summary)
 
 
 def _count_kinds(events: list[AnomalyEvent], components: dict[str, Any]) -> None:

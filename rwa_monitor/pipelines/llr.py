@@ -10,17 +10,26 @@ names when the file has that wheel, else to every wheel.
 from __future__ import annotations
 
 import time as _time
-from typing import Any, Mapping
+from typing import Any, Mapping, NamedTuple
 
 from rwa_monitor.core.events import AnomalyEvent
+from rwa_monitor.core.friction import RegressorSet
 from rwa_monitor.core.schema import LLR, llr_kwargs
 from rwa_monitor.exceptions import ConfigError
+from rwa_monitor.pipelines import Detection
 from rwa_monitor.telemetry import Telemetry
 
 SCHEMA = LLR
 NODE = LLR.name
 DEFAULTS = {name: LLR[name].default for name in LLR.names(('all',))}
 MODEL_KEY = 'friction_model_file'
+
+
+class RefinedModel(NamedTuple):
+    """A refined friction model: the wheel it names (None: every wheel) and its regressors."""
+
+    wheel: str | None
+    regressors: RegressorSet
 
 
 def applies(tele: Telemetry) -> bool:
@@ -33,8 +42,8 @@ def detector_kwargs(config: Mapping[str, Any]) -> dict[str, Any]:
     return llr_kwargs(LLR.validate(config))
 
 
-def friction_model(path: str, tele: Telemetry) -> tuple[str | None, Any] | None:
-    """Return (wheel or None, RegressorSet) of a refined model file, or None if unset.
+def friction_model(path: str, tele: Telemetry) -> RefinedModel | None:
+    """Return the refined model of a file written by identify, or None if unset.
 
     Raise ConfigError if the file cannot be read or the record lacks a channel it reads.
     """
@@ -55,12 +64,11 @@ def friction_model(path: str, tele: Telemetry) -> tuple[str | None, Any] | None:
         raise ConfigError(f'{MODEL_KEY} {path!r} reads channel(s) the file lacks: '
                           f'{", ".join(missing)}')
     wheel = cfg.get('friction_model', cfg).get('wheel')
-    return (wheel if wheel in tele.wheels else None), regressors_from_config(cfg)
+    return RefinedModel(wheel if wheel in tele.wheels else None, regressors_from_config(cfg))
 
 
-def run_with_summary(tele: Telemetry, config: Mapping[str, Any]
-                     ) -> tuple[list[AnomalyEvent], dict[str, Any]]:
-    """Run one detector per wheel (batch path); return (events, per-wheel summary).
+def run_with_summary(tele: Telemetry, config: Mapping[str, Any]) -> Detection:
+    """Run one detector per wheel (batch path); return the events and a per-wheel summary.
 
     The summary per wheel holds the number of events, samples, the detector's counters
     of rejected samples and its run time.
@@ -68,6 +76,7 @@ def run_with_summary(tele: Telemetry, config: Mapping[str, Any]
     from rwa_monitor.core.llr import detect_batch_with_counters
     values = LLR.validate(config)
     kwargs = llr_kwargs(values)
+    tele = tele.only('wheels')  # a multi-rate record: the wheel stream's own samples
     refined = friction_model(values[MODEL_KEY], tele)
     events: list[AnomalyEvent] = []
     summary: dict[str, Any] = {}
@@ -76,17 +85,17 @@ def run_with_summary(tele: Telemetry, config: Mapping[str, Any]
             continue
         start = _time.perf_counter()
         model = {}
-        if refined and refined[0] in (None, wheel_id):
-            model = {'regressors': refined[1], 'aux': tele.aux}
+        if refined and refined.wheel in (None, wheel_id):
+            model = {'regressors': refined.regressors, 'aux': tele.aux}
         found, counters = detect_batch_with_counters(
             tele.time, wheel.speed, wheel.friction, component=wheel_id, **kwargs, **model)
         summary[wheel_id] = {'events': len(found), 'samples': len(tele),
                              'rejected': dict(counters),
                              'runtime_s': _time.perf_counter() - start}
         events.extend(found)
-    return events, summary
+    return Detection(events, summary)
 
 
 def run(tele: Telemetry, config: Mapping[str, Any]) -> list[AnomalyEvent]:
     """Return the events of one LLR detector per wheel with a friction column."""
-    return run_with_summary(tele, config)[0]
+    return run_with_summary(tele, config).events

@@ -10,7 +10,6 @@ samples of one wheel for the node.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-import pathlib
 import time as _time
 from typing import Sequence
 
@@ -22,8 +21,6 @@ from rwa_monitor.core.fss.model import DEFAULT_SYSTEMS, SwitchingSystem
 from rwa_monitor.core.fss.segments import fit_intervals
 from rwa_monitor.core.fss.wglr import detect_changepoints
 from rwa_monitor.core.params import check_int, check_real
-
-DEFAULT_MODEL = pathlib.Path(__file__).resolve().parents[2] / 'data' / 'fss_model.json'
 
 
 @dataclass(frozen=True)
@@ -124,15 +121,6 @@ def extract(speed: np.ndarray, friction: np.ndarray, config: FssConfig = FssConf
                       rmse=refit.rmse, rejected=int(np.sum(assignment.inputs == 0)),
                       iterations=assignment.iterations, exact=assignment.exact,
                       identifiable=refit.identifiable, timings=timings, cpu_timings=cpu)
-
-
-def load_model(path: str | pathlib.Path | None = None) -> WindowClassifier:
-    """Return the classifier at ``path`` or the shipped default model."""
-    path = DEFAULT_MODEL if path is None else pathlib.Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f'FSS model not found: {path} (train one with '
-                                f'`rwa-monitor fss train DATASET -o MODEL`)')
-    return WindowClassifier.load(path)
 
 
 def normalise(speed_rad_s: np.ndarray, friction_nm: np.ndarray, config: FssConfig
