@@ -15,8 +15,7 @@ import pytest
 
 from rwa_monitor.core import llr
 from rwa_monitor.core.gchi2 import log_lower_bound
-from rwa_monitor.core.llr import LLRDetector
-from rwa_monitor.core.llr_batch import detect_batch_with_counters
+from rwa_monitor.core.llr import detect_batch_with_counters, LLRDetector
 from rwa_monitor.core.vsadc import VsadcDetector
 from rwa_monitor.exceptions import RwaMonitorError
 
