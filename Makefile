@@ -67,4 +67,4 @@ demo-bus: $(BSK_STAMP)
 	$(BSK_VENV)/bin/rwa-monitor detect data/generated/bus.csv; test $$? -le 1
 
 bench-bus: $(BSK_STAMP)
-	$(BSK_PY) -m bench bus
+	$(BSK_PY) -m bench bus bus_gyro

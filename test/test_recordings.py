@@ -239,13 +239,13 @@ def test_detect_runs_on_a_multi_rate_recording(tmp_path):
     run = subprocess.run([sys.executable, '-m', 'rwa_monitor.cli.main', 'detect', str(path),
                           '--topics', TOPICS, '-o', str(out)], capture_output=True,
                          text=True, timeout=120)
-    assert run.returncode == 0, run.stderr
+    assert run.returncode in (0, 1, 3), run.stderr  # detect's result codes, 2 = error
     summary = json.loads(out.read_text())['summary']
     assert 'llr' in json.dumps(summary) and 'vsadc' in json.dumps(summary)
 
 
 def test_both_encodings_of_empty_sequences_are_read(tmp_path):
-    """Read both: rclpy pads after an empty float64 sequence, canonical CDR does not."""
+    """Read both: rclpy appends padding after trailing empty sequences, canonical CDR not."""
     from rclpy.serialization import serialize_message
     from sensor_msgs.msg import JointState
     store = rosbag_io.typestore()

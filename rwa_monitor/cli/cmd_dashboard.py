@@ -18,6 +18,7 @@ from __future__ import annotations
 import argparse
 import collections
 import os
+import signal
 import sys
 import time
 from typing import Any, TextIO
@@ -242,8 +243,12 @@ def run(args: argparse.Namespace) -> int:
     executor.add_node(node)
     screen = Screen(interval=args.interval, plain_interval=args.interval)
     deadline = time.monotonic() + args.duration if args.duration > 0 else float('inf')
+    # Ctrl-C ends the loop between executor turns: raised inside rclpy's take it can
+    # surface as a RuntimeError traceback instead of KeyboardInterrupt.
+    stop = []
+    previous = signal.signal(signal.SIGINT, lambda *_: stop.append(True))
     try:
-        while context.ok() and time.monotonic() < deadline:
+        while context.ok() and time.monotonic() < deadline and not stop:
             executor.spin_once(timeout_sec=0.05)
             if screen.due():
                 screen.draw(render(board, title='rwa_monitor dashboard', colour=screen.tty))
@@ -251,6 +256,7 @@ def run(args: argparse.Namespace) -> int:
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
+        signal.signal(signal.SIGINT, previous)
         executor.shutdown()
         node.destroy_node()
         rclpy.try_shutdown(context=context)

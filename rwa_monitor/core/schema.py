@@ -20,8 +20,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 import difflib
 import math
+import textwrap
 from typing import Any, Callable, Iterator, Mapping, Sequence
 
+from rwa_monitor.core import gyro_calibration as gc
 from rwa_monitor.core.params import AUTO, check_choice, check_int, check_real
 from rwa_monitor.exceptions import ConfigError
 
@@ -345,7 +347,44 @@ def _three(value: list) -> None:
         raise ValueError(f'reference_rate must be 3 numbers (rad/s), got {value!r}')
 
 
+#: Parameters of the residual gyro diagnosis (core/gyro_diagnosis.py), not VsadcDetector's.
+RESIDUAL_PARAMETERS = ('feature', 'calibration_file', 'saturation_rad_s', 'residual_block',
+                       'residual_nominal_blocks', 'residual_tracking_blocks',
+                       'residual_guard_blocks', 'residual_fit_blocks',
+                       'residual_decide_blocks', 'residual_confirm_blocks',
+                       'residual_max_wait_blocks', 'residual_decide_chi2',
+                       'residual_freeze_fraction', 'residual_recovery_fraction')
+
 VSADC = Schema('vsadc_detector', (
+    Param('feature', 'residual', 'residual: gyro minus star-tracker rate, the true rate '
+          'cancels (works under guidance); paper: the two residuals of Algorithm 1 '
+          '(docs/vsadc.md).', choices=('residual', 'paper')),
+    Param('calibration_file', '', 'calibration.yaml whose gyro block sets the residual '
+          'thresholds; empty = defaults.', read_only=True),
+    Param('saturation_rad_s', 0.35, 'A gyro rate at or above this is saturated: held and '
+          'reported, never diagnosed.', low=0.0, low_open=True, unit='rad/s'),
+    Param('residual_block', gc.DEFAULT_BLOCK, 'Residual steps per block mean (the '
+          'statistic).', low=2, high=100_000, unit='samples'),
+    Param('residual_nominal_blocks', 6, 'Blocks of the first nominal level.', low=1,
+          high=100_000),
+    Param('residual_tracking_blocks', 30, 'Running-mean length of the tracked nominal; 0 = '
+          'fixed.', low=0, high=1_000_000),
+    Param('residual_guard_blocks', 3, 'Blocks between the newest one and the one that '
+          'teaches the nominal.', low=0, high=1000),
+    Param('residual_fit_blocks', gc.DEFAULT_FIT_BLOCKS, 'Blocks of the slope that turns a '
+          'drift into a bias and back.', low=3, high=10_000),
+    Param('residual_decide_blocks', 24, 'Blocks of the step-or-ramp decision.', low=3,
+          high=10_000),
+    Param('residual_confirm_blocks', 2, 'Successive blocks that confirm a change.', low=1,
+          high=1000),
+    Param('residual_max_wait_blocks', 6, 'Blocks after which an undecided kind is the '
+          'better fit.', low=0, high=1000),
+    Param('residual_decide_chi2', 9.0, 'Margin (block variances) by which step or ramp '
+          'must fit better.', low=0.0),
+    Param('residual_freeze_fraction', 0.5, 'The nominal stops learning beyond this '
+          'fraction of the level threshold.', low=0.0, high=1.0),
+    Param('residual_recovery_fraction', 0.5, 'A fault ends below this fraction of the '
+          'level threshold.', low=0.0, high=1.0, low_open=True),
     Param('window', 200, 'SW: samples of the nominal batch and of the evolving window '
           '(vsadc paper, Algorithm 1).', low=2, high=100_000, unit='samples'),
     Param('sigma_window', 200, 'Distances in the sigma of line 22; auto = window (the '
@@ -443,7 +482,8 @@ def llr_kwargs(values: Mapping[str, Any]) -> dict[str, Any]:
 
 def vsadc_kwargs(values: Mapping[str, Any]) -> dict[str, Any]:
     """Return VsadcDetector keywords from checked VSADC values (axes as a tuple)."""
-    kwargs = {name: values[name] for name in VSADC.names(('all',)) if name != 'reference_rate'}
+    kwargs = {name: values[name] for name in VSADC.names(('all',))
+              if name != 'reference_rate' and name not in RESIDUAL_PARAMETERS}
     kwargs['axes'] = tuple(a.strip() for a in values['axes'].split(',') if a.strip())
     return kwargs
 
@@ -500,7 +540,9 @@ def help_text(schema: Schema, scopes: Sequence[str] = ('all', 'file')) -> str:
     for p in schema:
         if p.scope in scopes:
             unit = f' [{p.unit}]' if p.unit else ''
-            lines.append(f'  {p.name} = {default_text(p)}{unit}: {p.description}')
+            lines.append(textwrap.fill(f'{p.name} = {default_text(p)}{unit}: {p.description}',
+                                       width=88, initial_indent='  ',
+                                       subsequent_indent='      '))
     return '\n'.join(lines)
 
 

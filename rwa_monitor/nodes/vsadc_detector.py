@@ -4,9 +4,12 @@ Subscribes ``telemetry/gyro`` (sensor_msgs/Imu, angular_velocity), ``telemetry/s
 (geometry_msgs/QuaternionStamped) and ``telemetry/reference_rate`` (Vector3Stamped; when
 it has sent nothing for ``reference_timeout`` s of data time, the ``reference_rate``
 parameter is used). Gyro and star-tracker samples are paired by stamp (within
-``pair_tolerance`` s) and fed in stamp order to :class:`rwa_monitor.core.vsadc.VsadcDetector`
-with the keywords of :func:`rwa_monitor.core.schema.vsadc_kwargs` (one
-implementation and one parameter meaning for node, ``detect`` and benchmarks).
+``pair_tolerance`` s) and fed in stamp order to the detector of
+:func:`rwa_monitor.core.gyro_diagnosis.make_gyro_detector` (``feature`` residual: the
+gyro-minus-star-tracker diagnosis with the ``calibration_file`` thresholds; paper: VSADC
+as in Algorithm 1); one implementation and one parameter meaning for node, ``detect`` and
+benchmarks. A gyro rate at or above ``saturation_rad_s`` is held and the axis reported
+WARN "saturated", never diagnosed.
 
 Publishes an event on ``anomalies`` at every state change of an axis (kind ``drift``,
 ``bias``, or ``healthy`` for a recovery) and each axis's health on ``/diagnostics``:
@@ -38,13 +41,16 @@ from sensor_msgs.msg import Imu
 
 from rwa_monitor.core import keys, streams
 from rwa_monitor.core.events import AnomalyEvent
-from rwa_monitor.core.schema import VSADC, vsadc_kwargs
-from rwa_monitor.core.vsadc import STATE_NAMES, VsadcDetector
+from rwa_monitor.core.gyro_diagnosis import make_gyro_detector
+from rwa_monitor.core.schema import VSADC
+from rwa_monitor.core.vsadc import STATE_NAMES
+from rwa_monitor.exceptions import ConfigError
 from rwa_monitor.nodes import common, messages
 from rwa_monitor.nodes.common import (declare_parameters, DiagnosticsPublisher, ERROR,
                                       EVENTS_QOS, node_help, OK, qos_event_callbacks,
                                       run_node, STALE, telemetry_qos, WARN)
 from rwa_monitor.nodes.latched import LatchedAlarms
+from rwa_monitor.telemetry.calibration_file import load_gyro_calibration
 
 NODE_NAME = 'vsadc_detector'
 INPUT_ID = 'gyro_star_tracker'
@@ -84,7 +90,10 @@ class VsadcDetectorNode(Node):
                                            self.params['max_lag'], self.params['time_jump'])
         self._refs: deque = deque(maxlen=64)
         self._failure: tuple[float, str] | None = None
-        self.detector = VsadcDetector(**vsadc_kwargs(self._detector_config()))
+        try:
+            self.detector = self._make_detector(self._detector_config())
+        except ValueError as err:
+            raise ConfigError(f'parameter {err}') from None
         self.diagnostics = DiagnosticsPublisher(
             self, period=self.params['diagnostic_period'],
             stale_timeout=self.params['stale_timeout'])
@@ -108,8 +117,14 @@ class VsadcDetectorNode(Node):
         values = self.params if values is None else values
         return {name: values[name] for name in DETECTOR_PARAMETERS}
 
+    @staticmethod
+    def _make_detector(config: dict[str, Any]) -> Any:
+        calibration = (load_gyro_calibration(config['calibration_file'])
+                       if config['calibration_file'] else None)
+        return make_gyro_detector(config, calibration)
+
     def _check_detector(self, values: dict[str, Any]) -> None:
-        VsadcDetector(**vsadc_kwargs(self._detector_config(values)))
+        self._make_detector(self._detector_config(values))
 
     def _on_parameter(self, name: str, value: Any) -> None:
         if name in ('pair_tolerance', 'time_jump'):
@@ -118,7 +133,7 @@ class VsadcDetectorNode(Node):
         if name == 'reference_rate':
             self.reference = list(value)
         elif name in DETECTOR_PARAMETERS:
-            self.detector = VsadcDetector(**vsadc_kwargs(self._detector_config()))
+            self.detector = self._make_detector(self._detector_config())
             self._axis_checks()
             self.get_logger().info(f'{name} = {value}: detector restarted')
 
@@ -207,7 +222,7 @@ class VsadcDetectorNode(Node):
         if self.counters['detector_failures'] == 1:
             self.get_logger().error(f'detector failed: {self._failure[1]}; detector '
                                     'restarted (further failures are only counted)')
-        self.detector = VsadcDetector(**vsadc_kwargs(self._detector_config()))
+        self.detector = self._make_detector(self._detector_config())
         self._axis_checks()
 
     # --------------------------------------------------------------------- output
@@ -243,6 +258,8 @@ class VsadcDetectorNode(Node):
         last = self._last_event.get(component)
         if last is not None:
             values[keys.CHANGE_TIME] = last.time
+        if getattr(self.detector, 'saturated_now', {}).get(self.detector.axes[i]):
+            return WARN, 'gyro saturated: samples held, not diagnosed', values
         if not channel.ready:
             level, message = STALE, (f'unknown: not examined yet, learning the nominal '
                                      f'class ({channel.samples} samples)')

@@ -151,22 +151,38 @@ def _encode_joint(seconds: float, names: Sequence[str], arrays: Sequence[Sequenc
 def decode_joint_state(buffer: bytes) -> tuple[float, list[str], tuple, tuple]:
     """Return ``(time, names, velocity, effort)`` of a serialised JointState.
 
+    Accepts both encodings of an empty float64 sequence (see :func:`parse_joint_state`).
     Raise ValueError if the bytes are not a little-endian CDR JointState (the caller
     falls back to rclpy's deserialisation).
+    """
+    sec, nanosec, _, names, (_, velocity, effort) = parse_joint_state(buffer)
+    return sec + nanosec / 1e9, names, velocity, effort
+
+
+def parse_joint_state(buffer: bytes) -> tuple[int, int, str, list[str], tuple]:
+    """Return ``(sec, nanosec, frame_id, names, (position, velocity, effort))``.
+
+    Canonical CDR ends with the last field; rclpy may append up to 8 bytes of padding of
+    unspecified content after a message whose last sequences are empty (the serialisers
+    then disagree on the size, and a strict reader refuses rclpy's bytes). Both are read;
+    ValueError for anything else.
     """
     if buffer[:2] != b'\x00\x01':
         raise ValueError('not little-endian CDR')
     data = memoryview(buffer)[4:]
     try:
         sec, nanosec, frame_len = _HEAD.unpack_from(data, 0)
+        frame = str(data[12:12 + max(frame_len - 1, 0)], 'utf-8')
         offset = (12 + frame_len + 3) & ~3
         (count,) = _U32.unpack_from(data, offset)
         offset += 4
         names = []
-        for _ in range(count):
+        for _ in range(min(count, len(data))):
             offset = (offset + 3) & ~3
             (size,) = _U32.unpack_from(data, offset)
             offset += 4
+            if size < 1 or offset + size > len(data):
+                raise ValueError('a name runs past the end')
             names.append(str(data[offset:offset + size - 1], 'utf-8'))
             offset += size
         arrays = []
@@ -176,13 +192,13 @@ def decode_joint_state(buffer: bytes) -> tuple[float, list[str], tuple, tuple]:
             offset += 4
             if size:
                 offset = (offset + 7) & ~7
-                arrays.append(struct.unpack_from(f'<{size}d', data, offset))
-                offset += 8 * size
-            else:
-                arrays.append(())
+            arrays.append(struct.unpack_from(f'<{size}d', data, offset) if size else ())
+            offset += 8 * size
     except (struct.error, UnicodeDecodeError) as err:
         raise ValueError(f'not a JointState: {err}') from None
-    return sec + nanosec / 1e9, names, arrays[1], arrays[2]
+    if len(names) != count or not len(data) - 8 <= offset <= len(data):
+        raise ValueError(f'not a JointState: {len(data) - offset} bytes left over')
+    return sec, nanosec, frame, names, tuple(arrays)
 
 
 class JointStateCodec:

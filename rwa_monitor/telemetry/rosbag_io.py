@@ -13,15 +13,15 @@ Each stream keeps its own stamps (``header.stamp``, the telemetry time; the bag'
 receive time is not used): the record's ``time`` is the union of the stamps and
 ``Telemetry.present`` marks each stream's rows (docs/contracts.md, multi-rate recordings).
 
-Payloads are written in canonical CDR by the type store (an empty sequence is its count
-alone, no padding), so files are byte-identical across runs with the same input. Reading
-accepts canonical CDR and the encoding rclpy writes (an empty float64 sequence followed by
-alignment padding): a payload the type store refuses is decoded by rclpy's deserialiser.
+Payloads are written in canonical CDR (an empty sequence is its count alone, nothing
+after the last field), so files are byte-identical across runs with the same input.
+Reading accepts canonical CDR and what rclpy writes (up to 8 bytes of uninitialised
+padding after a JointState ending in empty sequences): a JointState the type store
+refuses is read by the package's decoder, which allows that padding (telemetry/codecs.py).
 """
 
 from __future__ import annotations
 
-import importlib
 import os
 import pathlib
 import shutil
@@ -129,26 +129,35 @@ def read(path: str | os.PathLike, topics: str | Mapping[str, str] | None = None)
 
 
 class _Decoder:
-    """Deserialise CDR: the type store first (canonical), then rclpy (padded empties)."""
+    """Deserialise CDR: the type store (canonical), then JointState as rclpy writes it.
+
+    Only sensor_msgs/JointState among the types read has sequences that may be empty at
+    its end, the one place the serialisers differ: :func:`codecs.parse_joint_state`.
+    """
 
     def __init__(self) -> None:
         self.store = typestore()
-        self.fallback: dict[str, Any] = {}
 
     def __call__(self, data: bytes, msgtype: str, path: str, topic: str) -> Any:
         try:
             return self.store.deserialize_cdr(data, msgtype)
-        except Exception:  # noqa: BLE001 - try the other encoding of empty sequences
-            pass
-        from rclpy.serialization import deserialize_message
-        if msgtype not in self.fallback:
-            pkg, _, cls = msgtype.split('/')
-            self.fallback[msgtype] = getattr(importlib.import_module(f'{pkg}.msg'), cls)
-        try:
-            return deserialize_message(bytes(data), self.fallback[msgtype])
-        except Exception as err:  # noqa: BLE001
-            raise TelemetrySchemaError(path, f'undecodable {msgtype} message on {topic}: '
-                                       f'{err}', column=topic) from None
+        except Exception as err:  # noqa: BLE001 - try the other encoding of empty sequences
+            problem = err
+        if msgtype == 'sensor_msgs/msg/JointState':
+            try:
+                sec, nanosec, frame, names, arrays = codecs.parse_joint_state(bytes(data))
+            except ValueError as err:
+                problem = err
+            else:
+                t = self.store.types
+                return t[msgtype](
+                    header=t['std_msgs/msg/Header'](stamp=t['builtin_interfaces/msg/Time'](
+                        sec=sec, nanosec=nanosec), frame_id=frame),
+                    name=names, position=np.array(arrays[0], dtype=float),
+                    velocity=np.array(arrays[1], dtype=float),
+                    effort=np.array(arrays[2], dtype=float))
+        raise TelemetrySchemaError(path, f'undecodable {msgtype} message on {topic}: '
+                                   f'{problem}', column=topic)
 
 
 def _telemetry(path: str, samples: dict[str, list[tuple[int, Any]]],
@@ -343,6 +352,7 @@ class RecordingWriter:
                               storage_plugin=StoragePlugin.MCAP)
         self._writer.open()
         self._store = typestore()
+        self._decode = _Decoder()
         self._connections: dict[tuple[str, str], Any] = {}
         self.counts: dict[str, int] = {}
 
@@ -355,33 +365,13 @@ class RecordingWriter:
         if key not in self._connections:
             self._connections[key] = self._writer.add_connection(topic, msgtype,
                                                                  typestore=self._store)
-        msg = _Decoder()(data, msgtype, os.fspath(self.path), topic)
-        if not hasattr(msg, '__msgtype__'):  # decoded by rclpy (padded empty sequences)
-            msg = self._from_rclpy(msg, msgtype)
+        msg = self._decode(data, msgtype, os.fspath(self.path), topic)
         if stamp_ns is None:
             stamp = getattr(getattr(msg, 'header', None), 'stamp', None)
             stamp_ns = 0 if stamp is None else stamp.sec * 1_000_000_000 + stamp.nanosec
         self._writer.write(self._connections[key], stamp_ns,
                            bytes(self._store.serialize_cdr(msg, msgtype)))
         self.counts[topic] = self.counts.get(topic, 0) + 1
-
-    def _from_rclpy(self, msg: Any, msgtype: str) -> Any:
-        """Return the type store's message with the fields of an rclpy message."""
-        cls = self._store.types[msgtype]
-        values = {}
-        for name in cls.__dataclass_fields__:
-            if name == '__msgtype__':
-                continue
-            value = getattr(msg, name)
-            if hasattr(value, 'get_fields_and_field_types'):
-                value = self._from_rclpy(value, _type_name(value))
-            elif isinstance(value, (list, tuple)) and value and hasattr(
-                    value[0], 'get_fields_and_field_types'):
-                value = [self._from_rclpy(v, _type_name(v)) for v in value]
-            elif not isinstance(value, (str, bytes, int, float, bool)):
-                value = np.asarray(value)
-            values[name] = value
-        return cls(**values)
 
     def close(self) -> None:
         """Finish the recording and rename it onto ``path``."""
@@ -394,9 +384,3 @@ class RecordingWriter:
     def abort(self) -> None:
         """Drop the recording (``path`` is left as it was)."""
         shutil.rmtree(self._work, ignore_errors=True)
-
-
-def _type_name(msg: Any) -> str:
-    """Return ``pkg/msg/Type`` of an rclpy message."""
-    module = type(msg).__module__.split('.')[0]
-    return f'{module}/msg/{type(msg).__name__}'
