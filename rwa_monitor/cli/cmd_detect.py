@@ -41,6 +41,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                              'ros__parameters; default: the installed config/rwa_monitor.yaml)')
     parser.add_argument('-o', '--output', type=pathlib.Path, metavar='FILE',
                         help='write the events JSON here (default: print a table)')
+    parser.add_argument('--calibration', type=pathlib.Path, metavar='YAML',
+                        help='commissioning calibration (rwa-monitor calibrate '
+                             'DIR/calibration.yaml): detectors test changes against the '
+                             'nominal models it holds')
     parser.add_argument('--friction-model', type=pathlib.Path, metavar='YAML',
                         help='refined friction model for the LLR detector, as written by '
                              'rwa-monitor identify (DIR/friction_model.yaml)')
@@ -121,6 +125,9 @@ def run(args: argparse.Namespace) -> int:
     """Read the file, detect, and write the JSON or print the table."""
     tele = read_telemetry(args.file)
     config = load_config(args.config)
+    if args.calibration is not None:
+        block = config.setdefault(SHARED_BLOCK, {}).setdefault('ros__parameters', {})
+        block['calibration_file'] = str(args.calibration)
     if args.friction_model is not None:
         block = config.setdefault('llr_detector', {}).setdefault('ros__parameters', {})
         block['friction_model_file'] = str(args.friction_model)

@@ -5,7 +5,10 @@ Parameters are the ``llr_detector`` node's (config/rwa_monitor.yaml), same names
 0 = estimate from the data). ``friction_model_file`` names a refined friction model
 written by ``rwa-monitor identify`` (its ``friction_model.yaml``); empty = model (1). The
 refined model applies to the wheel it names when the file has that wheel, else to every
-wheel. Other keys of the block (node-only ones) are ignored.
+wheel. ``calibration_file`` names a commissioning calibration (``rwa-monitor calibrate``):
+the detector then tests the residual against each wheel's nominal model
+(pipelines/calibrated.py; it takes precedence over ``friction_model_file``). Other keys
+of the block (node-only ones) are ignored.
 """
 
 from __future__ import annotations
@@ -21,6 +24,7 @@ from rwa_monitor.telemetry import Telemetry
 NODE = 'llr_detector'
 DEFAULTS = {'window': 500, 'k_verif': 0, 'false_alarm_rate': 1.0e-5, 'noise_std': 0.0}
 MODEL_KEY = 'friction_model_file'
+CALIBRATION_KEY = 'calibration_file'
 
 
 def applies(tele: Telemetry) -> bool:
@@ -74,6 +78,9 @@ def run_with_summary(tele: Telemetry, config: Mapping[str, Any]
     """
     from rwa_monitor.core.llr_batch import detect_batch_with_counters
     kwargs = detector_kwargs(config)
+    if config.get(CALIBRATION_KEY):
+        from rwa_monitor.pipelines import calibrated
+        return calibrated.run_llr(tele, kwargs, str(config[CALIBRATION_KEY]))
     refined = friction_model(config.get(MODEL_KEY) or '', tele)
     events: list[AnomalyEvent] = []
     summary: dict[str, Any] = {}
