@@ -60,8 +60,8 @@ def test_a_change_in_the_calibration_data_is_named_with_wheel_and_time():
     tele = simulate_undeclared('none', n=N, seed=4, anomaly_time=6000.0, anomaly_dry=1e-3)
     wheel = tele.wheels['rw1']
     block, warnings = core.calibrate_wheel('rw1', tele.time, wheel.speed, wheel.friction)
-    assert len(warnings) == 1 and warnings[0].startswith('rw1: a friction change at t = ')
-    assert abs(block['changes_found_s'][0] - 6000.0) < 30.0
+    assert warnings and all(m.startswith('rw1: a friction change (') for m in warnings)
+    assert min(abs(t - 6000.0) for t in block['changes_found_s']) < 30.0
 
 
 def test_calibrated_detector_removes_false_alarms_and_keeps_the_step(stribeck_block):
@@ -160,7 +160,7 @@ def test_strict_refuses_data_with_a_change(tmp_path, capsys):
     write_telemetry(tmp_path / 'bad.csv', Telemetry(time=tele.time, wheels=tele.wheels))
     code = main(['calibrate', str(tmp_path / 'bad.csv'), '-o', str(tmp_path / 'cal'),
                  '--strict'])
-    assert code == 2 and 'rw1: a friction change at t = ' in capsys.readouterr().err
+    assert code == 2 and 'rw1: a friction change (' in capsys.readouterr().err
     assert not (tmp_path / 'cal' / 'calibration.yaml').exists()
 
 

@@ -28,8 +28,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help='output directory')
     parser.add_argument('--strict', action='store_true',
                         help='refuse data in which a friction change is found')
-    parser.add_argument('--no-jumps', action='store_true',
-                        help='do not search the data for friction changes')
     parser.set_defaults(func=run)
 
 
@@ -37,7 +35,7 @@ def run(args: argparse.Namespace) -> int:
     """Read the files, calibrate, write the outputs."""
     from rwa_monitor.pipelines import calibrated
     records = [read_telemetry(path) for path in args.files]
-    document, warnings, arrays = calibrated.commission(records, jumps=not args.no_jumps)
+    document, warnings, arrays = calibrated.commission(records)
     for message in warnings:
         print(f'rwa-monitor calibrate: warning: {message}', file=sys.stderr)
     if args.strict and any('friction change' in m for m in warnings):

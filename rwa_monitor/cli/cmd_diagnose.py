@@ -27,6 +27,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help='classifier model (default: the shipped one)')
     parser.add_argument('--params-file', default=None,
                         help='YAML with a fss_diagnoser block (default config/rwa_monitor.yaml)')
+    parser.add_argument('--calibration', default=None, metavar='YAML',
+                        help='commissioning calibration (rwa-monitor calibrate): judge each '
+                             'wheel relative to its nominal; a window the nominal and the '
+                             'known anomalies cannot explain is reported "unknown"')
     parser.add_argument('--last', type=int, default=None, metavar='N',
                         help='diagnose only the last N samples of each wheel')
     parser.set_defaults(func=run)
@@ -62,6 +66,13 @@ def run(args: argparse.Namespace) -> int:
     except (ValueError, OSError) as err:
         raise ConfigError(str(err)) from None
     tele = read_telemetry(args.file)
+    cal = None
+    if args.calibration:
+        from rwa_monitor.core.calibrate import check_wheels
+        from rwa_monitor.pipelines import calibrated
+        cal = calibrated.load(args.calibration)
+        check_wheels(cal, [w for w, ch in tele.wheels.items() if ch.friction is not None],
+                     args.calibration)
     wheels = {}
     for wheel_id, wheel in tele.wheels.items():
         if wheel.friction is None:
@@ -71,7 +82,11 @@ def run(args: argparse.Namespace) -> int:
         if np.count_nonzero(np.isfinite(speed) & np.isfinite(friction)) < 4 * config.window:
             wheels[wheel_id] = {'error': 'too few finite samples for a diagnosis'}
             continue
-        wheels[wheel_id] = diagnose(speed, friction, time, model, config)
+        if cal is not None:
+            wheels[wheel_id] = calibrated.diagnose_wheel(cal['wheels'][wheel_id], time, speed,
+                                                         friction, model, config)
+        else:
+            wheels[wheel_id] = diagnose(speed, friction, time, model, config)
     if not wheels:
         raise RwaMonitorError(f'{args.file}: no wheel with both speed and friction columns')
     with open(args.output, 'w') as handle:
@@ -80,5 +95,6 @@ def run(args: argparse.Namespace) -> int:
     for wheel_id, result in wheels.items():
         flags = result.get('anomalies', {})
         found = [k for k, v in flags.items() if v] or ['none']
-        print(f'{wheel_id}: anomalies {", ".join(found)}')
+        status = f' ({result["status"]})' if 'status' in result else ''
+        print(f'{wheel_id}: anomalies {", ".join(found)}{status}')
     return 0

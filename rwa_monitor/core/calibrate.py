@@ -13,9 +13,9 @@ version 1; docs/contracts.md). Per wheel:
 - ``fss``: the nominal reference of the window diagnoser (base dry friction, viscous
   coefficient and noise of the model's coulomb + viscous part).
 
-Friction changes inside the calibration data are found by the identification's jump
-detector (baseline.py); each is reported in ``warnings`` with wheel and time, and the
-model then describes the data after the last change (see :func:`calibrate_wheel`).
+Friction changes inside the calibration data are looked for with the calibrated LLR
+detector itself; each is reported in ``warnings`` with wheel and time (see
+:func:`calibrate_wheel`).
 
 The gyro block is filled by ``rwa_monitor.core.vsadc.calibrate_gyro`` when that function
 exists (it takes time, gyro (n, 3), star-tracker quaternion (n, 4, scalar last) and the
@@ -36,6 +36,10 @@ VERSION = 1
 BAND_EDGES = (0.0, 0.25, 0.5, 1.0, 1.5, 2.0, 3.0, 4.0, 5.0, 6.0, 8.0, 10.0, 15.0)
 # Level of the test "this bin's residual is larger than the reference noise".
 BAND_LEVEL = 1.0e-3
+# Least factor on the reference noise for a bin to count as larger.
+MIN_EXCESS = 1.1
+# Effects of the speed alone: the ones a nominal model keeps (see _keep_speed_effects).
+SPEED_KINDS = ('stribeck', 'asymmetric_coulomb', 'drag', 'smooth_speed')
 # Speeds above this fraction of the largest |speed| seen form the reference region.
 REFERENCE_FRACTION = 0.3
 
@@ -69,7 +73,9 @@ def noise_profile(speed: np.ndarray, residual: np.ndarray,
     largest |w| (at least 10 rad/s where the data reach it). A bin of |w| is *larger*
     when its mean square exceeds the reference's by more than the chi-square quantile
     at ``level`` (n - 1 degrees of freedom) allows; the band is ``|w| < b`` with b the
-    upper edge of the highest larger bin below the reference region (0: no band).
+    upper edge of the first run of larger bins from zero speed upwards (0: no band). A
+    bin is larger only if also by MIN_EXCESS: with tens of thousands of samples the test
+    alone flags excesses of a few per cent far from zero, which are not the band.
     """
     speed = np.abs(np.asarray(speed, dtype=float))
     residual = np.asarray(residual, dtype=float)
@@ -81,6 +87,7 @@ def noise_profile(speed: np.ndarray, residual: np.ndarray,
     std = float(np.sqrt(np.mean(ref ** 2)))
     profile = []
     band = 0.0
+    closed = False
     bounds = list(edges) + [np.inf]
     for lo, hi in zip(bounds[:-1], bounds[1:]):
         if lo >= ref_from:
@@ -90,12 +97,13 @@ def noise_profile(speed: np.ndarray, residual: np.ndarray,
             continue
         rms = float(np.sqrt(np.mean(part ** 2)))
         limit = std * np.sqrt(stats.chi2.isf(level, part.size) / part.size)
-        larger = bool(rms > limit)
+        larger = bool(rms > limit and rms > MIN_EXCESS * std)
         profile.append({'speed_abs_from_rad_s': float(lo),
                         'speed_abs_to_rad_s': float(min(hi, ref_from)),
                         'samples': int(part.size), 'rms_nm': rms, 'larger': larger})
-        if larger:
+        if larger and not closed:
             band = float(min(hi, ref_from))
+        closed = closed or (band > 0.0 and not larger)
     inside = residual[speed < band]
     return {'std_nm': std,
             'reference_speed_abs_from_rad_s': float(ref_from),
@@ -107,53 +115,137 @@ def noise_profile(speed: np.ndarray, residual: np.ndarray,
 
 
 def calibrate_wheel(wheel: str, time: np.ndarray, speed: np.ndarray, friction: np.ndarray,
-                    jumps: bool = True) -> tuple[dict[str, Any], list[str]]:
+                    false_alarm_rate: float = 1.0e-5) -> tuple[dict[str, Any], list[str]]:
     """Return (the wheel's calibration block, warnings) from fault-free telemetry.
 
-    Non-finite rows are dropped. A friction change found in the data (identify's jump
-    detector) is a warning naming the wheel and the time; the model's weights are then
-    those of the last segment (identify's snippet), the noise is measured on that
-    segment. Raise NotIdentifiableError when the data cannot separate dry from viscous.
+    Non-finite rows are dropped. The identification runs without its jump search (the
+    data are meant to be fault-free; on bus telemetry the jump search cut fault-free
+    records at zero-speed passages). Whether they are fault-free is then checked: the
+    calibrated LLR detector (docs/llr.md, "Calibrated") runs on the calibration data
+    against the model just fitted, at ``false_alarm_rate``; each change it declares is a
+    warning naming the wheel and the time (``changes_found_s``), since a model fitted
+    across a change is a compromise between the two frictions. Raise
+    NotIdentifiableError when the data cannot separate dry from viscous.
     """
     from rwa_monitor.core.identify.data import IdentData
     from rwa_monitor.core.identify.differentiate import local_noise_std
     from rwa_monitor.core.identify.model import snippet
     from rwa_monitor.core.identify.select import identify
+    from rwa_monitor.core.llr_batch import detect_batch
     time = np.asarray(time, dtype=float)
     speed = np.asarray(speed, dtype=float)
     friction = np.asarray(friction, dtype=float)
     ok = np.isfinite(time) & np.isfinite(speed) & np.isfinite(friction)
     t, w, f = time[ok], speed[ok], friction[ok]
     sign_change = np.zeros(len(w), dtype=bool)
-    flips = np.flatnonzero(np.sign(w[1:]) != np.sign(w[:-1]))
-    for k in flips:
+    for k in np.flatnonzero(np.sign(w[1:]) != np.sign(w[:-1])):
         sign_change[max(0, k - 5):k + 7] = True
     noise = local_noise_std(t, f, 5, 2, max(200, len(t) // 20), exclude=sign_change)
     data = IdentData(wheel=wheel, time=t, speed=w, friction=f, noise_std=noise,
                      counts={'rows': int(len(time)), 'non_finite_rows': int(np.sum(~ok))})
-    selection = identify(data, jumps=jumps)
-    model = snippet(selection)['friction_model']
-    warnings = []
-    starts = [int(k) for k in selection.segments.starts[1:]]
-    for k in starts:
-        warnings.append(f'{wheel}: a friction change at t = {t[k]:.1f} s in the '
-                        f'calibration data (the model describes the data after the last '
-                        f'one)')
-    last = starts[-1] if starts else 0
-    residual = f[last:] - nominal_prediction(model, w[last:], t[last:])
-    noise_model = noise_profile(w[last:], residual)
+    model = snippet(identify(data, jumps=False))['friction_model']
+    dropped = _keep_speed_effects(model, data)
+    noise_model = noise_profile(w, f - nominal_prediction(model, w))
     model['noise_std_nm'] = noise_model['std_nm']
     block = {
         'friction_model': model,
         'noise': noise_model,
         'speed_range_rad_s': [float(np.min(w)), float(np.max(w))],
-        'fss': {'base_dry_nm': float(model['weights']['dry']),
-                'viscous_nms': float(model['weights']['viscous']),
-                'noise_std_nm': noise_model['std_nm']},
+        'fss': fss_reference(w, f, noise_model),
         'samples': int(len(t)),
-        'changes_found_s': [float(t[k]) for k in starts],
+        'dropped_effects': dropped,
     }
+    residual, _ = NominalWheel(block).residual(t, w, f)
+    events = [e for e in detect_batch(t, w, residual, component=wheel,
+                                      false_alarm_rate=false_alarm_rate) if e.revision == 0]
+    block['changes_found_s'] = [float(e.time) for e in events]
+    warnings = [f'{wheel}: a friction change ({e.kind}) at t = {e.time:.1f} s in the '
+                f'calibration data; a nominal model needs fault-free data' for e in events]
     return block, warnings
+
+
+def fss_reference(speed: np.ndarray, friction: np.ndarray, noise: Mapping[str, Any]
+                  ) -> dict[str, Any]:
+    """Return the window diagnoser's nominal reference of one wheel.
+
+    ``model1_*``: the least-squares fit of model (1) outside the low-speed band (the
+    diagnoser knows dry and viscous friction only, the FSS paper's eq. (4)).
+    ``base_dry_nm``, ``viscous_nms``, ``noise_std_nm``: what the diagnoser's own
+    extraction (core/fss/pipeline.py, stages 1-3) reports on the calibration data given
+    as in :func:`fss_inputs`, so that a nominal window is judged against the same
+    estimator's nominal values.
+    """
+    from rwa_monitor.core.fss.pipeline import extract, FssConfig, normalise
+    band = float(noise['low_speed_band']['speed_abs_below_rad_s'])
+    out = np.abs(speed) >= band
+    h = -np.column_stack([np.sign(speed[out]), speed[out]])
+    dry, viscous = np.linalg.lstsq(h, friction[out], rcond=None)[0]
+    ref = {'model1_dry_nm': float(dry), 'model1_viscous_nms': float(viscous),
+           'speed_abs_below_rad_s': band}
+    given = np.where(out, friction, np.nan)
+    config = FssConfig()
+    ext = extract(*normalise(speed, given, config), config)
+    tq = config.torque_scale_nm
+    ref.update(base_dry_nm=float(ext.base_dry * tq),
+               viscous_nms=float(ext.viscous * tq / config.speed_scale_rad_s),
+               noise_std_nm=float(ext.sigma * tq))
+    return ref
+
+
+def fss_inputs(block: Mapping[str, Any], speed: np.ndarray, friction: np.ndarray
+               ) -> tuple[np.ndarray, dict[str, float]]:
+    """Return (friction for the diagnoser, its scales) relative to the wheel's nominal.
+
+    The friction loses what the nominal model holds beyond model (1) (nominal minus the
+    reference's model-(1) fit), samples inside the low-speed band or outside the
+    calibrated speed range become NaN (the stages skip them), and the normalising scales
+    are the reference's base dry friction and base dry / viscous, so that the nominal
+    wheel is (1, 1) in the diagnoser's units, where its classifier was trained
+    (docs/fss.md, "Calibrated").
+    """
+    speed = np.asarray(speed, dtype=float)
+    friction = np.asarray(friction, dtype=float)
+    ref = block['fss']
+    safe = np.where(np.isfinite(speed), speed, 0.0)
+    model1 = -ref['model1_dry_nm'] * np.sign(safe) - ref['model1_viscous_nms'] * safe
+    out = friction - (nominal_prediction(block['friction_model'], safe) - model1)
+    lo, hi = block['speed_range_rad_s']
+    with np.errstate(invalid='ignore'):
+        skip = (np.abs(speed) < ref['speed_abs_below_rad_s']) | (speed < lo) | (speed > hi)
+    out[skip | ~np.isfinite(speed)] = np.nan
+    scales = {}
+    if ref['base_dry_nm'] > 0:
+        scales['torque_scale_nm'] = float(ref['base_dry_nm'])
+        if ref['viscous_nms'] > 0:
+            scales['speed_scale_rad_s'] = float(ref['base_dry_nm'] / ref['viscous_nms'])
+    return out, scales
+
+
+def _keep_speed_effects(model: dict[str, Any], data: Any) -> list[str]:
+    """Keep the effects that depend on speed only; refit the weights; return the dropped.
+
+    A nominal model must hold on another day: effects of time (``drift``, ``periodic``)
+    or of an auxiliary channel describe this record, not the wheel, and would be
+    extrapolated. What they explained is mostly friction as a function of speed seen
+    through the speed's own time history (on the bus the guidance is periodic), so the
+    generic ``smooth_speed`` effect of the identification's vocabulary (its fallback
+    candidate, knots at the speed quantiles and near zero) is added when absent, and the
+    columns are refitted by least squares on the same data.
+    """
+    from rwa_monitor.core.identify import effects as fx
+    from rwa_monitor.core.identify.model import regressors_from_config
+    effects = model.get('effects') or []
+    kept = [e for e in effects if e.get('kind') in SPEED_KINDS]
+    dropped = [str(e.get('name', e.get('kind'))) for e in effects if e not in kept]
+    if not any(e['kind'] == 'smooth_speed' for e in kept):
+        fallback = fx.fallback_candidate(data)
+        kept.append({'name': fallback.name, 'kind': fallback.kind,
+                     'params': dict(fallback.grid[0])})
+    model['effects'] = kept
+    regs = regressors_from_config(model)
+    coef = np.linalg.lstsq(regs.matrix(data.speed), data.friction, rcond=None)[0]
+    model['weights'] = {n: float(c) for n, c in zip(regs.names, coef)}
+    return dropped
 
 
 def calibrate_gyro(time: np.ndarray, gyro: np.ndarray | None, quaternion: np.ndarray | None,

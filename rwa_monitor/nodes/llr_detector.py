@@ -29,7 +29,7 @@ from sensor_msgs.msg import JointState
 
 from rwa_monitor.core import keys
 from rwa_monitor.core.events import AnomalyEvent
-from rwa_monitor.nodes import common, messages
+from rwa_monitor.nodes import calibration, common, messages
 from rwa_monitor.nodes.common import (declare_parameters, DiagnosticsPublisher, EVENTS_QOS,
                                       OK, ParamSpec, qos_event_callbacks, run_node,
                                       telemetry_qos)
@@ -65,6 +65,7 @@ PARAMETERS = (
               'sensor-data publisher; samples may be lost).',
               choices=('reliable', 'best_effort'), read_only=True),
 )
+PARAMETERS += (calibration.param_spec(),)
 
 
 class _Wheel:
@@ -107,10 +108,12 @@ class LLRDetectorNode(Node):
         self.params = declare_parameters(self, PARAMETERS, self._on_parameter,
                                          self._check_detector)
         self._kwargs = detector_kwargs(self._detector_config())
+        self.calibration = calibration.CalibrationInForce(self.params[calibration.NAME])
         self.wheels: dict[str, _Wheel] = {}
         self.input_counters = {'messages': 0, 'length_mismatch': 0,
                                'empty_name': 0, 'duplicate_name': 0, 'unknown_wheel': 0,
-                               'too_many_wheels': 0, 'undecodable': 0}
+                               'too_many_wheels': 0, 'undecodable': 0,
+                               'uncalibrated_wheel': 0}
         self.events: collections.deque[AnomalyEvent] = collections.deque(maxlen=MAX_KEPT)
         self._codec: messages.JointStateCodec | None = None
         self._logged: set[tuple[str, str]] = set()
@@ -144,6 +147,11 @@ class LLRDetectorNode(Node):
                 wheel.restart()
                 wheel.detector = self._new_detector(wheel_id)
             self.get_logger().info(f'{name} = {value}: every wheel detector restarted')
+        elif name == calibration.NAME:
+            self.get_logger().info(self.calibration.set(value))
+            for wheel_id, wheel in self.wheels.items():
+                wheel.restart()
+                wheel.detector = self._new_detector(wheel_id)
         elif name == 'wheels':
             self._allowed = common.wheel_names(self.params['wheels'])
 
@@ -215,6 +223,9 @@ class LLRDetectorNode(Node):
             return wheel
         refusal = common.wheel_refusal(wheel_id, self._allowed, len(self.wheels),
                                        self.params['max_wheels'])
+        if refusal is None and not self.calibration.covers(wheel_id):
+            refusal = ('uncalibrated_wheel', f'{wheel_id}: not in the calibration in force '
+                       f'({self.calibration.describe()}): not monitored')
         if refusal is not None:
             self._reject(refusal[0], wheel_id, refusal[1])
             return None
@@ -242,6 +253,7 @@ class LLRDetectorNode(Node):
                 return
         wheel.last_time = seconds
         wheel.samples += 1
+        friction = self.calibration.residual(wheel_id, seconds, speed, friction)
         found = wheel.detector.update(seconds, speed, friction)
         if found:
             self._publish_events(wheel, found)
@@ -273,6 +285,9 @@ class LLRDetectorNode(Node):
             message = f'{event.kind} anomaly since t={event.time:.3f} s'
             values.update({keys.KIND: event.kind, keys.CHANGE_TIME: event.time,
                            keys.P_VALUE: event.p_value})
+        values.update(self.calibration.values(wheel.detector.component))
+        if values.get('not_tested_outside_calibrated_range'):
+            message += '; telemetry outside the calibrated speed range (not tested)'
         noise = getattr(wheel.detector, 'noise_std', None)
         if noise is not None:
             values[keys.NOISE_STD] = noise

@@ -24,7 +24,7 @@ from rwa_monitor.telemetry.atomic import atomic_write, write_text_atomic
 KEY = 'calibration_file'
 
 
-def commission(records: Sequence[Telemetry], jumps: bool = True
+def commission(records: Sequence[Telemetry]
                ) -> tuple[dict[str, Any], list[str], dict[str, dict]]:
     """Return (calibration document, warnings, arrays for the report) from records.
 
@@ -50,7 +50,7 @@ def commission(records: Sequence[Telemetry], jumps: bool = True
         w = np.concatenate([np.asarray(r.wheels[name].speed, dtype=float) for r in records])
         f = np.concatenate([np.asarray(r.wheels[name].friction, dtype=float)
                             for r in records])
-        block, found = core.calibrate_wheel(name, t, w, f, jumps=jumps)
+        block, found = core.calibrate_wheel(name, t, w, f)
         wheels[name] = block
         warnings += found
         arrays[name] = {'time': t, 'speed': w, 'friction': f}
@@ -203,3 +203,29 @@ def run_llr(tele: Telemetry, kwargs: Mapping[str, Any], path: str
         summary[wheel_id] = entry
         events.extend(found)
     return events, summary
+
+
+def diagnose_wheel(block: Mapping[str, Any], time: np.ndarray, speed: np.ndarray,
+                   friction: np.ndarray, classifier: Any, config: Any) -> dict[str, Any]:
+    """Return the window diagnosis of one wheel relative to its calibrated nominal.
+
+    core/calibrate.py ``fss_inputs`` (nominal's non-model-(1) part removed, band and
+    out-of-range samples skipped, scales from the reference), the four stages, then
+    core/fss/classify.py ``relative_verdict`` (``status``: nominal, anomalous or unknown).
+    """
+    from dataclasses import replace
+
+    from rwa_monitor.core.fss.classify import relative_verdict
+    from rwa_monitor.core.fss.pipeline import diagnose
+    given, scales = core.fss_inputs(block, speed, friction)
+    result = diagnose(speed, given, time, classifier, replace(config, **scales))
+    status, flags, reason = relative_verdict(result['anomalies'],
+                                             result['estimates']['noise_std_nm'],
+                                             block['fss']['noise_std_nm'])
+    result['anomalies'] = flags
+    result['status'] = status
+    if reason:
+        result['unknown_reason'] = reason
+    skipped = int(np.sum(~np.isfinite(given) & np.isfinite(np.asarray(friction, float))))
+    result['calibration'] = {**scales, 'samples_not_tested': skipped}
+    return result
