@@ -102,6 +102,23 @@ def evaluate(run: dict[str, Any], cal_path: str, params: dict[str, Any]) -> dict
         out[mode] = {'declarations': _declarations(events), 'wall_s': wall,
                      'samples_per_s': len(tele) * len(tele.wheels) / wall,
                      'not_tested': {w: s.get('not_tested') for w, s in summary.items()}}
+    out['fss'] = fss_flags(tele, cal_path)
+    return out
+
+
+def fss_flags(tele, cal_path: str) -> dict[str, Any]:
+    """Return the window diagnosis flags of each wheel (whole run), with and without."""
+    from rwa_monitor.core.fss.pipeline import diagnose, FssConfig, load_model
+    from rwa_monitor.pipelines import calibrated
+    cal = calibrated.load(cal_path)
+    model, config = load_model(), FssConfig()
+    out: dict[str, Any] = {'calibrated': {}, 'uncalibrated': {}}
+    for w, ch in tele.wheels.items():
+        res = calibrated.diagnose_wheel(cal['wheels'][w], tele.time, ch.speed, ch.friction,
+                                        model, config)
+        out['calibrated'][w] = {'flags': res['anomalies'], 'status': res['status']}
+        res = diagnose(ch.speed, ch.friction, tele.time, model, config)
+        out['uncalibrated'][w] = {'flags': res['anomalies']}
     return out
 
 
@@ -140,7 +157,17 @@ def score(results: list[dict[str, Any]], mode: str, hours: float = HOURS
         delays = entry['delays_s']
         entry['delay_median_s'] = float(np.median(delays)) if delays else None
         entry['delay_max_s'] = float(np.max(delays)) if delays else None
-    return {'healthy_wheel_hours': healthy_hours, 'false_alarms': false_alarms,
+    fss_runs = [r for r in results if 'fss' in r]
+    fss_healthy = [r['fss'][mode][w] for r in fss_runs for w in r['fss'][mode]
+                   if w != r['wheel']]
+    fss_faulty = [(r, r['fss'][mode][r['wheel']]) for r in fss_runs]
+    fss = {'healthy_wheels': len(fss_healthy),
+           'healthy_flagged': sum(any(x['flags'].values()) for x in fss_healthy),
+           'healthy_unknown': sum(x.get('status') == 'unknown' for x in fss_healthy),
+           'faulty_wheels': len(fss_faulty),
+           'faulty_right_flag': sum(bool(x['flags'].get(r['expected'])) for r, x in fss_faulty),
+           'faulty_unknown': sum(x.get('status') == 'unknown' for _, x in fss_faulty)}
+    return {'healthy_wheel_hours': healthy_hours, 'false_alarms': false_alarms, 'fss': fss,
             'false_alarms_per_wheel_hour': false_alarms / healthy_hours,
             'other_wheels_after_fault': other_wheel, 'per_fault': per_fault}
 
@@ -168,7 +195,9 @@ def markdown(acc: dict[str, Any], r: float, rate_hz: float) -> list[str]:
                      f'{raw["false_alarms_per_wheel_hour"]:.3f} ({raw["false_alarms"]})',
                      f'<= {bound:.3g}'],
                     ['declarations on the other wheels after the fault',
-                     cal['other_wheels_after_fault'], raw['other_wheels_after_fault'], '0']]
+                     cal['other_wheels_after_fault'], raw['other_wheels_after_fault'], '0'],
+                    ['FSS (whole 3-h run): healthy wheels flagged',
+                     _fss_cell(cal['fss']), _fss_cell(raw['fss']), '0']]
                    + [[f'{name}: detected, right kind (confirmed), median / max delay',
                        _fault_cell(cal['per_fault'][name]),
                        _fault_cell(raw['per_fault'][name]),
@@ -186,6 +215,12 @@ def markdown(acc: dict[str, Any], r: float, rate_hz: float) -> list[str]:
               f'{np.median(rates) / 1e6:.2f} million samples/s median over the runs '
               f'(wall time, shared machine).', '']
     return lines
+
+
+def _fss_cell(fss: dict[str, Any]) -> str:
+    return (f'{fss["healthy_flagged"]}/{fss["healthy_wheels"]} (unknown '
+            f'{fss["healthy_unknown"]}); faulty wheel: its kind flagged '
+            f'{fss["faulty_right_flag"]}/{fss["faulty_wheels"]}')
 
 
 def _fault_cell(entry: dict[str, Any]) -> str:

@@ -170,3 +170,30 @@ def test_wheel_without_friction_is_not_calibrated():
         calibrated.commission([])
     document, warnings, _ = calibrated.commission([tele])
     assert document['calibration']['wheels'] == {} and 'rw1: no friction' in warnings[0]
+
+
+def test_fss_verdict_unknown_when_the_window_is_not_explained():
+    from rwa_monitor.core.fss.classify import relative_verdict
+    flags = {'dry': True, 'viscous': False}
+    status, out, reason = relative_verdict(flags, 2.0e-4, 1.0e-4)
+    assert status == 'unknown' and not any(out.values()) and 'not explained' in reason
+    assert relative_verdict(flags, 1.2e-4, 1.0e-4)[:2] == ('anomalous', flags)
+    assert relative_verdict({'dry': False}, 1.0e-4, 1.0e-4)[0] == 'nominal'
+
+
+def test_fss_diagnosis_relative_to_the_calibrated_nominal(stribeck_block):
+    from rwa_monitor.core.fss.pipeline import diagnose, FssConfig, load_model
+    block, _ = stribeck_block
+    model, config = load_model(), FssConfig()
+    healthy = simulate_undeclared('stribeck', n=N, seed=7)
+    w = healthy.wheels['rw1']
+    assert any(diagnose(w.speed, w.friction, healthy.time, model, config)['anomalies'].values())
+    result = calibrated.diagnose_wheel(block, healthy.time, w.speed, w.friction, model, config)
+    assert result['status'] == 'nominal' and not any(result['anomalies'].values())
+    faulty = simulate_undeclared('stribeck', n=N, seed=7, anomaly_time=0.0, anomaly_dry=1.5e-3)
+    w = faulty.wheels['rw1']
+    result = calibrated.diagnose_wheel(block, faulty.time, w.speed, w.friction, model, config)
+    assert result['status'] == 'anomalous' and result['anomalies']['dry']
+    noisy = w.friction + 2e-4 * np.random.default_rng(0).standard_normal(N)
+    result = calibrated.diagnose_wheel(block, faulty.time, w.speed, noisy, model, config)
+    assert result['status'] == 'unknown' and not any(result['anomalies'].values())

@@ -151,7 +151,7 @@ def calibrate_wheel(wheel: str, time: np.ndarray, speed: np.ndarray, friction: n
         'friction_model': model,
         'noise': noise_model,
         'speed_range_rad_s': [float(np.min(w)), float(np.max(w))],
-        'fss': fss_reference(w, f, noise_model),
+        'fss': fss_reference(w, f, model, noise_model),
         'samples': int(len(t)),
         'dropped_effects': dropped,
     }
@@ -164,8 +164,8 @@ def calibrate_wheel(wheel: str, time: np.ndarray, speed: np.ndarray, friction: n
     return block, warnings
 
 
-def fss_reference(speed: np.ndarray, friction: np.ndarray, noise: Mapping[str, Any]
-                  ) -> dict[str, Any]:
+def fss_reference(speed: np.ndarray, friction: np.ndarray, friction_model: Mapping[str, Any],
+                  noise: Mapping[str, Any]) -> dict[str, Any]:
     """Return the window diagnoser's nominal reference of one wheel.
 
     ``model1_*``: the least-squares fit of model (1) outside the low-speed band (the
@@ -182,7 +182,9 @@ def fss_reference(speed: np.ndarray, friction: np.ndarray, noise: Mapping[str, A
     dry, viscous = np.linalg.lstsq(h, friction[out], rcond=None)[0]
     ref = {'model1_dry_nm': float(dry), 'model1_viscous_nms': float(viscous),
            'speed_abs_below_rad_s': band}
-    given = np.where(out, friction, np.nan)
+    model1 = -dry * np.sign(speed) - viscous * speed
+    given = friction - (nominal_prediction(friction_model, speed) - model1)
+    given[~out] = np.nan
     config = FssConfig()
     ext = extract(*normalise(speed, given, config), config)
     tq = config.torque_scale_nm
