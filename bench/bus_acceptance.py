@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 
 CALIBRATION_SEED = 1000
-EVAL_SEEDS = tuple(range(2000, 2012))
+EVAL_SEEDS = tuple(range(3000, 3012))
 HOURS = 3.0
 FAULT_TIME_S = 5400.0
 RAMP_S = 1800.0

@@ -36,6 +36,8 @@ VERSION = 1
 BAND_EDGES = (0.0, 0.25, 0.5, 1.0, 1.5, 2.0, 3.0, 4.0, 5.0, 6.0, 8.0, 10.0, 15.0)
 # Level of the test "this bin's residual is larger than the reference noise".
 BAND_LEVEL = 1.0e-3
+# Widest low-speed band the self-check may choose (rad/s).
+MAX_BAND_RAD_S = 8.0
 # Least factor on the reference noise for a bin to count as larger.
 MIN_EXCESS = 1.1
 # Effects of the speed alone: the ones a nominal model keeps (see _keep_speed_effects).
@@ -122,9 +124,14 @@ def calibrate_wheel(wheel: str, time: np.ndarray, speed: np.ndarray, friction: n
     data are meant to be fault-free; on bus telemetry the jump search cut fault-free
     records at zero-speed passages). Whether they are fault-free is then checked: the
     calibrated LLR detector (docs/llr.md, "Calibrated") runs on the calibration data
-    against the model just fitted, at ``false_alarm_rate``; each change it declares is a
-    warning naming the wheel and the time (``changes_found_s``), since a model fitted
-    across a change is a compromise between the two frictions. Raise
+    against the model just fitted, at ``false_alarm_rate``. The low-speed band starts
+    where the noise profile puts it (``noise_band_rad_s``) and is widened, edge by edge
+    up to MAX_BAND_RAD_S, until that self-check is silent: the residual of a static
+    nominal model stays structured a little beyond where its excess noise is visible (on
+    the bus: the Stribeck hysteresis, a few 1e-6 N m at 3-6 rad/s), and the band must
+    hold what the detector would take for changes. Each change still declared at the
+    widest band is a warning naming the wheel and the time (``changes_found_s``): a
+    change in the data, or friction that is not a function of speed. Raise
     NotIdentifiableError when the data cannot separate dry from viscous.
     """
     from rwa_monitor.core.identify.data import IdentData
@@ -155,9 +162,23 @@ def calibrate_wheel(wheel: str, time: np.ndarray, speed: np.ndarray, friction: n
         'samples': int(len(t)),
         'dropped_effects': dropped,
     }
-    residual, _ = NominalWheel(block).residual(t, w, f)
-    events = [e for e in detect_batch(t, w, residual, component=wheel,
-                                      false_alarm_rate=false_alarm_rate) if e.revision == 0]
+    band = noise_model['low_speed_band']
+    widths = [band['speed_abs_below_rad_s']] + [
+        e for e in BAND_EDGES if band['speed_abs_below_rad_s'] < e <= MAX_BAND_RAD_S]
+    for width in widths:
+        band['speed_abs_below_rad_s'] = float(width)
+        residual, _ = NominalWheel(block).residual(t, w, f)
+        events = [e for e in detect_batch(t, w, residual, component=wheel,
+                                          false_alarm_rate=false_alarm_rate)
+                  if e.revision == 0]
+        if not events:
+            break
+    inside = np.abs(w) < band['speed_abs_below_rad_s']
+    band['std_nm'] = float(np.sqrt(np.mean((f - nominal_prediction(model, w))[inside] ** 2))
+                           if inside.any() else noise_model['std_nm'])
+    band['samples'] = int(np.sum(inside))
+    band['noise_band_rad_s'] = float(widths[0])
+    block['fss'] = fss_reference(w, f, model, noise_model)
     block['changes_found_s'] = [float(e.time) for e in events]
     warnings = [f'{wheel}: a friction change ({e.kind}) at t = {e.time:.1f} s in the '
                 f'calibration data; a nominal model needs fault-free data' for e in events]
