@@ -253,3 +253,52 @@ def run(out_dir: pathlib.Path, params: dict[str, Any], quick: bool = False,
                   f'{len(result["uncalibrated"]["declarations"])} declarations', flush=True)
     acc['score'] = {mode: score(acc['runs'], mode) for mode in ('calibrated', 'uncalibrated')}
     return acc
+
+
+def summarise(tele, events: list[dict[str, Any]], tolerance_s: float = 1800.0) -> list[str]:
+    """Return lines counting LLR declarations against the truth columns of a bus file.
+
+    A wheel's true changes are the times its ``truth_<wheel>_dry`` / ``_viscous`` level
+    starts to move; a declaration is a detection when it comes after a true change of
+    its wheel and within ``tolerance_s`` of it, a false alarm otherwise.
+    """
+    lines = []
+    first = [e for e in events if e.get('detector') == 'llr' and e.get('revision', 0) == 0]
+    for wheel in tele.wheels:
+        starts = []
+        for part in ('dry', 'viscous'):
+            level = tele.truth.get(f'{wheel}_{part}')
+            if level is not None:
+                moved = np.flatnonzero(np.diff(level) != 0)
+                if moved.size:
+                    starts.append(float(tele.time[moved[0] + 1]))
+        mine = [e for e in first if e['component'] == wheel]
+        hits = [e for e in mine if any(0.0 <= e['declared_time'] - s <= tolerance_s
+                                       for s in starts)]
+        detected = [s for s in starts if any(0.0 <= e['declared_time'] - s <= tolerance_s
+                                             for e in mine)]
+        text = (f'{wheel}: {len(starts)} true change(s) at '
+                f'{", ".join(f"{s:.0f} s" for s in starts) or "-"}; detected {len(detected)}'
+                f'; false alarms {len(mine) - len(hits)}')
+        for e in hits:
+            text += (f'; declared {e["kind"]} at {e["declared_time"]:.1f} s (delay '
+                     f'{e["declared_time"] - min(starts):.0f} s)')
+        lines.append(text)
+    return lines
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m bench.bus_acceptance FILE EVENTS.json``: the demo's summary."""
+    import json
+    import sys
+
+    from rwa_monitor.telemetry import read_telemetry
+    args = sys.argv[1:] if argv is None else argv
+    tele = read_telemetry(args[0])
+    events = json.loads(pathlib.Path(args[1]).read_text())['events']
+    print('\n'.join(summarise(tele, events)))
+    return 0
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())
