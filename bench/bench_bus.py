@@ -220,7 +220,9 @@ def run_acceptance_only(out_dir: pathlib.Path) -> dict[str, Any]:
     path = out_dir / f'{NAME}.json'
     results = json.loads(path.read_text()) if path.exists() else {}
     results.pop('machine', None)
-    results['acceptance'] = bus_acceptance.run(out_dir, _llr_config())
+    partial = out_dir / f'{NAME}_acceptance_partial.json'
+    results['acceptance'] = bus_acceptance.run(
+        out_dir, _llr_config(), progress=lambda acc: write_json(out_dir, partial.stem, acc))
     results.setdefault('llr_r', _llr_config().get('false_alarm_rate', 1.0e-5))
     write_json(out_dir, NAME, results)
     if 'bare' in results:

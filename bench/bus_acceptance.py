@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 
 CALIBRATION_SEED = 1000
-EVAL_SEEDS = tuple(range(3000, 3012))
+EVAL_SEEDS = tuple(range(3000, 3010))
 HOURS = 3.0
 FAULT_TIME_S = 5400.0
 RAMP_S = 1800.0
@@ -237,7 +237,7 @@ def _worker(job: tuple) -> dict[str, Any]:
 
 
 def run(out_dir: pathlib.Path, params: dict[str, Any], quick: bool = False,
-        processes: int = 2) -> dict[str, Any]:
+        processes: int = 2, progress: Any = None) -> dict[str, Any]:
     """Calibrate, then evaluate the runs, ``processes`` at a time; return the results."""
     import multiprocessing
     acc: dict[str, Any] = {'calibration': calibrate(out_dir)}
@@ -248,6 +248,8 @@ def run(out_dir: pathlib.Path, params: dict[str, Any], quick: bool = False,
         acc['runs'] = []
         for result in pool.imap(_worker, jobs):
             acc['runs'].append(result)
+            if progress is not None:
+                progress(acc)
             print(f'  seed {result["seed"]} {result["fault"]} on {result["wheel"]}: '
                   f'calibrated {len(result["calibrated"]["declarations"])} / uncalibrated '
                   f'{len(result["uncalibrated"]["declarations"])} declarations', flush=True)

@@ -70,6 +70,10 @@ class CalibrationInForce:
         """Return True when no calibration is loaded or it calibrates ``wheel_id``."""
         return self.document is None or wheel_id in self._wheels
 
+    def block(self, wheel_id: str) -> dict[str, Any] | None:
+        """Return the wheel's calibration block, or None (no calibration or wheel)."""
+        return None if self.document is None else self.document['wheels'].get(wheel_id)
+
     def residual(self, wheel_id: str, t: float, speed: float, friction: float) -> float:
         """Return the friction to test: itself, or the residual against the nominal.
 

@@ -37,7 +37,7 @@ from rwa_monitor.core import keys
 from rwa_monitor.core.events import AnomalyEvent
 from rwa_monitor.core.fss.pipeline import diagnose, FssConfig, load_model, SlidingWindow
 from rwa_monitor.exceptions import ConfigError
-from rwa_monitor.nodes import common, messages
+from rwa_monitor.nodes import calibration, common, messages
 from rwa_monitor.nodes.common import (declare_parameters, DiagnosticsPublisher, EVENTS_QOS,
                                       OK, ParamSpec, qos_event_callbacks, run_node,
                                       telemetry_qos, WARN)
@@ -97,6 +97,9 @@ class _Wheel:
         self.health: Any = None
 
 
+PARAMETERS += (calibration.param_spec(),)
+
+
 class FssDiagnoserNode(Node):
     """Diagnose each wheel's sliding window in a worker thread; see the module docstring."""
 
@@ -106,6 +109,7 @@ class FssDiagnoserNode(Node):
         self.params = declare_parameters(self, PARAMETERS, self._on_parameter,
                                          self._check_config)
         self._config = self._make_config(self.params)
+        self.calibration = calibration.CalibrationInForce(self.params[calibration.NAME])
         try:
             self._model = load_model(self.params['model'] or None)
         except (OSError, ValueError) as err:
@@ -146,6 +150,8 @@ class FssDiagnoserNode(Node):
             self._config = self._make_config(self.params)
         elif name == 'wheels':
             self._allowed = common.wheel_names(self.params['wheels'])
+        elif name == calibration.NAME:
+            self.get_logger().info(self.calibration.set(value))
         elif name == 'window_period':
             for wheel in self.wheels.values():
                 wheel.window.period = int(value)
@@ -211,8 +217,14 @@ class FssDiagnoserNode(Node):
         wheel.busy = True
         time_s, speed, friction = wheel.window.snapshot()
         first_index = wheel.samples - time_s.size
-        future = self._worker.submit(diagnose, speed, friction, time_s, self._model,
-                                     self._config)
+        block = self.calibration.block(wheel_id)
+        if block is not None:
+            from rwa_monitor.pipelines.calibrated import diagnose_wheel
+            future = self._worker.submit(diagnose_wheel, block, time_s, speed, friction,
+                                         self._model, self._config)
+        else:
+            future = self._worker.submit(diagnose, speed, friction, time_s, self._model,
+                                         self._config)
         future.add_done_callback(
             lambda f: self._done.put((wheel_id, first_index, time_s[0], time_s[-1], f)))
 
@@ -276,6 +288,11 @@ class FssDiagnoserNode(Node):
                        keys.NOISE_STD: est['noise_std_nm'],
                        'changepoints': len(wheel.result['changepoints'])})
         values.update({f'anomaly_{k}': v for k, v in wheel.flags.items()})
+        values.update(self.calibration.values())
+        if wheel.result.get('status') == 'unknown':
+            values['status'] = 'unknown'
+            return WARN, f'unknown in t={start:.1f}..{end:.1f} s: ' \
+                f'{wheel.result.get("unknown_reason")}', values
         found = [k for k, v in wheel.flags.items() if v]
         if found:
             return WARN, f'anomalies {", ".join(found)} in t={start:.1f}..{end:.1f} s', values

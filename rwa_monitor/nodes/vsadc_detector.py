@@ -35,7 +35,7 @@ from rwa_monitor.core.events import AnomalyEvent
 from rwa_monitor.core.params import check_real
 from rwa_monitor.core.vsadc import STATE_NAMES, VsadcDetector
 from rwa_monitor.exceptions import ConfigError
-from rwa_monitor.nodes import messages
+from rwa_monitor.nodes import calibration, messages
 from rwa_monitor.nodes.common import (declare_parameters, DiagnosticsPublisher, ERROR,
                                       EVENTS_QOS, OK, ParamSpec, qos_event_callbacks,
                                       run_node, telemetry_qos, WARN)
@@ -109,8 +109,9 @@ class VsadcDetectorNode(Node):
     def __init__(self, **kwargs: Any) -> None:
         """Create the node (``kwargs`` go to rclpy's Node: context, cli_args, ...)."""
         super().__init__(NODE_NAME, **kwargs)
-        self.params = declare_parameters(self, PARAMETERS, self._on_parameter,
-                                         self._check_detector)
+        self.params = declare_parameters(self, PARAMETERS + (calibration.param_spec(),),
+                                         self._on_parameter, self._check_detector)
+        self.calibration = calibration.CalibrationInForce(self.params[calibration.NAME])
         param = self.declare_parameter(
             'reference_rate', list(DEFAULTS['reference_rate']), ParameterDescriptor(
                 description='Guidance body rate (rad/s, x y z) used when '
@@ -165,6 +166,8 @@ class VsadcDetectorNode(Node):
         return SetParametersResult(successful=True)
 
     def _on_parameter(self, name: str, value: Any) -> None:
+        if name == calibration.NAME:
+            self.get_logger().info(self.calibration.set(value))
         if name in DETECTOR_PARAMETERS:
             self.detector = VsadcDetector(**detector_kwargs(self._detector_config()))
             self._axis_checks()
@@ -301,6 +304,7 @@ class VsadcDetectorNode(Node):
     def _input_health(self) -> tuple[bytes, str, dict[str, Any]]:
         values = dict(self.counters)
         values.update(self.detector.counters())
+        values.update(self.calibration.values())
         return OK, f'{self.samples} gyro samples, {self.detector.held} held', values
 
 
