@@ -108,7 +108,8 @@ def evaluate(run: dict[str, Any], cal_path: str, params: dict[str, Any]) -> dict
 
 def fss_flags(tele, cal_path: str) -> dict[str, Any]:
     """Return the window diagnosis flags of each wheel (whole run), with and without."""
-    from rwa_monitor.core.fss.pipeline import diagnose, FssConfig, load_model
+    from rwa_monitor.core.fss.pipeline import diagnose, FssConfig
+    from rwa_monitor.telemetry.fss_model import load_model
     from rwa_monitor.pipelines import calibrated
     cal = calibrated.load(cal_path)
     model, config = load_model(), FssConfig()

@@ -182,7 +182,8 @@ def test_fss_verdict_unknown_when_the_window_is_not_explained():
 
 
 def test_fss_diagnosis_relative_to_the_calibrated_nominal(stribeck_block):
-    from rwa_monitor.core.fss.pipeline import diagnose, FssConfig, load_model
+    from rwa_monitor.core.fss.pipeline import diagnose, FssConfig
+    from rwa_monitor.telemetry.fss_model import load_model
     block, _ = stribeck_block
     model, config = load_model(), FssConfig()
     healthy = simulate_undeclared('stribeck', n=N, seed=7)

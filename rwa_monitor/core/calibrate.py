@@ -365,3 +365,30 @@ class NominalWheel:
         out[~np.isfinite(speed)] = np.nan
         return out, {'low_speed_band': int(np.sum(low)),
                      'outside_calibrated_range': int(np.sum(outside & ~low))}
+
+
+def diagnose_fss(block: Mapping[str, Any], time: np.ndarray, speed: np.ndarray,
+                 friction: np.ndarray, classifier: Any, config: Any) -> dict[str, Any]:
+    """Return the window diagnosis of one wheel relative to its calibrated nominal.
+
+    :func:`fss_inputs` (nominal's non-model-(1) part removed, band and out-of-range
+    samples skipped, scales from the reference), the four stages (core/fss/pipeline.py
+    ``diagnose``), then core/fss/classify.py ``relative_verdict`` (``status``: nominal,
+    anomalous or unknown, with ``unknown_reason``).
+    """
+    from dataclasses import replace
+
+    from rwa_monitor.core.fss.classify import relative_verdict
+    from rwa_monitor.core.fss.pipeline import diagnose
+    given, scales = fss_inputs(block, speed, friction)
+    result = diagnose(speed, given, time, classifier, replace(config, **scales))
+    status, flags, reason = relative_verdict(result['anomalies'],
+                                             result['estimates']['noise_std_nm'],
+                                             block['fss']['noise_std_nm'])
+    result['anomalies'] = flags
+    result['status'] = status
+    if reason:
+        result['unknown_reason'] = reason
+    skipped = int(np.sum(~np.isfinite(given) & np.isfinite(np.asarray(friction, float))))
+    result['calibration'] = {**scales, 'samples_not_tested': skipped}
+    return result

@@ -1,7 +1,8 @@
 """The calibration in force in a detector node (parameter ``calibration_file``).
 
-One holder per node. The parameter's check loads the file (pipelines/calibrated.py
-``load``), so a missing or malformed file is refused with the reason naming the file and
+One holder per node. The parameter (core/schema.py ``CALIBRATION_FILE``) is checked by
+loading the file (telemetry/calibration_file.py ``load``, from the node's check of its
+parameters), so a missing or malformed file is refused with the reason naming the file and
 the key: at start-up the node does not start (ConfigError), at run time the set request
 is rejected and the node keeps its last good calibration. An accepted change reloads
 the file (setting the same path again reloads it too), is logged, counted and shown on
@@ -15,24 +16,15 @@ from typing import Any
 import numpy as np
 
 from rwa_monitor.core.calibrate import NominalWheel
-from rwa_monitor.nodes.common import ParamSpec
-from rwa_monitor.pipelines import calibrated
+from rwa_monitor.telemetry.calibration_file import load
 
 NAME = 'calibration_file'
 
 
-def _check(value: str) -> str:
-    if value:
-        calibrated.load(value)
-    return value
-
-
-def param_spec() -> ParamSpec:
-    """Return the ``calibration_file`` parameter (the same on every detector node)."""
-    return ParamSpec(NAME, '', 'Commissioning calibration (rwa-monitor calibrate '
-                     'DIR/calibration.yaml): changes are tested against the nominal model '
-                     'of each wheel; empty = none. A bad file is refused naming the key.',
-                     validate=_check)
+def check(values: dict[str, Any]) -> None:
+    """Load the proposed ``calibration_file`` (ValueError naming the file and the key)."""
+    if values.get(NAME):
+        load(values[NAME])
 
 
 class CalibrationInForce:
@@ -48,7 +40,7 @@ class CalibrationInForce:
 
     def set(self, path: str) -> str:
         """Load ``path`` ('' = none); return a one-line description (ConfigError if bad)."""
-        document = calibrated.load(path) if path else None
+        document = load(path) if path else None
         self.path, self.document = path, document
         self._wheels = ({w: NominalWheel(b) for w, b in document['wheels'].items()}
                         if document else {})

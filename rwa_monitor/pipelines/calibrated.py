@@ -20,6 +20,7 @@ from rwa_monitor.core.events import AnomalyEvent
 from rwa_monitor.exceptions import ConfigError
 from rwa_monitor.telemetry import Telemetry
 from rwa_monitor.telemetry.atomic import atomic_write, write_text_atomic
+from rwa_monitor.telemetry.calibration_file import load
 
 KEY = 'calibration_file'
 
@@ -154,20 +155,6 @@ def _plot(name: str, block: Mapping[str, Any], data: dict | None,
     plt.close(fig)
 
 
-def load(path: str | pathlib.Path) -> dict[str, Any]:
-    """Return the checked calibration mapping of a file (ConfigError naming file and key)."""
-    import yaml
-    try:
-        text = pathlib.Path(path).read_text()
-    except OSError as err:
-        raise ConfigError(f'{path}: cannot read: {err.strerror}') from None
-    try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as err:
-        raise ConfigError(f'{path}: not valid YAML: {err}') from None
-    return core.check_calibration(data, str(path))
-
-
 def run_llr(tele: Telemetry, kwargs: Mapping[str, Any], path: str
             ) -> tuple[list[AnomalyEvent], dict[str, Any]]:
     """Run the model-(1) detector on the residual against each wheel's nominal model.
@@ -207,25 +194,8 @@ def run_llr(tele: Telemetry, kwargs: Mapping[str, Any], path: str
 
 def diagnose_wheel(block: Mapping[str, Any], time: np.ndarray, speed: np.ndarray,
                    friction: np.ndarray, classifier: Any, config: Any) -> dict[str, Any]:
-    """Return the window diagnosis of one wheel relative to its calibrated nominal.
+    """Return the window diagnosis of one wheel relative to its nominal (core function)."""
+    return core.diagnose_fss(block, time, speed, friction, classifier, config)
 
-    core/calibrate.py ``fss_inputs`` (nominal's non-model-(1) part removed, band and
-    out-of-range samples skipped, scales from the reference), the four stages, then
-    core/fss/classify.py ``relative_verdict`` (``status``: nominal, anomalous or unknown).
-    """
-    from dataclasses import replace
 
-    from rwa_monitor.core.fss.classify import relative_verdict
-    from rwa_monitor.core.fss.pipeline import diagnose
-    given, scales = core.fss_inputs(block, speed, friction)
-    result = diagnose(speed, given, time, classifier, replace(config, **scales))
-    status, flags, reason = relative_verdict(result['anomalies'],
-                                             result['estimates']['noise_std_nm'],
-                                             block['fss']['noise_std_nm'])
-    result['anomalies'] = flags
-    result['status'] = status
-    if reason:
-        result['unknown_reason'] = reason
-    skipped = int(np.sum(~np.isfinite(given) & np.isfinite(np.asarray(friction, float))))
-    result['calibration'] = {**scales, 'samples_not_tested': skipped}
-    return result
+__all__ = ['commission', 'diagnose_wheel', 'load', 'run_llr', 'write']
