@@ -230,6 +230,25 @@ def run_acceptance_only(out_dir: pathlib.Path) -> dict[str, Any]:
     return results
 
 
+def render_partial(out_dir: pathlib.Path) -> dict[str, Any]:
+    """Score the runs of bus_acceptance_partial.json so far; refresh bus.json and the docs."""
+    import json
+
+    from bench import bus_acceptance
+    acc = json.loads((out_dir / f'{NAME}_acceptance_partial.json').read_text())
+    acc.pop('machine', None)
+    acc['score'] = {mode: bus_acceptance.score(acc['runs'], mode)
+                    for mode in ('calibrated', 'uncalibrated')}
+    path = out_dir / f'{NAME}.json'
+    results = json.loads(path.read_text())
+    results.pop('machine', None)
+    results['acceptance'] = acc
+    results.setdefault('llr_r', 1.0e-5)
+    write_json(out_dir, NAME, results)
+    update_section(NAME, _markdown(results))
+    return results
+
+
 def run(out_dir: pathlib.Path, quick: bool) -> dict[str, Any]:
     """Run the benchmark (see the module docstring); return the results."""
     if not available():

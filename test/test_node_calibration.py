@@ -18,7 +18,7 @@ from rwa_monitor.telemetry import read_telemetry, write_telemetry
 
 pytestmark = pytest.mark.ros
 
-CONFIG = {'window': 200, 'k_verif': 0, 'false_alarm_rate': 1.0e-5, 'noise_std': 0.0}
+CONFIG = {'window': 200, 'false_alarm_rate': 1.0e-5}
 
 
 def _files(tmp_path):
