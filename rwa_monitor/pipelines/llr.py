@@ -4,9 +4,7 @@ Parameters are the ``llr_detector`` block of core/schema.py (LLR), the node's na
 node-only ones are accepted and ignored, unknown ones refused. ``friction_model_file``
 names a refined friction model written by ``rwa-monitor identify`` (its
 ``friction_model.yaml``); empty = model (1). The refined model applies to the wheel it
-names when the file has that wheel, else to every wheel. ``calibration_file`` names a
-commissioning calibration (``rwa-monitor calibrate``): the detector then tests the residual
-against each wheel's nominal (pipelines/calibrated.py; it takes precedence).
+names when the file has that wheel, else to every wheel.
 """
 
 from __future__ import annotations
@@ -76,9 +74,10 @@ def run_with_summary(tele: Telemetry, config: Mapping[str, Any]) -> Detection:
     The summary per wheel holds the number of events, samples, the detector's counters
     of rejected samples and its run time.
     """
-    from rwa_monitor.core.llr_batch import detect_batch_with_counters
+    from rwa_monitor.core.llr import detect_batch_with_counters
     values = LLR.validate(config)
     kwargs = llr_kwargs(values)
+    tele = tele.only('wheels')  # a multi-rate record: the wheel stream's own samples
     if values[CALIBRATION_KEY]:
         from rwa_monitor.pipelines import calibrated
         return Detection(*calibrated.run_llr(tele, kwargs, values[CALIBRATION_KEY]))
