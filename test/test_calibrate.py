@@ -8,7 +8,7 @@ import yaml
 
 from rwa_monitor.cli.main import main
 from rwa_monitor.core import calibrate as core
-from rwa_monitor.core.llr_batch import detect_batch_with_counters
+from rwa_monitor.core.llr import detect_batch_with_counters
 from rwa_monitor.exceptions import ConfigError
 from rwa_monitor.pipelines import calibrated
 from rwa_monitor.sim.undeclared import simulate_undeclared

@@ -138,7 +138,7 @@ def calibrate_wheel(wheel: str, time: np.ndarray, speed: np.ndarray, friction: n
     from rwa_monitor.core.identify.differentiate import local_noise_std
     from rwa_monitor.core.identify.model import snippet
     from rwa_monitor.core.identify.select import identify
-    from rwa_monitor.core.llr_batch import detect_batch
+    from rwa_monitor.core.llr import detect_batch
     time = np.asarray(time, dtype=float)
     speed = np.asarray(speed, dtype=float)
     friction = np.asarray(friction, dtype=float)

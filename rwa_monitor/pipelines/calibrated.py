@@ -164,7 +164,7 @@ def run_llr(tele: Telemetry, kwargs: Mapping[str, Any], path: str
     samples not tested by reason (``low_speed_band``, ``outside_calibrated_range``) and a
     note when telemetry leaves the calibrated speed range.
     """
-    from rwa_monitor.core.llr_batch import detect_batch_with_counters
+    from rwa_monitor.core.llr import detect_batch_with_counters
     cal = load(path)
     wheels = [w for w, ch in tele.wheels.items() if ch.friction is not None]
     core.check_wheels(cal, wheels, str(path))
