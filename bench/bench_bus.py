@@ -10,6 +10,10 @@
    Stribeck excess (static = Coulomb) and wheels kept away from zero speed. Model (1)
    holds away from zero speed only, so the false alarms measure the undeclared effect.
 
+3. Acceptance of the calibrated detectors (bench/bus_acceptance.py): calibration from one
+   fault-free run, evaluation on fresh seeds with one injected fault each, with and
+   without the calibration.
+
 Skips with a message (exit 0, docs/results.md untouched) where the extra is absent.
 """
 
@@ -201,7 +205,48 @@ def _markdown(results: dict[str, Any]) -> str:
              '"Near zero speed": |w| < 1 rad/s within one window of the estimated change; '
              'a declaration counts once (its revisions are not counted). '
              'Plot: `bench/results/bus_friction_near_zero.png`. Reading: docs/basilisk.md.']
+    if results.get('acceptance'):
+        from bench import bus_acceptance
+        lines += [''] + bus_acceptance.markdown(results['acceptance'], results['llr_r'],
+                                                BusConfig.rate_hz)
     return '\n'.join(lines)
+
+
+def run_acceptance_only(out_dir: pathlib.Path) -> dict[str, Any]:
+    """Re-measure the acceptance part only; keep the other parts of the last bus.json."""
+    import json
+
+    from bench import bus_acceptance
+    path = out_dir / f'{NAME}.json'
+    results = json.loads(path.read_text()) if path.exists() else {}
+    results.pop('machine', None)
+    partial = out_dir / f'{NAME}_acceptance_partial.json'
+    results['acceptance'] = bus_acceptance.run(
+        out_dir, _llr_config(), progress=lambda acc: write_json(out_dir, partial.stem, acc))
+    results.setdefault('llr_r', _llr_config().get('false_alarm_rate', 1.0e-5))
+    write_json(out_dir, NAME, results)
+    if 'bare' in results:
+        update_section(NAME, _markdown(results))
+    return results
+
+
+def render_partial(out_dir: pathlib.Path) -> dict[str, Any]:
+    """Score the runs of bus_acceptance_partial.json so far; refresh bus.json and the docs."""
+    import json
+
+    from bench import bus_acceptance
+    acc = json.loads((out_dir / f'{NAME}_acceptance_partial.json').read_text())
+    acc.pop('machine', None)
+    acc['score'] = {mode: bus_acceptance.score(acc['runs'], mode)
+                    for mode in ('calibrated', 'uncalibrated')}
+    path = out_dir / f'{NAME}.json'
+    results = json.loads(path.read_text())
+    results.pop('machine', None)
+    results['acceptance'] = acc
+    results.setdefault('llr_r', 1.0e-5)
+    write_json(out_dir, NAME, results)
+    update_section(NAME, _markdown(results))
+    return results
 
 
 def run(out_dir: pathlib.Path, quick: bool) -> dict[str, Any]:
@@ -225,6 +270,8 @@ def run(out_dir: pathlib.Path, quick: bool) -> dict[str, Any]:
         results['false_alarms'].append(false_alarms(name, overrides, hours, out_dir))
         print(f'  {name}: {results["false_alarms"][-1]["false_alarms_per_wheel_hour"]:.3f} '
               'false alarms per wheel-hour', flush=True)
+    from bench import bus_acceptance
+    results['acceptance'] = bus_acceptance.run(out_dir, _llr_config(), quick)
     write_json(out_dir, NAME, results)
     if not quick:
         update_section(NAME, _markdown(results))

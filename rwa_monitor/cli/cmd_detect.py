@@ -51,6 +51,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument('-o', '--output', type=pathlib.Path, metavar='FILE',
                         help='write the events JSON here, atomically (- = standard output; '
                              'an input file is refused; default: print a table)')
+    parser.add_argument('--calibration', type=pathlib.Path, metavar='YAML',
+                        help='commissioning calibration (rwa-monitor calibrate '
+                             'DIR/calibration.yaml): detectors test changes against the '
+                             'nominal models it holds')
     parser.add_argument('--friction-model', type=pathlib.Path, metavar='YAML',
                         help='refined friction model for the LLR detector, as written by '
                              'rwa-monitor identify (DIR/friction_model.yaml)')
@@ -125,6 +129,10 @@ def run(args: argparse.Namespace) -> int:
     check_output(args.output, args.file, args.config, args.friction_model)
     tele = read_telemetry(args.file, args.topics)
     config = load_config(args.config)
+    if args.calibration is not None:
+        for node in ('llr_detector', 'vsadc_detector'):
+            block = config.setdefault(node, {}).setdefault('ros__parameters', {})
+            block['calibration_file'] = str(args.calibration)
     if args.friction_model is not None:
         block = config.setdefault('llr_detector', {}).setdefault('ros__parameters', {})
         block['friction_model_file'] = str(args.friction_model)

@@ -34,6 +34,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument('--params-file', default=None,
                         help='parameters file with a fss_diagnoser block (default: the '
                              'installed config/rwa_monitor.yaml)')
+    parser.add_argument('--calibration', default=None, metavar='YAML',
+                        help='commissioning calibration (rwa-monitor calibrate): judge each '
+                             'wheel relative to its nominal; a window the nominal and the '
+                             'known anomalies cannot explain is reported "unknown" (default: '
+                             'calibration_file of the parameters)')
     parser.add_argument('--last', type=int, default=None, metavar='N',
                         help='diagnose only the last N samples of each wheel')
     parser.set_defaults(func=run)
@@ -56,6 +61,14 @@ def run(args: argparse.Namespace) -> int:
     except (ValueError, OSError) as err:
         raise ConfigError(str(err)) from None
     tele = read_telemetry(args.file, args.topics).only('wheels')
+    cal_path = args.calibration or params.get('calibration_file') or ''
+    cal = None
+    if cal_path:
+        from rwa_monitor.core.calibrate import check_wheels, diagnose_fss
+        from rwa_monitor.telemetry.calibration_file import load
+        cal = load(cal_path)
+        check_wheels(cal, [w for w, ch in tele.wheels.items() if ch.friction is not None],
+                     cal_path)
     wheels = {}
     for wheel_id, wheel in tele.wheels.items():
         if wheel.friction is None:
@@ -65,7 +78,11 @@ def run(args: argparse.Namespace) -> int:
         if np.count_nonzero(np.isfinite(speed) & np.isfinite(friction)) < 4 * config.wglr_window:
             wheels[wheel_id] = {'error': 'too few finite samples for a diagnosis'}
             continue
-        wheels[wheel_id] = diagnose(speed, friction, time, model, config)
+        if cal is not None:
+            wheels[wheel_id] = diagnose_fss(cal['wheels'][wheel_id], time, speed, friction,
+                                            model, config)
+        else:
+            wheels[wheel_id] = diagnose(speed, friction, time, model, config)
     if not wheels:
         raise RwaMonitorError(f'{args.file}: no wheel with both speed and friction columns')
     with quiet_broken_pipe():
@@ -74,5 +91,6 @@ def run(args: argparse.Namespace) -> int:
         for wheel_id, result in wheels.items():
             flags = result.get('anomalies', {})
             found = [k for k, v in flags.items() if v] or ['none']
-            print(f'{wheel_id}: anomalies {", ".join(found)}', file=out)
+            status = f' ({result["status"]})' if 'status' in result else ''
+            print(f'{wheel_id}: anomalies {", ".join(found)}{status}', file=out)
     return 0

@@ -213,6 +213,13 @@ class Schema:
 
 # ------------------------------------------------------------------- shared parameters
 
+# The commissioning calibration, the same for every detector (docs/contracts.md). Read by
+# the file pipelines and the nodes (not a detector keyword: scope node, accepted in files).
+CALIBRATION_FILE = Param('calibration_file', '', 'Commissioning calibration (`rwa-monitor '
+                         'calibrate` DIR/calibration.yaml): wheels are judged against their '
+                         'nominal; empty = none. A missing or malformed file is refused '
+                         'naming the key; a node keeps its last good one.', scope='node')
+
 # Names every node has or ROS adds: accepted in any block, used by none of the algorithms.
 SHARED_NAMES = frozenset({'use_sim_time'})
 
@@ -285,6 +292,7 @@ LLR = Schema('llr_detector', (
           high=10_000_000, unit='samples'),
     Param('friction_model_file', '', 'Refined friction model written by `rwa-monitor '
           'identify` (friction_model.yaml); empty = model (1).', scope='file'),
+    CALIBRATION_FILE,
     _wheels(),
     MAX_WHEELS,
     _time_jump("the wheel's detector"),
@@ -322,6 +330,7 @@ FSS = Schema('fss_diagnoser', (
           unit='rad/s'),
     Param('model', '', 'Classifier model file (JSON from `rwa-monitor fss train`); empty = '
           'the shipped model.', read_only=True),
+    CALIBRATION_FILE,
     _wheels(),
     MAX_WHEELS,
     STALE_TIMEOUT,

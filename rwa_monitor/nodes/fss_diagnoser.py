@@ -41,11 +41,12 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState
 
 from rwa_monitor.core import keys, streams
+from rwa_monitor.core.calibrate import diagnose_fss
 from rwa_monitor.core.events import AnomalyEvent
 from rwa_monitor.core.fss.pipeline import diagnose, FssConfig, SlidingWindow
 from rwa_monitor.core.schema import FSS, fss_config
 from rwa_monitor.exceptions import ConfigError
-from rwa_monitor.nodes import common, messages
+from rwa_monitor.nodes import calibration, common, messages
 from rwa_monitor.nodes.common import (declare_parameters, DiagnosticsPublisher, ERROR,
                                       EVENTS_QOS, node_help, OK, qos_event_callbacks,
                                       run_node, STALE, telemetry_qos, WARN)
@@ -91,6 +92,7 @@ class FssDiagnoserNode(Node):
         self.params = declare_parameters(self, PARAMETERS, self._on_parameter,
                                          self._check_config)
         self._config = self._make_config(self.params)
+        self.calibration = calibration.CalibrationInForce(self.params[calibration.NAME])
         try:
             self._model = load_model(self.params['model'] or None)
         except (OSError, ValueError) as err:
@@ -131,10 +133,13 @@ class FssDiagnoserNode(Node):
 
     def _check_config(self, values: dict[str, Any]) -> None:
         self._make_config(values)
+        calibration.check(values)
 
     def _on_parameter(self, name: str, value: Any) -> None:
         if name in CONFIG_NAMES:
             self._config = self._make_config(self.params)
+        elif name == calibration.NAME:
+            self.get_logger().info(self.calibration.set(value))
         elif name == 'wheels':
             self._allowed = common.wheel_names(self.params['wheels'])
         elif name == 'window_period':
@@ -212,8 +217,13 @@ class FssDiagnoserNode(Node):
         wheel.busy = True
         time_s, speed, friction = wheel.window.snapshot()
         first_index = wheel.samples - time_s.size
-        future = self._worker.submit(diagnose, speed, friction, time_s, self._model,
-                                     self._config)
+        block = self.calibration.block(wheel_id)
+        if block is not None:
+            future = self._worker.submit(diagnose_fss, block, time_s, speed, friction,
+                                         self._model, self._config)
+        else:
+            future = self._worker.submit(diagnose, speed, friction, time_s, self._model,
+                                         self._config)
         future.add_done_callback(
             lambda f: self._done.put((wheel_id, first_index, time_s[0], time_s[-1], f)))
 
@@ -302,6 +312,11 @@ class FssDiagnoserNode(Node):
                        keys.NOISE_STD: est['noise_std_nm'],
                        'changepoints': len(wheel.result['changepoints'])})
         values.update({f'anomaly_{k}': v for k, v in wheel.flags.items()})
+        values.update(self.calibration.values())
+        if wheel.result.get('status') == 'unknown':
+            values['status'] = 'unknown'
+            return WARN, f'unknown in t={start:.1f}..{end:.1f} s: ' \
+                f'{wheel.result.get("unknown_reason")}', values
         found = [k for k, v in wheel.flags.items() if v]
         if found:
             level, text = WARN, f'anomalies {", ".join(found)} in t={start:.1f}..{end:.1f} s'

@@ -38,7 +38,7 @@ from sensor_msgs.msg import JointState
 from rwa_monitor.core import keys, streams
 from rwa_monitor.core.events import AnomalyEvent
 from rwa_monitor.core.schema import LLR, llr_kwargs
-from rwa_monitor.nodes import common, messages
+from rwa_monitor.nodes import calibration, common, messages
 from rwa_monitor.nodes.common import (declare_parameters, DiagnosticsPublisher, ERROR,
                                       EVENTS_QOS, node_help, OK, qos_event_callbacks,
                                       run_node, telemetry_qos)
@@ -101,10 +101,12 @@ class LLRDetectorNode(Node):
         self.params = declare_parameters(self, PARAMETERS, self._on_parameter,
                                          self._check_detector)
         self._kwargs = llr_kwargs(self._detector_config())
+        self.calibration = calibration.CalibrationInForce(self.params[calibration.NAME])
         self.wheels: dict[str, _Wheel] = {}
         self.input_counters = {'messages': 0, 'length_mismatch': 0,
                                'empty_name': 0, 'duplicate_name': 0, 'unknown_wheel': 0,
-                               'too_many_wheels': 0, 'undecodable': 0, 'detector_failures': 0,
+                               'too_many_wheels': 0, 'undecodable': 0,
+                               'uncalibrated_wheel': 0, 'detector_failures': 0,
                                'wheels_freed': 0}
         self.events: collections.deque[AnomalyEvent] = collections.deque(maxlen=MAX_KEPT)
         self._codec: messages.JointStateCodec | None = None
@@ -136,6 +138,7 @@ class LLRDetectorNode(Node):
     def _check_detector(self, values: dict[str, Any]) -> None:
         """Build a detector from ``values`` (ValueError naming a parameter if it fails)."""
         self._detector_class('check', **llr_kwargs(self._detector_config(values)))
+        calibration.check(values)
 
     def _on_parameter(self, name: str, value: Any) -> None:
         if name in DETECTOR_PARAMETERS:
@@ -145,6 +148,11 @@ class LLRDetectorNode(Node):
                 wheel.detector = self._new_detector(wheel_id)
             self.get_logger().info(f'{name} = {value}: every wheel detector restarted '
                                    '(latched anomalies stay)')
+        elif name == calibration.NAME:
+            self.get_logger().info(self.calibration.set(value))
+            for wheel_id, wheel in self.wheels.items():
+                wheel.restart()
+                wheel.detector = self._new_detector(wheel_id)
         elif name == 'wheels':
             self._allowed = common.wheel_names(self.params['wheels'])
 
@@ -217,6 +225,9 @@ class LLRDetectorNode(Node):
             return wheel
         refusal = common.wheel_refusal(wheel_id, self._allowed, len(self.wheels),
                                        self.params['max_wheels'])
+        if refusal is None and not self.calibration.covers(wheel_id):
+            refusal = ('uncalibrated_wheel', f'{wheel_id}: not in the calibration in force '
+                       f'({self.calibration.describe()}): not monitored')
         if refusal is not None:
             self._reject(refusal[0], wheel_id, refusal[1])
             return None
@@ -245,6 +256,7 @@ class LLRDetectorNode(Node):
             return
         wheel.samples += 1
         try:
+            friction = self.calibration.residual(wheel_id, seconds, speed, friction)
             found = wheel.detector.update(seconds, speed, friction)
         except Exception as err:  # noqa: BLE001 - one wheel's failure never stops the node
             self._detector_failed(wheel_id, wheel, err)
@@ -315,6 +327,9 @@ class LLRDetectorNode(Node):
         if fault is not None:
             level, message = ERROR, f'{fault}; {message}'
             values['sensor_fault'] = True
+        values.update(self.calibration.values(wheel.detector.component))
+        if values.get('not_tested_outside_calibrated_range'):
+            message += '; telemetry outside the calibrated speed range (not tested)'
         failure = wheel.last_failure
         if failure is not None and self.diagnostics.now() - failure[0] < ERROR_HOLD_S:
             level, message = ERROR, f'detector failed ({failure[1]}), restarted; {message}'

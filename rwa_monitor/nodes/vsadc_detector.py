@@ -45,7 +45,7 @@ from rwa_monitor.core.gyro_diagnosis import make_gyro_detector
 from rwa_monitor.core.schema import VSADC
 from rwa_monitor.core.vsadc import STATE_NAMES
 from rwa_monitor.exceptions import ConfigError
-from rwa_monitor.nodes import common, messages
+from rwa_monitor.nodes import calibration, common, messages
 from rwa_monitor.nodes.common import (declare_parameters, DiagnosticsPublisher, ERROR,
                                       EVENTS_QOS, node_help, OK, qos_event_callbacks,
                                       run_node, STALE, telemetry_qos, WARN)
@@ -79,6 +79,7 @@ class VsadcDetectorNode(Node):
         self.params = declare_parameters(self, PARAMETERS, self._on_parameter,
                                          self._check_detector)
         self.reference = list(self.params['reference_rate'])
+        self.calibration = calibration.CalibrationInForce(self.params[calibration.NAME])
         self.counters = {'gyro_messages': 0, 'star_tracker_messages': 0,
                          'reference_messages': 0, 'unpaired_gyro': 0,
                          'unpaired_star_tracker': 0, 'reference_from_parameter': 0,
@@ -125,12 +126,15 @@ class VsadcDetectorNode(Node):
 
     def _check_detector(self, values: dict[str, Any]) -> None:
         self._make_detector(self._detector_config(values))
+        calibration.check(values)
 
     def _on_parameter(self, name: str, value: Any) -> None:
         if name in ('pair_tolerance', 'time_jump'):
             self._pairer.tolerance = self.params['pair_tolerance']
             self._pairer.time_jump = self.params['time_jump']
-        if name == 'reference_rate':
+        if name == calibration.NAME:
+            self.get_logger().info(self.calibration.set(value))
+        elif name == 'reference_rate':
             self.reference = list(value)
         elif name in DETECTOR_PARAMETERS:
             self.detector = self._make_detector(self._detector_config())
@@ -274,6 +278,7 @@ class VsadcDetectorNode(Node):
         values.update(self.detector.counters)
         gyro, star = self._pairer.waiting
         values.update(waiting_gyro=gyro, waiting_star_tracker=star)
+        values.update(self.calibration.values())
         message = f'{self.samples} gyro samples, {self.detector.held} held'
         if self._failure is not None and self.diagnostics.now() - self._failure[0] < \
                 ERROR_HOLD_S:

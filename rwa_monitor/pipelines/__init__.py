@@ -29,9 +29,10 @@ class Detection(NamedTuple):
 
 
 def available() -> dict[str, ModuleType]:
-    """Return pipeline name -> module, for every module of this package."""
-    return {m.name: importlib.import_module(f'{__name__}.{m.name}')
-            for m in pkgutil.iter_modules(__path__)}
+    """Return pipeline name -> module, for every module of this package with ``applies``."""
+    modules = {m.name: importlib.import_module(f'{__name__}.{m.name}')
+               for m in pkgutil.iter_modules(__path__)}
+    return {name: mod for name, mod in modules.items() if hasattr(mod, 'applies')}
 
 
 def detect(tele: Telemetry, config: dict[str, Any], where: Any = 'parameters'

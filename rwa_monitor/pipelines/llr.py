@@ -23,6 +23,7 @@ SCHEMA = LLR
 NODE = LLR.name
 DEFAULTS = {name: LLR[name].default for name in LLR.names(('all',))}
 MODEL_KEY = 'friction_model_file'
+CALIBRATION_KEY = 'calibration_file'
 
 
 class RefinedModel(NamedTuple):
@@ -77,6 +78,9 @@ def run_with_summary(tele: Telemetry, config: Mapping[str, Any]) -> Detection:
     values = LLR.validate(config)
     kwargs = llr_kwargs(values)
     tele = tele.only('wheels')  # a multi-rate record: the wheel stream's own samples
+    if values[CALIBRATION_KEY]:
+        from rwa_monitor.pipelines import calibrated
+        return Detection(*calibrated.run_llr(tele, kwargs, values[CALIBRATION_KEY]))
     refined = friction_model(values[MODEL_KEY], tele)
     events: list[AnomalyEvent] = []
     summary: dict[str, Any] = {}

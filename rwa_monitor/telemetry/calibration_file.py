@@ -1,37 +1,56 @@
-"""The ``gyro:`` block of a commissioning calibration.yaml (DESIGN.md, Calibration).
+"""Reading a calibration file (``rwa-monitor calibrate`` DIR/calibration.yaml).
 
-Read by ``rwa-monitor detect`` (``calibration_file`` parameter) and the ``vsadc_detector``
-node; written by the calibration command from
-:func:`rwa_monitor.core.gyro_calibration.calibrate_gyro` (axis -> dict).
+The shape is checked by core/calibrate.py ``check_calibration``; every error names the
+file and the key (docs/contracts.md, section Calibration). The ``gyro:`` block alone
+(axis -> dict of :func:`rwa_monitor.core.gyro_calibration.calibrate_gyro`) is what the
+gyro diagnosis reads (``detect`` and the ``vsadc_detector`` node).
 """
 
 from __future__ import annotations
 
+import os
 import pathlib
 from typing import Any
 
 import yaml
 
+from rwa_monitor.core.calibrate import check_calibration
+from rwa_monitor.exceptions import ConfigError
+
 AXES = ('x', 'y', 'z')
 
 
-def load_gyro_calibration(path: str | pathlib.Path) -> dict[str, dict[str, Any]]:
+def _read(path: str | os.PathLike) -> Any:
+    try:
+        text = pathlib.Path(path).read_text()
+    except OSError as err:
+        raise ConfigError(f'{path}: cannot read: {err.strerror}') from None
+    except UnicodeDecodeError:
+        raise ConfigError(f'{path}: not a text file') from None
+    try:
+        return yaml.safe_load(text)
+    except yaml.YAMLError as err:
+        raise ConfigError(f'{path}: not valid YAML: {err}') from None
+
+
+def load(path: str | os.PathLike) -> dict[str, Any]:
+    """Return the checked calibration mapping of a file (ConfigError naming file and key)."""
+    return check_calibration(_read(path), str(path))
+
+
+def load_gyro_calibration(path: str | os.PathLike) -> dict[str, dict[str, Any]]:
     """Return the ``calibration.gyro`` block (axis -> dict) of a calibration.yaml file.
 
-    ValueError with the file name when it cannot be read or has no usable gyro block.
+    ConfigError (a ValueError) with the file name when it cannot be read or has no usable
+    gyro block.
     """
-    try:
-        data = yaml.safe_load(pathlib.Path(path).read_text())
-    except OSError as err:
-        raise ValueError(f'{path}: cannot read: {err.strerror}') from None
-    except yaml.YAMLError as err:
-        raise ValueError(f'{path}: not valid YAML: {err}') from None
+    data = _read(path)
     block = None
     if isinstance(data, dict) and isinstance(data.get('calibration'), dict):
         block = data['calibration'].get('gyro')
     if not isinstance(block, dict) or not block:
-        raise ValueError(f'{path}: no calibration.gyro block')
+        raise ConfigError(f'{path}: no calibration.gyro block')
     bad = [a for a in block if a not in AXES or not isinstance(block[a], dict)]
     if bad:
-        raise ValueError(f'{path}: calibration.gyro: unknown axis entries {bad}')
+        raise ConfigError(f'{path}: calibration.gyro: unknown axis entries {bad}')
     return block

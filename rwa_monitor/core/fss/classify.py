@@ -162,3 +162,28 @@ def detection_matrix(classifier: WindowClassifier, items: Sequence[dict]
         for k, v in flags.items():
             row[k].append(v)
     return {st: {k: float(np.mean(v)) for k, v in row.items()} for st, row in out.items()}
+
+
+# A window whose noise exceeds the calibrated nominal noise by this factor is not
+# explained by the nominal wheel plus the known anomalies (docs/fss.md, "Calibrated").
+UNKNOWN_NOISE_FACTOR = 1.5
+
+
+def relative_verdict(flags: dict[str, bool], window_noise: float, nominal_noise: float,
+                     factor: float = UNKNOWN_NOISE_FACTOR
+                     ) -> tuple[str, dict[str, bool], str | None]:
+    """Return (status, flags, reason) of a window judged against its calibrated nominal.
+
+    ``flags`` come from the SVMs on features normalised by the wheel's calibrated nominal
+    (its base dry friction and viscous coefficient are 1 there). Status ``unknown`` (every
+    flag False, with the reason) when the window's residual noise after stages 1-3 is more
+    than ``factor`` times the nominal's: the extraction did not explain the window, and
+    any class would be a guess. Else ``anomalous`` if a flag is set, ``nominal``
+    otherwise.
+    """
+    check_real('factor', factor, 1.0)
+    if not np.isfinite(window_noise) or window_noise > factor * nominal_noise:
+        reason = (f'residual noise {window_noise:.3g} N m is more than {factor:g} x the '
+                  f'calibrated {nominal_noise:.3g} N m: the window is not explained')
+        return 'unknown', {k: False for k in flags}, reason
+    return ('anomalous' if any(flags.values()) else 'nominal'), dict(flags), None

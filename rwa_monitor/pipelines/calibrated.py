@@ -1,0 +1,201 @@
+"""Calibration files: commissioning (write), loading (checked) and the calibrated LLR run.
+
+``commission(tele_list)`` calls core/calibrate.py per wheel on the concatenated records;
+``write(cal, out_dir)`` writes ``calibration.yaml`` and ``report.md`` with plots;
+``load(path)`` returns the checked ``calibration`` mapping (ConfigError naming the file
+and the key); ``run_llr`` runs the unchanged model-(1) detector on the residual against
+the calibrated nominal (docs/llr.md, section "Calibrated").
+"""
+
+from __future__ import annotations
+
+import pathlib
+import time as _time
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+
+from rwa_monitor.core import calibrate as core
+from rwa_monitor.core.events import AnomalyEvent
+from rwa_monitor.exceptions import ConfigError
+from rwa_monitor.telemetry import Telemetry
+from rwa_monitor.telemetry.atomic import atomic_write, write_text_atomic
+from rwa_monitor.telemetry.calibration_file import load
+
+KEY = 'calibration_file'
+
+
+def commission(records: Sequence[Telemetry]
+               ) -> tuple[dict[str, Any], list[str], dict[str, dict]]:
+    """Return (calibration document, warnings, arrays for the report) from records.
+
+    Records are calibrated wheel by wheel; several records of one spacecraft are
+    concatenated per wheel (a time gap between them is harmless: the nominal model is
+    static). Every record must have the same wheels (ConfigError naming them).
+    """
+    if not records:
+        raise ConfigError('calibrate: no telemetry file given')
+    names = list(records[0].wheels)
+    for tele in records[1:]:
+        if list(tele.wheels) != names:
+            raise ConfigError(f'{tele.source}: wheels {", ".join(tele.wheels)} differ from '
+                              f'{records[0].source}: {", ".join(names)}')
+    wheels: dict[str, Any] = {}
+    warnings: list[str] = []
+    arrays: dict[str, dict] = {}
+    for name in names:
+        if records[0].wheels[name].friction is None:
+            warnings.append(f'{name}: no friction column; not calibrated')
+            continue
+        t = np.concatenate([np.asarray(r.time, dtype=float) for r in records])
+        w = np.concatenate([np.asarray(r.wheels[name].speed, dtype=float) for r in records])
+        f = np.concatenate([np.asarray(r.wheels[name].friction, dtype=float)
+                            for r in records])
+        block, found = core.calibrate_wheel(name, t, w, f)
+        wheels[name] = block
+        warnings += found
+        arrays[name] = {'time': t, 'speed': w, 'friction': f}
+    first = records[0]
+    gyro = core.calibrate_gyro(first.time, _stack(first, 'gyro'), _stack(first, 'q'),
+                               _stack(first, 'ref'))
+    sources = [{'file': str(r.source), 'time_s': [float(r.time[0]), float(r.time[-1])],
+                'samples': len(r)} for r in records]
+    document = {'calibration': {'version': core.VERSION, 'sources': sources,
+                                'wheels': wheels, 'gyro': gyro, 'warnings': warnings}}
+    return document, warnings, arrays
+
+
+def _stack(tele: Telemetry, prefix: str) -> np.ndarray | None:
+    value = getattr(tele, {'gyro': 'gyro', 'q': 'attitude', 'ref': 'reference_rate'}[prefix],
+                    None)
+    return None if value is None else np.asarray(value, dtype=float)
+
+
+def _plain(value: Any) -> Any:
+    if isinstance(value, Mapping):
+        return {str(k): _plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple, np.ndarray)):
+        return [_plain(v) for v in value]
+    if isinstance(value, np.generic):
+        return value.item()
+    return value
+
+
+def write(document: Mapping[str, Any], arrays: Mapping[str, dict], out_dir: pathlib.Path
+          ) -> list[pathlib.Path]:
+    """Write calibration.yaml, report.md and one PNG per wheel; return the paths."""
+    import yaml
+    out_dir.mkdir(parents=True, exist_ok=True)
+    cal_path = out_dir / 'calibration.yaml'
+    write_text_atomic(cal_path, yaml.safe_dump(_plain(document), sort_keys=False))
+    written = [cal_path]
+    cal = document['calibration']
+    lines = ['# Commissioning calibration', '',
+             'Sources: ' + ', '.join(f'{s["file"]} ({s["samples"]} samples, '
+                                     f'{s["time_s"][0]:.1f}-{s["time_s"][1]:.1f} s)'
+                                     for s in cal['sources']), '']
+    if cal.get('warnings'):
+        lines += ['## Warnings', ''] + [f'- {w}' for w in cal['warnings']] + ['']
+    lines += ['| wheel | effects | dry (N m) | viscous (N m s/rad) | noise std (N m) | '
+              'low-speed band (rad/s) | band std (N m) | speed range (rad/s) |',
+              '|---|---|---|---|---|---|---|---|']
+    for name, block in cal['wheels'].items():
+        model, noise = block['friction_model'], block['noise']
+        band = noise['low_speed_band']
+        effects = ', '.join(e['name'] for e in model.get('effects') or []) or 'none'
+        lo, hi = block['speed_range_rad_s']
+        lines.append(f'| {name} | {effects} | {model["weights"]["dry"]:.3g} | '
+                     f'{model["weights"]["viscous"]:.3g} | {noise["std_nm"]:.3g} | '
+                     f'{band["speed_abs_below_rad_s"]:g} | {band["std_nm"]:.3g} | '
+                     f'{lo:.1f} .. {hi:.1f} |')
+        png = out_dir / f'{name}_friction.png'
+        _plot(name, block, arrays.get(name), png)
+        written.append(png)
+    lines += ['', 'The detectors test changes against the nominal model; samples with '
+              '|speed| below the band, or outside the speed range, are not tested '
+              '(docs/llr.md, section "Calibrated").', '']
+    lines += [f'![{n}]({n}_friction.png)' for n in cal['wheels']]
+    lines += ['', f'Gyro: {", ".join(cal.get("gyro") or {}) or "not calibrated"}', '']
+    report = out_dir / 'report.md'
+    write_text_atomic(report, '\n'.join(lines))
+    written.append(report)
+    return written
+
+
+def _plot(name: str, block: Mapping[str, Any], data: dict | None,
+          path: pathlib.Path) -> None:
+    import matplotlib
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+    fig, (top, bottom) = plt.subplots(2, 1, figsize=(8, 6.5))
+    if data is not None:
+        ok = np.isfinite(data['speed']) & np.isfinite(data['friction'])
+        w, f = data['speed'][ok], data['friction'][ok]
+        top.plot(w, f, ',', color='0.6', label='measured')
+        grid = np.linspace(np.min(w), np.max(w), 2000)
+        top.plot(grid, core.nominal_prediction(block['friction_model'], grid), 'C0',
+                 label='nominal model')
+    band = block['noise']['low_speed_band']['speed_abs_below_rad_s']
+    for ax in (top, bottom):
+        if band > 0:
+            ax.axvspan(-band, band, color='C3', alpha=0.15, label='low-speed band')
+    top.set_ylabel('friction (N m)')
+    top.legend(loc='best', fontsize=8)
+    top.set_title(f'{name}: nominal friction and noise profile')
+    prof = block['noise']['profile']
+    mids = [0.5 * (p['speed_abs_from_rad_s'] + p['speed_abs_to_rad_s']) for p in prof]
+    bottom.semilogy(mids, [p['rms_nm'] for p in prof], 'o-', label='residual RMS per |w| bin')
+    bottom.axhline(block['noise']['std_nm'], color='k', ls='--', label='reference std')
+    bottom.set_xlabel('|speed| (rad/s), bins; speed (rad/s) above')
+    bottom.set_ylabel('N m')
+    bottom.legend(loc='best', fontsize=8)
+    fig.tight_layout()
+    with atomic_write(path, 'wb', encoding=None) as handle:
+        fig.savefig(handle, format='png', dpi=90)
+    plt.close(fig)
+
+
+def run_llr(tele: Telemetry, kwargs: Mapping[str, Any], path: str
+            ) -> tuple[list[AnomalyEvent], dict[str, Any]]:
+    """Run the model-(1) detector on the residual against each wheel's nominal model.
+
+    Every wheel of the record with a friction column must be calibrated (ConfigError
+    naming the others). Summary per wheel: events, samples, the detector's counters, the
+    samples not tested by reason (``low_speed_band``, ``outside_calibrated_range``) and a
+    note when telemetry leaves the calibrated speed range.
+    """
+    from rwa_monitor.core.llr import detect_batch_with_counters
+    cal = load(path)
+    wheels = [w for w, ch in tele.wheels.items() if ch.friction is not None]
+    core.check_wheels(cal, wheels, str(path))
+    events: list[AnomalyEvent] = []
+    summary: dict[str, Any] = {}
+    for wheel_id in wheels:
+        ch = tele.wheels[wheel_id]
+        start = _time.perf_counter()
+        nominal = core.NominalWheel(cal['wheels'][wheel_id])
+        residual, skipped = nominal.residual(tele.time, ch.speed, ch.friction)
+        found, counters = detect_batch_with_counters(
+            tele.time, ch.speed, residual, component=wheel_id, **kwargs)
+        counters = dict(counters)
+        counters['nonfinite'] = counters.get('nonfinite', 0) - sum(skipped.values())
+        entry = {'events': len(found), 'samples': len(tele), 'rejected': counters,
+                 'not_tested': skipped, 'calibration': str(path),
+                 'runtime_s': _time.perf_counter() - start}
+        if skipped['outside_calibrated_range']:
+            lo, hi = nominal.speed_range
+            entry['warning'] = (f'{skipped["outside_calibrated_range"]} samples outside the '
+                                f'calibrated speed range [{lo:.1f}, {hi:.1f}] rad/s: not '
+                                f'tested')
+        summary[wheel_id] = entry
+        events.extend(found)
+    return events, summary
+
+
+def diagnose_wheel(block: Mapping[str, Any], time: np.ndarray, speed: np.ndarray,
+                   friction: np.ndarray, classifier: Any, config: Any) -> dict[str, Any]:
+    """Return the window diagnosis of one wheel relative to its nominal (core function)."""
+    return core.diagnose_fss(block, time, speed, friction, classifier, config)
+
+
+__all__ = ['commission', 'diagnose_wheel', 'load', 'run_llr', 'write']

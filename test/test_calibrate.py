@@ -1,0 +1,200 @@
+"""Commissioning calibration: core arithmetic, file contract, calibrated LLR, command line."""
+
+import json
+
+import numpy as np
+import pytest
+import yaml
+
+from rwa_monitor.cli.main import main
+from rwa_monitor.core import calibrate as core
+from rwa_monitor.core.llr import detect_batch_with_counters
+from rwa_monitor.exceptions import ConfigError
+from rwa_monitor.pipelines import calibrated
+from rwa_monitor.sim.undeclared import simulate_undeclared
+from rwa_monitor.telemetry import Telemetry, Wheel, write_telemetry
+
+N = 12000
+
+
+@pytest.fixture(scope='module')
+def stribeck_block():
+    """Calibrate rw1 on a fault-free record with a Stribeck excess model (1) lacks."""
+    tele = simulate_undeclared('stribeck', n=N, seed=1)
+    wheel = tele.wheels['rw1']
+    return core.calibrate_wheel('rw1', tele.time, wheel.speed, wheel.friction)
+
+
+def test_nominal_prediction_of_model_1_is_the_project_sign():
+    model = {'effects': [], 'weights': {'dry': 5e-4, 'viscous': 2e-6}}
+    w = np.array([-20.0, -1.0, 0.0, 3.0])
+    assert np.allclose(core.nominal_prediction(model, w), -5e-4 * np.sign(w) - 2e-6 * w)
+    with pytest.raises(ConfigError, match='viscous'):
+        core.nominal_prediction({'effects': [], 'weights': {'dry': 1.0}}, w)
+
+
+def test_calibration_of_a_fault_free_wheel(stribeck_block):
+    block, warnings = stribeck_block
+    assert warnings == []
+    assert block['changes_found_s'] == []
+    assert block['friction_model']['effects']        # the Stribeck excess was identified
+    assert abs(block['noise']['std_nm'] / 5e-5 - 1) < 0.1
+    tele = simulate_undeclared('stribeck', n=N, seed=1)
+    speed = tele.wheels['rw1'].speed
+    assert block['speed_range_rad_s'] == [float(speed.min()), float(speed.max())]
+
+
+def test_noise_band_found_where_the_residual_is_larger():
+    rng = np.random.default_rng(3)
+    speed = np.linspace(-30, 30, 20000)
+    residual = 5e-5 * rng.standard_normal(speed.size)
+    residual[np.abs(speed) < 2.0] *= 4.0
+    noise = core.noise_profile(speed, residual)
+    assert noise['low_speed_band']['speed_abs_below_rad_s'] == 2.0
+    assert abs(noise['low_speed_band']['std_nm'] / 2e-4 - 1) < 0.15
+    plain = core.noise_profile(speed, 5e-5 * rng.standard_normal(speed.size))
+    assert plain['low_speed_band']['speed_abs_below_rad_s'] == 0.0
+
+
+def test_a_change_in_the_calibration_data_is_named_with_wheel_and_time():
+    tele = simulate_undeclared('none', n=N, seed=4, anomaly_time=6000.0, anomaly_dry=1e-3)
+    wheel = tele.wheels['rw1']
+    block, warnings = core.calibrate_wheel('rw1', tele.time, wheel.speed, wheel.friction)
+    assert warnings and all(m.startswith('rw1: a friction change (') for m in warnings)
+    assert min(abs(t - 6000.0) for t in block['changes_found_s']) < 30.0
+
+
+def test_calibrated_detector_removes_false_alarms_and_keeps_the_step(stribeck_block):
+    block, _ = stribeck_block
+    nominal = core.NominalWheel(block)
+    healthy = simulate_undeclared('stribeck', n=N, seed=2)
+    w = healthy.wheels['rw1']
+    raw, _ = detect_batch_with_counters(healthy.time, w.speed, w.friction, component='rw1')
+    residual, _ = nominal.residual(healthy.time, w.speed, w.friction)
+    cal, _ = detect_batch_with_counters(healthy.time, w.speed, residual, component='rw1')
+    assert len(raw) > 5 and cal == []
+    faulty = simulate_undeclared('stribeck', n=N, seed=5, anomaly_time=7000.0,
+                                 anomaly_dry=3e-4)
+    w = faulty.wheels['rw1']
+    residual, _ = nominal.residual(faulty.time, w.speed, w.friction)
+    found, _ = detect_batch_with_counters(faulty.time, w.speed, residual, component='rw1')
+    assert len({e.index for e in found}) == 1
+    assert abs(found[0].time - 7000.0) < 30.0 and found[-1].kind == 'dry'
+
+
+def test_band_and_range_samples_are_not_tested_and_counted():
+    block = {'friction_model': {'effects': [], 'weights': {'dry': 1e-3, 'viscous': 0.0}},
+             'noise': {'low_speed_band': {'speed_abs_below_rad_s': 1.0}},
+             'speed_range_rad_s': [-10.0, 10.0]}
+    residual, counts = core.NominalWheel(block).residual(
+        np.arange(5.0), np.array([0.5, -2.0, 12.0, np.nan, 3.0]),
+        np.array([0.0, 1e-3, 0.0, 0.0, np.nan]))
+    assert counts == {'low_speed_band': 1, 'outside_calibrated_range': 1}
+    assert np.isnan(residual[[0, 2, 3, 4]]).all() and residual[1] == pytest.approx(0.0)
+
+
+def _document(block):
+    return {'calibration': {'version': 1, 'sources': [], 'wheels': {'rw1': block},
+                            'gyro': {}}}
+
+
+def test_malformed_files_name_the_file_and_the_key(tmp_path, stribeck_block):
+    block, _ = stribeck_block
+    good = calibrated._plain(_document(block))
+    path = tmp_path / 'calibration.yaml'
+    path.write_text(yaml.safe_dump(good))
+    assert set(calibrated.load(path)['wheels']) == {'rw1'}
+    with pytest.raises(ConfigError, match=f'{tmp_path / "missing.yaml"}: cannot read'):
+        calibrated.load(tmp_path / 'missing.yaml')
+    cases = [({'calibration': {**good['calibration'], 'version': 2}}, 'calibration.version'),
+             ({'calibration': {'version': 1}}, 'calibration.wheels'),
+             ({'calibration': {**good['calibration'], 'wheels': {'rw1': {
+                 k: v for k, v in good['calibration']['wheels']['rw1'].items()
+                 if k != 'noise'}}}}, 'calibration.wheels.rw1.noise'),
+             ({'calibration': {**good['calibration'], 'wheels': {'rw1': {
+                 **good['calibration']['wheels']['rw1'], 'speed_range_rad_s': [3, 1]}}}},
+              'calibration.wheels.rw1.speed_range_rad_s')]
+    for document, key in cases:
+        path.write_text(yaml.safe_dump(document))
+        with pytest.raises(ConfigError, match=f'{path}: key {key}'):
+            calibrated.load(path)
+    path.write_text('calibration: [unclosed')
+    with pytest.raises(ConfigError, match='not valid YAML'):
+        calibrated.load(path)
+
+
+def test_other_wheel_names_are_an_error_naming_them(stribeck_block):
+    cal = core.check_calibration(_document(stribeck_block[0]))
+    with pytest.raises(ConfigError, match=r'no calibration for wheel\(s\) rw7; it '
+                                          r'calibrates rw1'):
+        core.check_wheels(cal, ['rw1', 'rw7'], 'cal.yaml')
+
+
+def test_calibrate_then_detect_from_the_command_line(tmp_path, capsys):
+    commissioning = simulate_undeclared('stribeck', n=N, seed=11)
+    faulty = simulate_undeclared('stribeck', n=N, seed=12, anomaly_time=7000.0,
+                                 anomaly_dry=3e-4)
+    for name, tele in (('nominal.csv', commissioning), ('faulty.csv', faulty)):
+        write_telemetry(tmp_path / name, Telemetry(time=tele.time, wheels=tele.wheels))
+    out = tmp_path / 'cal'
+    assert main(['calibrate', str(tmp_path / 'nominal.csv'), '-o', str(out)]) == 0
+    assert (out / 'report.md').is_file() and (out / 'rw1_friction.png').is_file()
+    cal = yaml.safe_load((out / 'calibration.yaml').read_text())['calibration']
+    assert cal['version'] == 1 and cal['sources'][0]['samples'] == N
+    events = tmp_path / 'events.json'
+    assert main(['detect', str(tmp_path / 'faulty.csv'), '--calibration',
+                 str(out / 'calibration.yaml'), '-o', str(events)]) in (0, 1)
+    document = json.loads(events.read_text())
+    llr = [e for e in document['events'] if e['detector'] == 'llr']
+    assert len({e['index'] for e in llr}) == 1 and abs(llr[0]['time'] - 7000.0) < 30.0
+    summary = document['summary']['pipelines']['llr']['components']['rw1']
+    assert 'not_tested' in summary
+    other = tmp_path / 'other.csv'
+    write_telemetry(other, Telemetry(time=faulty.time, wheels={'rw9': faulty.wheels['rw1']}))
+    assert main(['detect', str(other), '--calibration', str(out / 'calibration.yaml')]) == 2
+    assert 'rw9' in capsys.readouterr().err
+
+
+def test_strict_refuses_data_with_a_change(tmp_path, capsys):
+    tele = simulate_undeclared('none', n=N, seed=4, anomaly_time=6000.0, anomaly_dry=1e-3)
+    write_telemetry(tmp_path / 'bad.csv', Telemetry(time=tele.time, wheels=tele.wheels))
+    code = main(['calibrate', str(tmp_path / 'bad.csv'), '-o', str(tmp_path / 'cal'),
+                 '--strict'])
+    assert code == 2 and 'rw1: a friction change (' in capsys.readouterr().err
+    assert not (tmp_path / 'cal' / 'calibration.yaml').exists()
+
+
+def test_wheel_without_friction_is_not_calibrated():
+    tele = Telemetry(time=np.arange(10.0), wheels={'rw1': Wheel(speed=np.ones(10))})
+    with pytest.raises(ConfigError, match='no telemetry file'):
+        calibrated.commission([])
+    document, warnings, _ = calibrated.commission([tele])
+    assert document['calibration']['wheels'] == {} and 'rw1: no friction' in warnings[0]
+
+
+def test_fss_verdict_unknown_when_the_window_is_not_explained():
+    from rwa_monitor.core.fss.classify import relative_verdict
+    flags = {'dry': True, 'viscous': False}
+    status, out, reason = relative_verdict(flags, 2.0e-4, 1.0e-4)
+    assert status == 'unknown' and not any(out.values()) and 'not explained' in reason
+    assert relative_verdict(flags, 1.2e-4, 1.0e-4)[:2] == ('anomalous', flags)
+    assert relative_verdict({'dry': False}, 1.0e-4, 1.0e-4)[0] == 'nominal'
+
+
+def test_fss_diagnosis_relative_to_the_calibrated_nominal(stribeck_block):
+    from rwa_monitor.core.fss.pipeline import diagnose, FssConfig
+    from rwa_monitor.telemetry.fss_model import load_model
+    block, _ = stribeck_block
+    model, config = load_model(), FssConfig()
+    healthy = simulate_undeclared('stribeck', n=N, seed=7)
+    w = healthy.wheels['rw1']
+    assert any(diagnose(w.speed, w.friction, healthy.time, model, config)['anomalies'].values())
+    result = calibrated.diagnose_wheel(block, healthy.time, w.speed, w.friction, model, config)
+    assert result['status'] == 'nominal' and not any(result['anomalies'].values())
+    faulty = simulate_undeclared('stribeck', n=N, seed=7, anomaly_time=0.0, anomaly_dry=1.5e-3)
+    w = faulty.wheels['rw1']
+    result = calibrated.diagnose_wheel(block, faulty.time, w.speed, w.friction, model, config)
+    assert result['status'] == 'anomalous' and result['anomalies']['dry']
+    noisy = w.friction + 2e-4 * np.random.default_rng(0).standard_normal(N)
+    result = calibrated.diagnose_wheel(block, faulty.time, w.speed, noisy, model, config)
+    assert result['status'] == 'unknown' and not any(result['anomalies'].values())

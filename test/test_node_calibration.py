@@ -1,0 +1,83 @@
+"""The detector nodes' ``calibration_file``: same events as ``detect --calibration``."""
+
+from diagnostic_msgs.msg import DiagnosticArray
+import pytest
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from ros_harness import Collector, RosWorld
+import yaml
+
+from rwa_monitor.exceptions import ConfigError
+from rwa_monitor.nodes import messages
+from rwa_monitor.nodes.common import EVENTS_QOS
+from rwa_monitor.nodes.llr_detector import LLRDetectorNode
+from rwa_monitor.nodes.replay import TelemetryReplay
+from rwa_monitor.pipelines import calibrated, llr
+from rwa_monitor.sim.friction import Anomaly, simulate_friction_with_truth
+from rwa_monitor.telemetry import read_telemetry, write_telemetry
+
+pytestmark = pytest.mark.ros
+
+CONFIG = {'window': 200, 'false_alarm_rate': 1.0e-5}
+
+
+def _files(tmp_path):
+    """Return (calibration file, faulted telemetry file, its telemetry)."""
+    nominal, _ = simulate_friction_with_truth(wheels=['rw1', 'rw2'], n_samples=3000,
+                                              rate_hz=10.0, seed=5)
+    document, _, arrays = calibrated.commission([nominal])
+    cal = calibrated.write(document, arrays, tmp_path / 'cal')[0]
+    faulted, _ = simulate_friction_with_truth(
+        wheels=['rw1', 'rw2'], n_samples=3000, rate_hz=10.0, seed=11,
+        anomalies=[Anomaly('rw2', 'dry', 150.0, delta_dry=3e-4)])
+    path = tmp_path / 'faulted.csv'
+    write_telemetry(path, faulted)
+    return cal, path, read_telemetry(path)
+
+
+def _key(event):
+    return (event.component, event.kind, event.index, event.declared_index, event.revision)
+
+
+def test_node_with_calibration_equals_detect_and_keeps_the_last_good_file(tmp_path):
+    cal, path, tele = _files(tmp_path)
+    expected = llr.run(tele, {**CONFIG, 'calibration_file': str(cal)})
+    assert any(e.component == 'rw2' for e in expected)
+    with RosWorld('calibration') as world:
+        overrides = [Parameter('use_sim_time', value=True),
+                     Parameter('calibration_file', value=str(cal))]
+        overrides += [Parameter(k, value=v) for k, v in CONFIG.items()]
+        detector = world.node(LLRDetectorNode, parameter_overrides=overrides)
+        sink = world.node(Node, 'sink')
+        anomalies = Collector(sink, DiagnosticArray, 'anomalies', EVENTS_QOS)
+        replay = world.node(TelemetryReplay, parameter_overrides=[
+            Parameter(k, value=v) for k, v in {'file': str(path), 'rate': 0.0, 'burst': 50,
+                                               'exit_when_done': False}.items()])
+        world.wait_until(lambda: replay.done and sum(
+            w.samples for w in detector.wheels.values()) == 2 * len(tele), 240.0,
+            f'samples ({detector.input_counters})')
+        world.wait_until(lambda: sum(len(m.status) for m in anomalies.messages)
+                         >= len(expected), 10.0, 'events')
+        got = [messages.status_event(s) for m in anomalies.messages for s in m.status]
+        assert [_key(e) for e in got] == [_key(e) for e in expected]
+        values = detector.calibration.values('rw1')
+        assert values['calibration_file'] == str(cal)
+        bad = tmp_path / 'bad.yaml'
+        bad.write_text(yaml.safe_dump({'calibration': {'version': 1}}))
+        for wrong, words in ((tmp_path / 'missing.yaml', 'cannot read'),
+                             (bad, 'key calibration.wheels')):
+            result = detector.set_parameters([Parameter('calibration_file',
+                                                        value=str(wrong))])[0]
+            assert not result.successful and str(wrong) in result.reason
+            assert words in result.reason
+        assert detector.calibration.path == str(cal) and detector.calibration.loads == 1
+        assert detector.set_parameters([Parameter('calibration_file',
+                                                  value=str(cal))])[0].successful
+        assert detector.calibration.loads == 2
+
+
+def test_node_refuses_to_start_on_a_bad_calibration(tmp_path):
+    with RosWorld('calibration_bad') as world:
+        with pytest.raises(ConfigError, match='missing.yaml: cannot read'):
+            world.node(LLRDetectorNode, parameter_overrides=[
+                Parameter('calibration_file', value=str(tmp_path / 'missing.yaml'))])
