@@ -85,7 +85,9 @@ def test_scheduled_and_live_friction_faults_reported_on_the_right_wheel():
     assert abs(first['rw4'].time - injected_at) <= 5.0
     for w, t0 in (('rw2', 150.0), ('rw4', injected_at)):
         same_change = [e for e in events if e.component == w and e.index == first[w].index]
-        assert max(same_change, key=lambda e: e.revision).kind == 'dry'
+        # 'undecided' when 500 s of the bus profile cannot exclude a viscous part
+        # (docs/llr.md, categorisation); never a confirmed wrong kind
+        assert max(same_change, key=lambda e: e.revision).kind in ('dry', 'undecided')
         # Algorithm 1 declares after the window and k_verif = window / 2 more samples
         assert first[w].declared_time <= t0 + 1.5 * LLR['window'] / RATE_HZ + 1.0
 

@@ -23,6 +23,7 @@ import pathlib
 
 import numpy as np
 
+from rwa_monitor.cli.options import add_topics, INPUT_HELP
 from rwa_monitor.core.identify import report as rep
 from rwa_monitor.core.identify.data import prepare
 from rwa_monitor.core.identify.model import snippet
@@ -44,8 +45,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                     'the residual, add named effects by forward selection validated on '
                     'held-out data, and write DIR/report.json, plots, a markdown report '
                     'and the refined model as a config snippet (friction_model.yaml).')
-    p.add_argument('file', type=pathlib.Path, help='telemetry file (CSV or MCAP), or the '
+    p.add_argument('file', type=pathlib.Path, help=INPUT_HELP + ', or the '
                    'coast-down per-revolution CSV with --format coastdown')
+    add_topics(p)
     p.add_argument('-o', '--out', type=pathlib.Path, required=True, help='output directory')
     p.add_argument('--wheel', help='wheel id (default: the first wheel); with --format '
                    'coastdown the body: drum (default) or wheel')
@@ -76,7 +78,7 @@ def run(args: argparse.Namespace) -> int:
             coastdown_folder(args.file), body)
         wheel = body
     else:
-        tele = read_telemetry(args.file)
+        tele = read_telemetry(args.file, args.topics).only('wheels')
         inertia, wheel = args.inertia, args.wheel
     try:
         data = prepare(tele, wheel, inertia, args.torque_constant, args.half_width)

@@ -231,6 +231,15 @@ DIAGNOSTIC_PERIOD = Param('diagnostic_period', 1.0, 'Seconds between /diagnostic
                           scope='node')
 
 
+EVENTS_FILE = Param('events_file', '', 'JSON Lines journal of every event and '
+                    'acknowledgement, flushed and fsynced per line; its unacknowledged '
+                    'anomalies are reloaded at start. Empty = none (anomalies are latched '
+                    'in memory only).', read_only=True, scope='node')
+WHEEL_TIMEOUT = Param('wheel_timeout', 600.0, 'Seconds of wall time without input after '
+                      'which a wheel is freed (its detector and state; latched anomalies '
+                      'stay); 0 = never.', low=0.0, unit='s', scope='node')
+
+
 def _time_jump(what: str) -> Param:
     return Param('time_jump', 1.0, f'A stamp more than this before the last one restarts '
                  f'{what} (replay loop); smaller steps back are dropped.', low=0.0,
@@ -264,6 +273,15 @@ LLR = Schema('llr_detector', (
           'out_of_range.', low=0.0, low_open=True, unit='rad/s'),
     Param('max_abs_friction', 1.0e6, 'Samples at or beyond this friction are dropped and '
           'counted out_of_range.', low=0.0, low_open=True, unit='N m'),
+    Param('noise_ar_max_order', AUTO, 'Largest order of the AR noise model fitted on the '
+          'first samples and used to prewhiten them (docs/llr.md); auto = 3 with an '
+          'estimated noise level, 0 with noise_std given (white noise, the paper).', low=0,
+          high=10, auto=True, kind=int),
+    Param('noise_fit_samples', AUTO, 'Samples that fit the AR noise model; auto = '
+          '2 window + 1.', low=20, high=10_000_000, auto=True, kind=int, unit='samples'),
+    Param('reference_max', 0, 'Longest reference segment (sliding reference that follows '
+          'slow drifts, docs/llr.md); 0 = growing reference (the paper).', low=0,
+          high=10_000_000, unit='samples'),
     Param('friction_model_file', '', 'Refined friction model written by `rwa-monitor '
           'identify` (friction_model.yaml); empty = model (1).', scope='file'),
     _wheels(),
@@ -271,6 +289,8 @@ LLR = Schema('llr_detector', (
     _time_jump("the wheel's detector"),
     STALE_TIMEOUT,
     DIAGNOSTIC_PERIOD,
+    EVENTS_FILE,
+    WHEEL_TIMEOUT,
     Param('telemetry_reliability', 'reliable', 'QoS of the telemetry/wheels subscription: '
           'reliable (keep all, no loss) or best_effort (hears a sensor-data publisher; '
           'samples may be lost).', choices=('reliable', 'best_effort'), read_only=True,
@@ -305,6 +325,8 @@ FSS = Schema('fss_diagnoser', (
     MAX_WHEELS,
     STALE_TIMEOUT,
     DIAGNOSTIC_PERIOD,
+    EVENTS_FILE,
+    WHEEL_TIMEOUT,
 ), 'FSS window diagnoser (physics-informed FSS paper); docs/fss.md.',
     lambda values: fss_config(values))
 
@@ -404,6 +426,7 @@ VSADC = Schema('vsadc_detector', (
     _time_jump('the detector'),
     STALE_TIMEOUT,
     DIAGNOSTIC_PERIOD,
+    EVENTS_FILE,
 ), 'VSADC gyro drift/bias classifier (vsadc paper, Algorithm 1); docs/vsadc.md. Samples '
    'are star-tracker/gyro pairs.', lambda values: _vsadc_detector(values))
 
@@ -421,9 +444,13 @@ IDENTIFY = Schema('identify', (
 # ------------------------------------------------------------------------------- replay
 
 REPLAY = Schema('telemetry_replay', (
-    Param('file', '', 'Telemetry file to replay (.csv, or .mcap written by rwa_monitor); '
-          'required, give it with -p file:=PATH (never in a parameters file, where it would '
-          'beat the command line).', read_only=True, required=True, scope='node'),
+    Param('file', '', 'Telemetry to replay: CSV file, rosbag2 folder, or bare .mcap or .db3 '
+          'file; required, give it with -p file:=PATH (never in a parameters file, where it '
+          'would beat the command line).', read_only=True, required=True, scope='node'),
+    Param('topics', '', 'Topics of the streams in a recording, as wheels=/a,gyro=/b,'
+          'star_tracker=/c,reference_rate=/d; streams not named keep the DESIGN.md topics '
+          '(/telemetry/wheels, /telemetry/gyro, /telemetry/star_tracker, '
+          '/telemetry/reference_rate).', read_only=True, scope='node'),
     Param('rate', 1.0, 'Time factor: 1.0 real time, 40.0 forty times faster, 0.0 as fast as '
           'the subscribers take it without loss.', low=0.0, high=1.0e6, scope='node'),
     Param('start_offset', 0.0, 'Seconds from the first sample where the replay (and every '
