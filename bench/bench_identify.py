@@ -23,13 +23,13 @@ from typing import Any
 import numpy as np
 
 from bench.report import table, update_section, write_json
-from rwa_monitor.cli.cmd_identify import (coastdown_runs, pendulum_inertia, read_coastdown,
-                                          write_outputs)
 from rwa_monitor.core.identify.data import prepare
 from rwa_monitor.core.identify.model import regressors_from_config, snippet
 from rwa_monitor.core.identify.select import identify
+from rwa_monitor.pipelines.identify_report import write_outputs
 from rwa_monitor.sim.undeclared import EFFECTS, simulate_undeclared
 from rwa_monitor.telemetry import read_telemetry
+from rwa_monitor.telemetry.coastdown import coastdown_runs, pendulum_inertia, read_coastdown
 
 MEASURED = pathlib.Path(__file__).resolve().parents[2].parent / 'shared' / 'data' / \
     'measured' / 'drum-coastdown'
