@@ -34,7 +34,7 @@ from rwa_monitor.exceptions import NotIdentifiableError
 RIDGE = 1e-9
 PEAKS = 3
 LOW_SPEED_QUANTILE = 0.1
-FLEX_ROWS = 20000  # the flexible background is fitted on at most about this many rows
+FLEX_ROWS = 10000  # the flexible background is fitted on at most about this many rows
 
 
 def baseline_columns(speed: np.ndarray) -> np.ndarray:
@@ -93,8 +93,10 @@ def flexible_residual(data: IdentData, spacing: int,
     fallback effect's columns, free to jump at w = 0) plus dry, viscous and offset terms
     that are piecewise linear in time (knots every ``spacing`` rows): without the time
     terms a slow effect would bend the fitted function of speed and leave a residual that
-    is not smooth in time. ``extra`` columns (effects already identified) join the fit.
-    Then sinusoids at the residual's three largest spectral peaks are added and the fit
+    is not smooth in time. When the speed passes through zero, a second piecewise-linear
+    function of speed on the branch that left zero (history.py ``left_zero``) joins, so
+    that friction with hysteresis cannot pass for a string of jumps. ``extra`` columns
+    (effects already identified) join the fit. Then sinusoids at the residual's three largest spectral peaks are added and the fit
     repeated, so that a periodic torque does not pass for a string of jumps (a step has
     a broad spectrum that three sinusoids hardly absorb). The coefficients are fitted on
     at most about FLEX_ROWS evenly spaced rows; the residual is evaluated on all rows.
@@ -121,12 +123,17 @@ def flexible_residual(data: IdentData, spacing: int,
                                  for j in range(len(tknots))])
         h = baseline_columns(wr)
         cols = [h, np.column_stack(hats), h[:, :1] * thats, h[:, 1:] * thats, thats]
+        if branch is not None:
+            cols.append(np.column_stack(hats) * branch[rows, None])
         if extra is not None:
             cols.append(extra.reshape(n, -1)[rows])
         cols += [f(2 * np.pi * fr * t[rows])[:, None] for fr in freqs
                  for f in (np.cos, np.sin)]
         return np.hstack(cols)
 
+    past = data.past
+    branch = past.left_zero.astype(float) if past is not None and past.passages and \
+        past.left_zero.any() else None
     fit_rows = np.arange(0, n, max(1, n // FLEX_ROWS))
     resid = _residual(design, fit_rows, data, [])
     freqs, _ = spectral_peaks(data.time, resid, PEAKS, refine=False)

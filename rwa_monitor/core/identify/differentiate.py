@@ -21,7 +21,13 @@ from rwa_monitor.core.params import check_int
 _MAD_TO_STD = 1.4826
 
 
-def _local_fit_weights(time: np.ndarray, half_width: int, order: int
+def _uniform(time: np.ndarray) -> bool:
+    """Return True when the samples are equally spaced (to 1e-9 of the step)."""
+    step = np.diff(time)
+    return bool(len(step) and np.ptp(step) <= 1e-9 * abs(float(np.mean(step))))
+
+
+def _local_fit_weights(time: np.ndarray, half_width: int, order: int, force: bool = False
                        ) -> tuple[np.ndarray, np.ndarray]:
     """Return (window indices (n, m), weights (n, order + 1, m)) of local polynomial fits.
 
@@ -32,6 +38,16 @@ def _local_fit_weights(time: np.ndarray, half_width: int, order: int
     m = 2 * half_width + 1
     start = np.clip(np.arange(n) - half_width, 0, n - m)
     idx = start[:, None] + np.arange(m)[None, :]
+    if not force and n > 2 * m and _uniform(time):
+        # Uniform sampling: every interior row has the same weights; compute one record
+        # of 2m samples (left edges, interior, right edges) and broadcast the interior.
+        _, few = _local_fit_weights(time[:2 * m], half_width,
+                                    order, force=True)
+        coef = np.empty((n, order + 1, m))
+        coef[:half_width] = few[:half_width]
+        coef[half_width:n - half_width] = few[half_width]
+        coef[n - half_width:] = few[2 * m - half_width:]
+        return idx, coef
     dt = time[idx] - time[:, None]
     scale = np.max(np.abs(dt), axis=1)
     scale[scale == 0] = 1.0

@@ -46,7 +46,9 @@ class Design:
     """The columns of the current model; scores candidate columns without refitting all.
 
     The Gram matrix of the current columns on the training rows is kept, so a candidate
-    of k columns costs O(n p k) rather than O(n (p + k)^2).
+    of k columns costs O(n p k) rather than O(n (p + k)^2). The thin products are einsum
+    loops, not threaded BLAS calls: on a loaded machine a threaded product of an (n, 1)
+    column cost 30-90 ms (measured), the loop well under one.
     """
 
     def __init__(self, y: np.ndarray, columns: np.ndarray, held_out: np.ndarray) -> None:
@@ -73,9 +75,9 @@ class Design:
 
     def _extended(self, columns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         ct = columns[self.train]
-        xc = self._xt.T @ ct
-        gram = np.block([[self._gram, xc], [xc.T, ct.T @ ct]])
-        return gram, np.concatenate([self._xy, ct.T @ self._yt])
+        xc = np.einsum('ij,ik->jk', self._xt, ct)
+        gram = np.block([[self._gram, xc], [xc.T, np.einsum('ij,ik->jk', ct, ct)]])
+        return gram, np.concatenate([self._xy, np.einsum('ij,i->j', ct, self._yt)])
 
     def fit(self, columns: np.ndarray | None = None) -> Fit:
         """Return the fit of the current columns, plus ``columns`` if given."""
@@ -91,7 +93,7 @@ class Design:
                                         rcond=RCOND)
         coef = z * scale
         rss_train = max(self._yy - 2.0 * coef @ xy + coef @ gram @ coef, 0.0)
-        resid_ho = self._yh - xh @ coef
+        resid_ho = self._yh - np.einsum('ij,j->i', xh, coef)
         return Fit(coef=coef, rank=int(rank), rss_train=float(rss_train),
                    rss_held_out=float(resid_ho @ resid_ho), n_train=int(np.sum(self.train)),
                    n_held_out=int(np.sum(self.held_out)))
