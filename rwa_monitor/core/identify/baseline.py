@@ -96,9 +96,10 @@ def flexible_residual(data: IdentData, spacing: int,
     is not smooth in time. When the speed passes through zero, a second piecewise-linear
     function of speed on the branch that left zero (history.py ``left_zero``) joins, so
     that friction with hysteresis cannot pass for a string of jumps. ``extra`` columns
-    (effects already identified) join the fit. Then sinusoids at the residual's three largest spectral peaks are added and the fit
-    repeated, so that a periodic torque does not pass for a string of jumps (a step has
-    a broad spectrum that three sinusoids hardly absorb). The coefficients are fitted on
+    (effects already identified) join the fit. Then sinusoids at the residual's three
+    largest spectral peaks are added and the fit repeated, so that a periodic torque does
+    not pass for a string of jumps (a step has a broad spectrum that three sinusoids
+    hardly absorb). The coefficients are fitted on
     at most about FLEX_ROWS evenly spaced rows; the residual is evaluated on all rows.
     """
     w = data.speed
