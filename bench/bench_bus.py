@@ -105,9 +105,9 @@ def node_speed(sim_s: float, rate: float, with_llr: bool, burst: int = 1) -> dic
 
 
 def _llr_config() -> dict[str, Any]:
-    from rwa_monitor.cli.cmd_detect import load_config, node_parameters
     from rwa_monitor.pipelines import llr
-    params = node_parameters(load_config(None), llr.NODE)
+    from rwa_monitor.telemetry.parameters_file import load_block
+    params = load_block(None, llr.SCHEMA)
     return {k: v for k, v in params.items() if k in llr.DEFAULTS}
 
 

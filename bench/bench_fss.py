@@ -17,8 +17,8 @@ import numpy as np
 from scipy import stats
 
 from bench import report
-from rwa_monitor.cli.cmd_fss import detection_matrix, train_model
 from rwa_monitor.core.fss.assign import assign_changepoints
+from rwa_monitor.core.fss.classify import detection_matrix, train_model
 from rwa_monitor.core.fss.pipeline import extract, FssConfig
 from rwa_monitor.core.fss.segments import fit_intervals
 from rwa_monitor.core.fss.wglr import detect_changepoints, estimate_sigma, wglr
@@ -44,7 +44,7 @@ def _dataset(quick: bool, seed: int = 0, per_status: int | None = None) -> pathl
 
 def shipped_model_held_out(quick: bool) -> dict:
     """Return the shipped model's detection matrix on an independent data set (seed 1)."""
-    from rwa_monitor.core.fss.pipeline import load_model
+    from rwa_monitor.telemetry.fss_model import load_model
     path = _dataset(quick, seed=1, per_status=4 if quick else 40)
     items = fss.dataset_extractions(path)
     model = load_model()
@@ -152,7 +152,7 @@ def timing_pass(path: pathlib.Path, manifest: dict, items: list[dict],
     actually ran, which is what an otherwise idle computer would take). The load average
     before and after is recorded beside.
     """
-    from rwa_monitor.core.fss.pipeline import load_model
+    from rwa_monitor.telemetry.fss_model import load_model
     model = load_model()
     stages = ('changepoints', 'least_squares', 'assignment', 'classification', 'total')
     wall: dict[str, list[float]] = {k: [] for k in stages}
@@ -211,7 +211,7 @@ def changepoint_truth(path: pathlib.Path, manifest: dict, count: int) -> dict:
         hit = d.min(axis=0) <= 3 if d is not None else np.zeros(0, bool)
         missed.append(int(np.sum(~hit)))
         gaps = np.diff(np.concatenate(([0], true, [speed.size])))
-        isolated = (gaps[:-1] > 2 * config.window) & (gaps[1:] > 2 * config.window)
+        isolated = (gaps[:-1] > 2 * config.wglr_window) & (gaps[1:] > 2 * config.wglr_window)
         big_missed.append(int(np.sum(~hit & isolated)))
         sigma = estimate_sigma(friction, speed, 1.0)
         ext = extract(speed, friction, config)

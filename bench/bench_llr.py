@@ -33,7 +33,8 @@ ARL_ALARMS = 100
 MEMORY_BUDGET_S = 240.0
 CATEGORIES = {'dry': (0.5, 0.0), 'viscous': (0.0, 0.025), 'both': (0.5, 0.025)}
 CATEGORY_SCALES = (1, 2)
-REALISTIC_CONFIG = {'window': 400, 'k_verif': 0, 'false_alarm_rate': 1e-4, 'noise_std': 0.0}
+REALISTIC_CONFIG = {'window': 400, 'k_verif': 'auto', 'false_alarm_rate': 1e-4,
+                    'noise_std': 'auto'}
 GOALS = {'streaming_per_s': 300_000, 'batch_per_s': 3_000_000, 'miss_rate_0.3': 0.02,
          'categorisation': 0.95}
 

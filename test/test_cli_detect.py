@@ -156,5 +156,6 @@ def test_unreadable_config_is_an_error(simulated, tmp_path, capsys):
 
 def test_installed_config_has_the_llr_block():
     params = node_parameters(load_config(None), llr_pipeline.NODE)
-    assert llr_pipeline.detector_kwargs(params) == {
-        'window': 500, 'k_verif': None, 'false_alarm_rate': 1e-5, 'noise_std': None}
+    kwargs = llr_pipeline.detector_kwargs(params)
+    assert {k: kwargs[k] for k in ('window', 'k_verif', 'false_alarm_rate', 'noise_std')} == {
+        'window': 500, 'k_verif': 'auto', 'false_alarm_rate': 1e-5, 'noise_std': 'auto'}

@@ -6,9 +6,10 @@ import numpy as np
 import pytest
 
 from rwa_monitor.cli.main import main
-from rwa_monitor.core.fss.pipeline import (diagnose, extract, FssConfig, load_model,
-                                           SlidingWindow)
+from rwa_monitor.core.fss.pipeline import diagnose, extract, FssConfig, SlidingWindow
+from rwa_monitor.core.schema import FSS, fss_config
 from rwa_monitor.sim import fss
+from rwa_monitor.telemetry.fss_model import load_model
 
 
 @pytest.fixture(scope='module')
@@ -72,11 +73,12 @@ def test_nan_runs_constant_speed_and_more_changepoints_than_the_beam(model):
 
 
 def test_bad_config_and_lengths():
-    with pytest.raises(ValueError, match='window'):
-        FssConfig(window=1)
+    with pytest.raises(ValueError, match='wglr_window'):
+        FssConfig(wglr_window=1)
     with pytest.raises(ValueError, match='same length'):
         extract(np.zeros(10), np.zeros(11))
-    assert FssConfig.from_dict({'window': 30, 'rate': 3}).window == 30
+    assert FSS.validate({'wglr_window': 30}, strict=False)['wglr_window'] == 30
+    assert fss_config(FSS.validate({'wglr_window': 30})).wglr_window == 30
 
 
 def test_sliding_window_is_bounded_and_ordered():

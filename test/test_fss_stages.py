@@ -12,6 +12,7 @@ from rwa_monitor.core.fss.classify import histogram, WindowClassifier
 from rwa_monitor.core.fss.model import EXAMPLE_1, EXAMPLE_2, LOG_FLOOR, SwitchingSystem
 from rwa_monitor.core.fss.segments import fit_intervals
 from rwa_monitor.core.fss.wglr import detect_changepoints, run_maxima, wglr
+from rwa_monitor.telemetry.fss_model import load_model, save_model
 
 
 def _signal(n, steps, sigma, seed, speed=None):
@@ -246,8 +247,8 @@ def test_svms_learn_separable_anomalies(tmp_path):
         flags = model.predict(f)
         assert flags == {k: k == s for k in flags}
     path = tmp_path / 'm.json'
-    model.save(path)
-    again = WindowClassifier.load(path)
+    save_model(model, path)
+    again = load_model(path)
     assert again.decision(test[0]) == pytest.approx(model.decision(test[0]))
     with pytest.raises(ValueError, match='fss2'):
         WindowClassifier.fit(feats[:4], statuses[:4])

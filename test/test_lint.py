@@ -7,7 +7,8 @@ from conftest import REPO
 
 
 def test_flake8_and_pep257():
-    targets = [t for t in ('rwa_monitor', 'bench', 'test', 'setup.py', 'launch') if (REPO / t).exists()]
+    targets = [t for t in ('rwa_monitor', 'bench', 'test', 'setup.py', 'launch')
+               if (REPO / t).exists()]
     result = subprocess.run([sys.executable, '-m', 'flake8', *targets], cwd=REPO,
                             capture_output=True, text=True)
     assert result.returncode == 0, result.stdout + result.stderr

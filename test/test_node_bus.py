@@ -31,7 +31,8 @@ from rwa_monitor.nodes.vsadc_detector import VsadcDetectorNode  # noqa: E402
 
 pytestmark = pytest.mark.ros
 
-LLR = {'window': 200, 'k_verif': 0, 'false_alarm_rate': 1.0e-5, 'noise_std': 0.0}
+LLR = {'window': 200, 'k_verif': 'auto', 'false_alarm_rate': 1.0e-5,
+       'noise_std': 'auto'}
 RATE_HZ = 4.0
 
 

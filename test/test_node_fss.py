@@ -10,12 +10,13 @@ from rclpy.parameter import Parameter
 from ros_harness import Collector, RosWorld
 from sensor_msgs.msg import JointState
 
-from rwa_monitor.core.fss.pipeline import diagnose, FssConfig, load_model
+from rwa_monitor.core.fss.pipeline import diagnose, FssConfig
 from rwa_monitor.exceptions import ConfigError
 from rwa_monitor.nodes import fss_diagnoser, messages
 from rwa_monitor.nodes.common import DIAGNOSTICS_QOS, EVENTS_QOS
 from rwa_monitor.nodes.fss_diagnoser import FssDiagnoserNode
 from rwa_monitor.sim.fss import simulate_fss
+from rwa_monitor.telemetry.fss_model import load_model
 
 pytestmark = pytest.mark.ros
 
@@ -123,7 +124,7 @@ def test_parameters(repo_root):
             _node(world, model='/nonexistent/model.json')
         node = world.node(FssDiagnoserNode, cli_args=[
             '--ros-args', '--params-file', str(repo_root / 'config' / 'rwa_monitor.yaml')])
-        assert node.params['window_length'] == 80_000 and node._config.window == 20
+        assert node.params['window_length'] == 80_000 and node._config.wglr_window == 20
         result = node.set_parameters([Parameter('beam', value=0)])[0]
         assert not result.successful and 'beam' in result.reason
         assert node.set_parameters([Parameter('beam', value=64)])[0].successful

@@ -140,7 +140,7 @@ def test_out_of_order_and_bad_messages_are_counted():
         for t, q in rows:
             detector.on_star_tracker(messages.quaternion(t, q))
             detector.on_gyro(messages.imu(t, [0.0, 0.0, 0.0]))
-        c = detector.detector.counters()
+        c = detector.detector.counters
         assert detector.samples == 6
         assert c['out_of_order'] == 1 and c['invalid_quaternions'] == 2
         assert c['accepted'] == 2          # 1.25 and 2.0 (the first has no rate yet)

@@ -20,7 +20,8 @@ from rwa_monitor.telemetry import read_telemetry, write_telemetry
 
 pytestmark = pytest.mark.ros
 
-CONFIG = {'window': 200, 'k_verif': 0, 'false_alarm_rate': 1.0e-5, 'noise_std': 0.0}
+CONFIG = {'window': 200, 'k_verif': 'auto', 'false_alarm_rate': 1.0e-5,
+          'noise_std': 'auto'}
 
 
 def _seeded(tmp_path, n=3000):
@@ -131,8 +132,10 @@ def test_parameters_from_yaml_file(tmp_path, repo_root):
         assert node.get_parameter('use_sim_time').value is True
         assert node.params['window'] == 123 and node.params['k_verif'] == 7
         assert node.params['false_alarm_rate'] == 1.0e-3
-        assert node._kwargs == {'window': 123, 'k_verif': 7, 'false_alarm_rate': 1.0e-3,
-                                'noise_std': 2.5e-5}
+        kwargs = {k: node._kwargs[k] for k in ('window', 'k_verif', 'false_alarm_rate',
+                                               'noise_std')}
+        assert kwargs == {'window': 123, 'k_verif': 7, 'false_alarm_rate': 1.0e-3,
+                          'noise_std': 2.5e-5}
         assert node._allowed == {'rw1', 'rw3'}
         shipped = world.node(LLRDetectorNode, cli_args=[
             '--ros-args', '--params-file', str(repo_root / 'config' / 'rwa_monitor.yaml')])

@@ -44,7 +44,8 @@ def test_replay_and_detector_processes_deliver_the_anomaly(tmp_path):
         anomalies=[Anomaly('rw2', 'dry', 150.0, delta_dry=3e-4)])
     path = tmp_path / 'seeded.csv'
     write_telemetry(path, tele)
-    config = {'window': 200, 'k_verif': 0, 'false_alarm_rate': 1.0e-5, 'noise_std': 0.0}
+    config = {'window': 200, 'k_verif': 'auto', 'false_alarm_rate': 1.0e-5,
+              'noise_std': 'auto'}
     expected = llr.run(read_telemetry(path), config)
     assert expected
     with RosWorld() as world:

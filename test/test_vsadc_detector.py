@@ -67,7 +67,7 @@ def test_star_tracker_lost_on_a_healthy_gyro_never_becomes_a_fault():
     tele.attitude[2000:] = np.nan
     events, det = _events(tele)
     assert events == [] and det.held == len(tele) - 2000 + 1
-    assert det.counters()['invalid_quaternions'] == len(tele) - 2000
+    assert det.counters['invalid_quaternions'] == len(tele) - 2000
 
 
 def test_bad_quaternions_and_out_of_order_rows_are_counted_and_harmless(medium):
@@ -93,7 +93,7 @@ def test_bad_quaternions_and_out_of_order_rows_are_counted_and_harmless(medium):
     healthy.gyro[800, 1] = np.inf
     events, det = _events(healthy)
     assert events == []
-    c = det.counters()
+    c = det.counters
     assert c['invalid_quaternions'] == 3 and c['bad_gyro'] == 1
     assert c['accepted'] + c['held'] + c['bad_gyro'] + c['out_of_order'] == len(healthy)
 

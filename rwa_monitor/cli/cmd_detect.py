@@ -1,9 +1,9 @@
 """``rwa-monitor detect FILE``: run every detector whose input columns the file has.
 
 Each module of :mod:`rwa_monitor.pipelines` whose ``applies(tele)`` is true runs with the
-parameters of its node: the ``/**`` block of the YAML file overlaid with the module's
-``NODE`` block (``<name>_detector`` if the module names none), ``ros__parameters`` in both,
-so one file configures the nodes and the command line alike. A pipeline with
+parameters of its node (its ``SCHEMA``): the ``/**`` block of the YAML file overlaid with
+the node's block, read and checked by :mod:`rwa_monitor.telemetry.parameters_file`, so
+one file configures the nodes and the command line alike. A pipeline with
 ``run_with_summary`` also reports per-component facts (samples, rejected-sample counters,
 run time); events are sorted by estimated change time. A bad parameter value is a
 ConfigError naming the pipeline and the parameter (exit code 2).
@@ -15,17 +15,13 @@ import argparse
 import json
 import pathlib
 import sys
-import time
 from typing import Any
 
-import yaml
-
-from rwa_monitor import paths, pipelines
 from rwa_monitor.core.events import AnomalyEvent
-from rwa_monitor.exceptions import ConfigError
-from rwa_monitor.telemetry import read_telemetry, Telemetry
-
-SHARED_BLOCK = '/**'
+from rwa_monitor.core.schema import help_text, LLR, SCHEMAS, VSADC
+from rwa_monitor.pipelines import detect
+from rwa_monitor.telemetry import read_telemetry
+from rwa_monitor.telemetry.parameters_file import block_values, read_parameters_file
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -34,7 +30,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         'detect', help='detect anomalies in a telemetry file (events JSON)',
         description='Run every detector whose input columns the telemetry file has; '
                     'write the events JSON ({"events": [...], "summary": {...}}) or print '
-                    'a table. Times are seconds of the file, torques N m.')
+                    'a table. Times are seconds of the file, torques N m.',
+        epilog=f'{help_text(LLR)}\n{help_text(VSADC)}',
+        formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument('file', type=pathlib.Path, help='telemetry file (.csv or .mcap)')
     parser.add_argument('--config', type=pathlib.Path, metavar='YAML',
                         help='parameters file in the node format (node blocks with '
@@ -49,72 +47,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def load_config(path: pathlib.Path | None) -> dict[str, Any]:
     """Return the node blocks of a parameters YAML file (the installed one by default)."""
-    if path is None:
-        try:
-            path = paths.config_file()
-        except FileNotFoundError:
-            return {}
-    try:
-        data = yaml.safe_load(pathlib.Path(path).read_text())
-    except OSError as err:
-        raise ConfigError(f'{path}: cannot read: {err.strerror}') from None
-    except yaml.YAMLError as err:
-        raise ConfigError(f'{path}: not valid YAML: {err}') from None
-    if data is None:
-        return {}
-    if not isinstance(data, dict):
-        raise ConfigError(f'{path}: expected a mapping of node blocks')
-    return data
+    return read_parameters_file(path)
 
 
 def node_parameters(config: dict[str, Any], node: str) -> dict[str, Any]:
-    """Return the shared ``/**`` parameters overlaid with the node's own block."""
-    params: dict[str, Any] = {}
-    for block in (SHARED_BLOCK, node):
-        values = (config.get(block) or {}).get('ros__parameters') or {}
-        if not isinstance(values, dict):
-            raise ConfigError(f'{block}: ros__parameters must be a mapping')
-        params.update(values)
-    return params
-
-
-def detect(tele: Telemetry, config: dict[str, Any]) -> tuple[list[AnomalyEvent], dict]:
-    """Run every applicable pipeline; return (events sorted by time, summary)."""
-    events: list[AnomalyEvent] = []
-    summary: dict[str, Any] = {'samples': len(tele), 'source': tele.source, 'pipelines': {}}
-    for name, module in sorted(pipelines.available().items()):
-        if not module.applies(tele):
-            continue
-        params = node_parameters(config, getattr(module, 'NODE', f'{name}_detector'))
-        start = time.perf_counter()
-        try:
-            if hasattr(module, 'run_with_summary'):
-                found, components = module.run_with_summary(tele, params)
-            else:
-                found, components = module.run(tele, params), {}
-        except ValueError as err:
-            raise ConfigError(f'{name}: {err}') from None
-        _count_kinds(found, components)
-        summary['pipelines'][name] = {'events': len(found), 'components': components,
-                                      'runtime_s': time.perf_counter() - start}
-        events.extend(found)
-    events.sort(key=lambda e: (e.time, e.component, e.revision))
-    summary['events'] = len(events)
-    return events, summary
-
-
-def _count_kinds(events: list[AnomalyEvent], components: dict[str, Any]) -> None:
-    """Add per component the number of changes and their kinds (latest revision)."""
-    latest: dict[tuple[str, int], AnomalyEvent] = {}
-    for e in events:
-        key = (e.component, e.index)
-        if key not in latest or e.revision >= latest[key].revision:
-            latest[key] = e
-    for (component, _), e in sorted(latest.items()):
-        entry = components.setdefault(component, {})
-        entry['changes'] = entry.get('changes', 0) + 1
-        kinds = entry.setdefault('by_kind', {})
-        kinds[e.kind] = kinds.get(e.kind, 0) + 1
+    """Return the checked parameters of ``node``: its block over ``/**``, defaults filled."""
+    return block_values(config, SCHEMAS[node])
 
 
 def run(args: argparse.Namespace) -> int:
@@ -124,7 +62,7 @@ def run(args: argparse.Namespace) -> int:
     if args.friction_model is not None:
         block = config.setdefault('llr_detector', {}).setdefault('ros__parameters', {})
         block['friction_model_file'] = str(args.friction_model)
-    events, summary = detect(tele, config)
+    events, summary = detect(tele, config, args.config or 'installed parameters')
     if args.output is not None:
         document = {'events': [e.to_json() for e in events], 'summary': summary}
         args.output.write_text(json.dumps(document, indent=2) + '\n')

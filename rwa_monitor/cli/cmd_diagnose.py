@@ -4,14 +4,13 @@ from __future__ import annotations
 
 import argparse
 import json
-import pathlib
 
 import numpy as np
 
+from rwa_monitor.core.schema import FSS, fss_config, help_text
 from rwa_monitor.exceptions import ConfigError, RwaMonitorError
 from rwa_monitor.telemetry import read_telemetry
-
-NODE_BLOCK = 'fss_diagnoser'
+from rwa_monitor.telemetry.parameters_file import load_block
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -20,45 +19,33 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         'diagnose', help='window diagnosis of every wheel (FSS paper: dry, viscous, fss1, '
                          'fss2)',
         description='Run the four-stage FSS window diagnoser on the whole file, per wheel, '
-                    'and write the JSON of DESIGN.md (docs/fss.md).')
+                    'and write the JSON of DESIGN.md (docs/fss.md).',
+        epilog=help_text(FSS), formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument('file', help='telemetry file (.csv or .mcap)')
     parser.add_argument('-o', '--output', required=True, help='output JSON file')
     parser.add_argument('--model', default=None,
                         help='classifier model (default: the shipped one)')
     parser.add_argument('--params-file', default=None,
-                        help='YAML with a fss_diagnoser block (default config/rwa_monitor.yaml)')
+                        help='parameters file with a fss_diagnoser block (default: the '
+                             'installed config/rwa_monitor.yaml)')
     parser.add_argument('--last', type=int, default=None, metavar='N',
                         help='diagnose only the last N samples of each wheel')
     parser.set_defaults(func=run)
 
 
 def load_params(path: str | None) -> dict:
-    """Return the fss_diagnoser parameters of a YAML params file (empty if none)."""
-    import yaml
-
-    from rwa_monitor.paths import config_file
-    try:
-        file = pathlib.Path(path) if path else config_file()
-    except FileNotFoundError:
-        return {}
-    try:
-        data = yaml.safe_load(file.read_text()) or {}
-    except (OSError, yaml.YAMLError) as err:
-        raise ConfigError(f'{file}: {err}') from None
-    block = data.get(NODE_BLOCK, {}) if isinstance(data, dict) else {}
-    params = dict((block or {}).get('ros__parameters', {}))
-    if 'wglr_window' in params:  # the node's name for the wGLR half-window
-        params['window'] = params.pop('wglr_window')
-    return params
+    """Return the checked fss_diagnoser parameters of a parameters file (or the defaults)."""
+    return load_block(path, FSS)
 
 
 def run(args: argparse.Namespace) -> int:
     """Diagnose each wheel and write the JSON."""
-    from rwa_monitor.core.fss.pipeline import diagnose, FssConfig, load_model
+    from rwa_monitor.core.fss.pipeline import diagnose
+    from rwa_monitor.telemetry.fss_model import load_model
+    params = load_params(args.params_file)
     try:
-        params = load_params(args.params_file)
-        config = FssConfig.from_dict(params)
-        model = load_model(args.model or params.get('model') or None)
+        config = fss_config(params)
+        model = load_model(args.model or params['model'] or None)
     except (ValueError, OSError) as err:
         raise ConfigError(str(err)) from None
     tele = read_telemetry(args.file)
@@ -68,7 +55,7 @@ def run(args: argparse.Namespace) -> int:
             continue
         sl = slice(-args.last, None) if args.last else slice(None)
         speed, friction, time = wheel.speed[sl], wheel.friction[sl], tele.time[sl]
-        if np.count_nonzero(np.isfinite(speed) & np.isfinite(friction)) < 4 * config.window:
+        if np.count_nonzero(np.isfinite(speed) & np.isfinite(friction)) < 4 * config.wglr_window:
             wheels[wheel_id] = {'error': 'too few finite samples for a diagnosis'}
             continue
         wheels[wheel_id] = diagnose(speed, friction, time, model, config)

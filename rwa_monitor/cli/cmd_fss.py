@@ -8,7 +8,9 @@ import sys
 
 import numpy as np
 
+from rwa_monitor.core.fss.classify import detection_matrix, train_model
 from rwa_monitor.exceptions import ConfigError
+from rwa_monitor.telemetry.fss_model import save_model
 
 DEFAULT_DATASET = 'data/generated/fss'
 
@@ -70,26 +72,6 @@ def _items(dataset: str) -> list[dict]:
         raise ConfigError(str(err)) from None
 
 
-def train_model(items: list[dict], *, bins: int = 20, c: float = 1.0, seed: int = 0,
-                use: str = 'both'):
-    """Return a WindowClassifier trained on extraction items."""
-    from rwa_monitor.core.fss.classify import WindowClassifier
-    return WindowClassifier.fit([it['features'] for it in items],
-                                [it['status'] for it in items], bins=bins, c=c, seed=seed,
-                                use=use)
-
-
-def detection_matrix(classifier, items: list[dict]) -> dict[str, dict[str, float]]:
-    """Return status -> anomaly -> fraction of that status's windows flagged."""
-    out: dict[str, dict[str, list[bool]]] = {}
-    for it in items:
-        flags = classifier.predict(it['features'])
-        row = out.setdefault(it['status'], {k: [] for k in flags})
-        for k, v in flags.items():
-            row[k].append(v)
-    return {st: {k: float(np.mean(v)) for k, v in row.items()} for st, row in out.items()}
-
-
 def _train(args: argparse.Namespace) -> int:
     items = _items(args.dataset)
     if not 0.0 < args.train_fraction <= 1.0:
@@ -104,13 +86,13 @@ def _train(args: argparse.Namespace) -> int:
         raise ConfigError(str(err)) from None
     model.spec['trained_on'] = {'dataset': str(args.dataset), 'windows': n_train,
                                 'seed': args.seed}
-    model.save(args.output)
+    save_model(model, args.output)
     print(f'model trained on {n_train} windows written to {args.output}')
     return 0
 
 
 def _evaluate(args: argparse.Namespace) -> int:
-    from rwa_monitor.core.fss.pipeline import load_model
+    from rwa_monitor.telemetry.fss_model import load_model
     try:
         model = load_model(args.model)
     except (OSError, ValueError) as err:

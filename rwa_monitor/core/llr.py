@@ -21,7 +21,7 @@ from rwa_monitor.core.events import AnomalyEvent
 from rwa_monitor.core.friction import coulomb_viscous, RegressorSet
 from rwa_monitor.core.gchi2 import (gchi2_logsf_general, log_lower_bound, log_sf2,
                                     log_sf2_t, skip_threshold)
-from rwa_monitor.core.params import check_int, check_real
+from rwa_monitor.core.params import AUTO, check_int, check_real
 
 COUNTER_NAMES = ('nonfinite', 'out_of_range', 'non_increasing_time', 'missing_aux',
                  'ill_conditioned')
@@ -29,14 +29,18 @@ _LN10 = math.log(10.0)
 
 
 def validate_parameters(component: str = 'rw1', *, window: int = 500,
-                        k_verif: int | None = None, false_alarm_rate: float = 1e-5,
-                        noise_std: float | None = None,
+                        k_verif: int | str | None = AUTO, false_alarm_rate: float = 1e-5,
+                        noise_std: float | str | None = AUTO,
                         regressors: RegressorSet | None = None,
                         min_excitation: float = 1e-6, category_level: float = 1e-3,
                         category_revisions: int = 3, refine_change: bool = True,
                         max_abs_speed: float = 1e6, max_abs_friction: float = 1e6
                         ) -> dict[str, Any]:
-    """Check the detector's keyword parameters; return them normalised (ValueError if bad)."""
+    """Check the detector's keyword parameters; return them normalised (ValueError if bad).
+
+    ``k_verif`` and ``noise_std`` :data:`AUTO` (core/schema.py) become ``window // 2`` and
+    None (estimated) in the returned mapping.
+    """
     if not isinstance(component, str) or not component:
         raise ValueError(f'component must be a non-empty string, got {component!r}')
     if regressors is None:
@@ -45,10 +49,12 @@ def validate_parameters(component: str = 'rw1', *, window: int = 500,
         raise ValueError(f'regressors must be a RegressorSet or None, got {regressors!r}')
     p = regressors.p
     window = check_int('window', window, max(10, p + 2))
-    if k_verif is None:
+    if k_verif is None or k_verif == AUTO:
         k_verif = window // 2
     k_verif = check_int('k_verif', k_verif, 0, window - 1)
     r = check_real('false_alarm_rate', false_alarm_rate, 0.0, 1.0, True, True)
+    if noise_std == AUTO:
+        noise_std = None
     if noise_std is not None:
         noise_std = check_real('noise_std', noise_std, 0.0, math.inf, True, True)
     min_excitation = check_real('min_excitation', min_excitation, 0.0, 1.0, False, True)
@@ -129,10 +135,10 @@ def checkpoints(start: int, n: int, count: int, window: int) -> list[int]:
 class LLRDetector:
     """Streaming LLR detector of friction changes for one wheel (Algorithm 1).
 
-    Keyword parameters: ``window`` w (look-ahead samples, >= 10), ``k_verif``
-    (verification samples, default ``window // 2``, in ``[0, window - 1]``),
-    ``false_alarm_rate`` r in (0, 1), ``noise_std`` (N m; None: estimated from the
-    reference fit), ``regressors`` (a RegressorSet; None: the paper's eq. (1)),
+    Keyword parameters (core/schema.py LLR, docs/parameters.md): ``window`` w (look-ahead
+    samples, >= 10), ``k_verif`` (verification samples in ``[0, window - 1]``; ``'auto'``:
+    ``window // 2``), ``false_alarm_rate`` r in (0, 1), ``noise_std`` (N m; ``'auto'``:
+    estimated from the reference fit), ``regressors`` (a RegressorSet; None: the paper's eq. (1)),
     ``min_excitation`` (smallest ``det(corr(Pi_P))``, in [0, 1): below it the test is
     skipped and counted), ``category_level`` (level of each dry / viscous test, default
     1e-3; None: r),
@@ -143,8 +149,18 @@ class LLRDetector:
     index (number of ``update`` calls before that sample since construction or reset).
     """
 
-    def __init__(self, component: str = 'rw1', **params: Any):
-        self._cfg = validate_parameters(component, **params)
+    def __init__(self, component: str = 'rw1', *, window: int = 500,
+                 k_verif: int | str = AUTO, false_alarm_rate: float = 1e-5,
+                 noise_std: float | str = AUTO, regressors: RegressorSet | None = None,
+                 min_excitation: float = 1e-6, category_level: float = 1e-3,
+                 category_revisions: int = 3, refine_change: bool = True,
+                 max_abs_speed: float = 1e6, max_abs_friction: float = 1e6) -> None:
+        self._cfg = validate_parameters(
+            component, window=window, k_verif=k_verif, false_alarm_rate=false_alarm_rate,
+            noise_std=noise_std, regressors=regressors, min_excitation=min_excitation,
+            category_level=category_level, category_revisions=category_revisions,
+            refine_change=refine_change, max_abs_speed=max_abs_speed,
+            max_abs_friction=max_abs_friction)
         cfg = self._cfg
         self._component = cfg['component']
         self._w = cfg['window']
@@ -166,6 +182,16 @@ class LLRDetector:
     def parameters(self) -> dict[str, Any]:
         """Validated keyword parameters, defaults filled in."""
         return dict(self._cfg)
+
+    @property
+    def params(self) -> dict[str, Any]:
+        """Validated keyword parameters (the detector protocol's name, core/protocol.py)."""
+        return dict(self._cfg)
+
+    @property
+    def last_event(self) -> AnomalyEvent | None:
+        """The latest event returned by :meth:`update` (declaration or revision), or None."""
+        return self._last_event
 
     @property
     def component(self) -> str:
@@ -274,6 +300,7 @@ class LLRDetector:
         self._checks: list[int] = []
         self._cat: dict[str, Any] | None = None
         self._checkpoint = -1
+        self._last_event: AnomalyEvent | None = None
 
     def update(self, t: float, speed: float, friction: float,
                aux: Mapping[str, float] | None = None) -> list[AnomalyEvent]:
@@ -460,6 +487,7 @@ class LLRDetector:
         times = (self._rtime[tau % L], self._rtime[n % L])
         event = make_event(self._component, kind, rows, times, self._logpmin, dx, z, s2, 0,
                            confirmed)
+        self._last_event = event
         self._cat = dict(before=prefix[tau - first].copy(), n_before=tau - c, kind=kind,
                          confirmed=confirmed, revision=0, rows=rows, time=times[0],
                          log_p=self._logpmin, start=tau,
@@ -508,8 +536,9 @@ class LLRDetector:
         cat['revision'] += 1
         rows = cat['rows'][:2] + (self._rrow[j % self._L],)
         times = (cat['time'], self._rtime[j % self._L])
-        return [make_event(self._component, kind, rows, times, cat['log_p'], dx, z, s2,
-                           cat['revision'], confirmed)]
+        self._last_event = make_event(self._component, kind, rows, times, cat['log_p'], dx,
+                                      z, s2, cat['revision'], confirmed)
+        return [self._last_event]
 
     # -- general model (p > 2): numpy per sample -------------------------------------
     def _update_general(self, row: int, t: float, f: float, h: np.ndarray

@@ -5,6 +5,9 @@ from __future__ import annotations
 import math
 import numbers
 
+# The one spelling of an automatic value, in Python, YAML and ROS parameters alike.
+AUTO = 'auto'
+
 
 def _interval(low: float, high: float, low_open: bool, high_open: bool) -> str:
     return f'{"(" if low_open else "["}{low:g}, {high:g}{")" if high_open else "]"}'

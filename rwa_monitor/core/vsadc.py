@@ -41,7 +41,7 @@ from typing import Any, Sequence
 from rwa_monitor.core import keys
 from rwa_monitor.core.attitude import StarTrackerRate
 from rwa_monitor.core.events import AnomalyEvent
-from rwa_monitor.core.params import check_choice, check_int, check_real
+from rwa_monitor.core.params import AUTO, check_choice, check_int, check_real
 
 HEALTHY, DRIFT, BIAS = 0, 1, 2
 STATE_NAMES = keys.GYRO_STATES
@@ -129,20 +129,22 @@ class VsadcAxis:
     """
 
     def __init__(self, *, window: int = 200, distance_threshold: float = 1.5e-5,
-                 sigma_window: int | None = None, reference_window: int | None = 1200,
+                 sigma_window: int | str = AUTO, reference_window: int | str = 1200,
                  margin: float = 1.5, exit_limit: str = 'max', exit_margin: float = 1.25,
                  hold: int = 1, nominal_tracking: int = 0,
                  freeze_fraction: float = 0.5, adaptive: bool = True,
                  recovery_fraction: float = 0.75) -> None:
         self.window = check_int('window', window, 2, 100_000)
         self.sigma_window = check_int(
-            'sigma_window', self.window if sigma_window is None else sigma_window, 2, 100_000)
+            'sigma_window', self.window if sigma_window in (None, AUTO) else sigma_window, 2,
+            100_000)
         self.exit_limit = check_choice('exit_limit', exit_limit, ('mean', 'max'))
         self.exit_margin = check_real('exit_margin', exit_margin, 0.0, low_open=True)
         self.distance_threshold = check_real('distance_threshold', distance_threshold, 0.0,
                                              low_open=True)
         self.reference_window = check_int(
-            'reference_window', self.window if reference_window is None else reference_window,
+            'reference_window',
+            self.window if reference_window in (None, AUTO) else reference_window,
             1, 1_000_000)
         self.margin = check_real('margin', margin, 0.0, low_open=True)
         self.hold = check_int('hold', hold, 1, 100_000)
@@ -350,15 +352,28 @@ class VsadcDetector:
     labels, so a star tracker that stops cannot turn into a drift.
     """
 
-    def __init__(self, *, max_gap: float = 1.0, norm_tolerance: float = 0.1,
-                 axes: Sequence[str] = AXES, **axis_parameters: Any) -> None:
-        """Build one :class:`VsadcAxis` per axis with ``axis_parameters`` (its keywords)."""
+    def __init__(self, *, window: int = 200, distance_threshold: float = 1.5e-5,
+                 sigma_window: int | str = AUTO, reference_window: int | str = 1200,
+                 margin: float = 1.5, exit_limit: str = 'max', exit_margin: float = 1.25,
+                 hold: int = 1, nominal_tracking: int = 0, freeze_fraction: float = 0.5,
+                 adaptive: bool = True, recovery_fraction: float = 0.75,
+                 max_gap: float = 1.0, norm_tolerance: float = 0.1,
+                 axes: Sequence[str] = AXES) -> None:
+        """Build one :class:`VsadcAxis` per axis (core/schema.py VSADC has the meanings)."""
+        axis_parameters = dict(
+            window=window, distance_threshold=distance_threshold, sigma_window=sigma_window,
+            reference_window=reference_window, margin=margin, exit_limit=exit_limit,
+            exit_margin=exit_margin, hold=hold, nominal_tracking=nominal_tracking,
+            freeze_fraction=freeze_fraction, adaptive=adaptive,
+            recovery_fraction=recovery_fraction)
         bad = [a for a in axes if a not in AXES]
         if bad or not axes:
             raise ValueError(f'axes must be a non-empty subset of x, y, z; got {axes!r}')
         self.axes = tuple(axes)
         self._index = [AXES.index(a) for a in self.axes]
         self._axis_kwargs = axis_parameters
+        self._params = {'max_gap': max_gap, 'norm_tolerance': norm_tolerance,
+                        'axes': self.axes, **axis_parameters}
         self.channels = [VsadcAxis(**self._axis_kwargs) for _ in self.axes]
         self.star_tracker = StarTrackerRate(max_gap=max_gap, norm_tolerance=norm_tolerance)
         self.reset()
@@ -374,14 +389,21 @@ class VsadcDetector:
         self.bad_gyro = 0
         self.out_of_order = 0
         self._last_time = -math.inf
+        self.last_event: AnomalyEvent | None = None
 
     @property
     def states(self) -> dict[str, int]:
         """Return axis -> current label."""
         return {a: ch.state for a, ch in zip(self.axes, self.channels)}
 
+    @property
+    def params(self) -> dict[str, Any]:
+        """The keyword parameters given (axis ones included; defaults are VsadcAxis's)."""
+        return dict(self._params)
+
+    @property
     def counters(self) -> dict[str, int]:
-        """Return the bad-input counters: rows seen, accepted, held and rejected by cause."""
+        """Rows seen, accepted, held and rejected by cause."""
         st = self.star_tracker
         return {'rows': self.rows, 'accepted': self.accepted, 'held': self.held,
                 'bad_gyro': self.bad_gyro, 'out_of_order': self.out_of_order,
@@ -419,6 +441,8 @@ class VsadcDetector:
             tr = ch.update(r[i] - rate[i], r[i] - g[i], stamp)
             if tr is not None:
                 events.append(make_event(axis, tr))
+        if events:
+            self.last_event = events[-1]
         return events
 
 

@@ -4,8 +4,10 @@ The API (documented in docs/nodes.md):
 
 - QoS: :func:`telemetry_qos`, :data:`EVENTS_QOS`, :data:`DIAGNOSTICS_QOS`,
   :data:`CLOCK_QOS`; :func:`qos_event_callbacks` logs incompatible-QoS peers once.
-- Parameters: :class:`ParamSpec` (name, default, description, range or choices, read-only)
-  and :func:`declare_parameters`, which declares each with a ParameterDescriptor, validates
+- Parameters: the core schema's :class:`~rwa_monitor.core.schema.Param` (alias
+  :data:`ParamSpec`), :func:`descriptor` (its ParameterDescriptor),
+  :func:`refuse_unknown_overrides`, and :func:`declare_parameters`, which declares each
+  with its ParameterDescriptor, validates
   the start-up values (ConfigError naming the parameter) and rejects bad values at run time
   with a reason naming the parameter. The returned :class:`Parameters` mapping always holds
   the current values.
@@ -18,11 +20,9 @@ The API (documented in docs/nodes.md):
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-import math
 import sys
 import time
-from typing import Any, Callable, Iterator, Mapping, Sequence
+from typing import Any, Callable, Iterator, Mapping, NamedTuple, Sequence
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
@@ -38,7 +38,8 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-from rwa_monitor.core.params import check_choice, check_int, check_real
+from rwa_monitor.core.params import AUTO
+from rwa_monitor.core.schema import Param, Schema, SCHEMAS, SHARED_NAMES
 from rwa_monitor.exceptions import ConfigError
 
 # --------------------------------------------------------------------------------- QoS
@@ -106,78 +107,63 @@ def qos_event_callbacks(node: Node, topic: str, publisher: bool = False
 
 _BIG = sys.float_info.max
 
+# A node parameter is a core schema parameter (core/schema.py): one definition for the
+# node, the file commands, the docs and the shipped YAML.
+ParamSpec = Param
 
-@dataclass(frozen=True)
-class ParamSpec:
-    """One node parameter: its default, meaning, allowed values and mutability.
 
-    The ROS type is the type of ``default`` (bool, int, float, str or list of str). Numbers
-    are limited to ``[low, high]`` (``low_open``/``high_open`` exclude an end point);
-    strings may be limited to ``choices``; ``validate`` adds a check of its own (raise
-    ValueError naming the parameter). ``read_only`` parameters are set at start-up only.
+def descriptor(spec: Param) -> ParameterDescriptor:
+    """Return the ParameterDescriptor of a schema parameter: description, range, read-only.
+
+    Typed by :meth:`Param.check`, not by ROS (``dynamic_typing``), so that a value of the
+    wrong type is refused with a reason naming the parameter, an integer written for a
+    float parameter (rate: 40) is accepted as 40.0, a float written without a dot (1e-5,
+    read as a string) is accepted, and ``auto`` is accepted where the schema allows it.
     """
+    text = spec.description
+    if spec.unit:
+        text += f' Unit: {spec.unit}.'
+    if spec.choices:
+        text += f' One of: {", ".join(spec.choices)}.'
+    if spec.auto:
+        text += f' Or {AUTO}.'
+    desc = ParameterDescriptor(name=spec.name, description=text, read_only=spec.read_only,
+                               dynamic_typing=True)
+    kind = spec.type
+    if kind is float and (spec.low is not None or spec.high is not None):
+        desc.floating_point_range = [FloatingPointRange(
+            from_value=-_BIG if spec.low is None else float(spec.low),
+            to_value=_BIG if spec.high is None else float(spec.high), step=0.0)]
+    elif kind is int and (spec.low is not None or spec.high is not None):
+        desc.integer_range = [IntegerRange(
+            from_value=-2 ** 63 if spec.low is None else int(spec.low),
+            to_value=2 ** 63 - 1 if spec.high is None else int(spec.high), step=1)]
+    if spec.choices:
+        desc.additional_constraints = 'one of: ' + ', '.join(spec.choices)
+    elif spec.allowed():
+        desc.additional_constraints = spec.allowed()
+    return desc
 
-    name: str
-    default: Any
-    description: str
-    low: float | None = None
-    high: float | None = None
-    low_open: bool = False
-    high_open: bool = False
-    choices: tuple[str, ...] | None = None
-    read_only: bool = False
-    validate: Callable[[Any], Any] | None = None
 
-    def check(self, value: Any) -> Any:
-        """Return ``value`` if allowed, else raise ValueError naming the parameter."""
-        kind = type(self.default)
-        if kind is bool:
-            if not isinstance(value, bool):
-                raise ValueError(f'{self.name} must be true or false, got {value!r}')
-        elif kind is int:
-            value = check_int(self.name, value,
-                              None if self.low is None else int(self.low),
-                              None if self.high is None else int(self.high))
-        elif kind is float:
-            value = check_real(self.name, value,
-                               -math.inf if self.low is None else self.low,
-                               math.inf if self.high is None else self.high,
-                               self.low_open, self.high_open)
-        elif kind is str:
-            if not isinstance(value, str):
-                raise ValueError(f'{self.name} must be a string, got {value!r}')
-            if self.choices is not None:
-                check_choice(self.name, value, self.choices)
-        elif kind is list:
-            if not all(isinstance(v, str) for v in value):
-                raise ValueError(f'{self.name} must be a list of strings, got {value!r}')
-            value = list(value)
-        if self.validate is not None:
-            self.validate(value)
-        return value
+_ROS_TYPES = {bool: Parameter.Type.BOOL, int: Parameter.Type.INTEGER,
+              float: Parameter.Type.DOUBLE, str: Parameter.Type.STRING,
+              list: Parameter.Type.STRING_ARRAY}
 
-    def descriptor(self) -> ParameterDescriptor:
-        """Return the ParameterDescriptor: description, range, read-only flag."""
-        text = self.description
-        if self.choices:
-            text += f' One of: {", ".join(self.choices)}.'
-        # Typed by check(), so that a value of the wrong type is refused with a reason
-        # naming the parameter (ROS's own type check does not name it) and an integer
-        # written for a float parameter (rate: 40) is accepted as 40.0.
-        desc = ParameterDescriptor(name=self.name, description=text,
-                                   read_only=self.read_only, dynamic_typing=True)
-        kind = type(self.default)
-        if kind is float and (self.low is not None or self.high is not None):
-            desc.floating_point_range = [FloatingPointRange(
-                from_value=-_BIG if self.low is None else float(self.low),
-                to_value=_BIG if self.high is None else float(self.high), step=0.0)]
-        elif kind is int and (self.low is not None or self.high is not None):
-            desc.integer_range = [IntegerRange(
-                from_value=-2 ** 63 if self.low is None else int(self.low),
-                to_value=2 ** 63 - 1 if self.high is None else int(self.high), step=1)]
-        if self.choices:
-            desc.additional_constraints = 'one of: ' + ', '.join(self.choices)
-        return desc
+
+def refuse_unknown_overrides(node: Node, schema: Schema) -> None:
+    """Raise ConfigError for a parameter given to ``node`` that no schema knows.
+
+    ROS ignores such a parameter silently; the file commands refuse it, so the node does
+    too, naming the nearest valid name. A name of another node's schema may come from a
+    ``/**`` block and is left alone, as the file commands do.
+    """
+    given = getattr(node, '_parameter_overrides', {})
+    known = set(SHARED_NAMES).union(*(s.names() for s in SCHEMAS.values()))
+    for name in given:
+        if name in known or name.startswith('qos_overrides.'):
+            continue
+        raise ConfigError(f'{node.get_name()}: unknown parameter {name!r}'
+                          f'{schema.nearest(name)}')
 
 
 class Parameters(Mapping[str, Any]):
@@ -196,26 +182,36 @@ class Parameters(Mapping[str, Any]):
         return len(self._values)
 
 
-def declare_parameters(node: Node, specs: Sequence[ParamSpec],
+def declare_parameters(node: Node, specs: Sequence[Param],
                        on_change: Callable[[str, Any], None] | None = None,
                        check_all: Callable[[dict[str, Any]], None] | None = None
                        ) -> Parameters:
     """Declare ``specs`` on ``node``, validate them, and guard every later change.
 
     Start-up values (defaults, ``--params-file``, ``-p``) that break a spec raise
-    :class:`ConfigError` naming the parameter. At run time a set request with a bad value
-    is rejected with that reason; accepted values update the returned mapping, then
-    ``on_change(name, value)`` is called for each. ``check_all(values)`` checks rules
-    between parameters (raise ValueError naming one), at start-up and on every change.
+    :class:`ConfigError` naming the parameter; a ``required`` spec has no default (it is
+    declared typed but unset, and its value is None until given). At run time a set
+    request with a bad value is rejected with that reason; accepted values update the
+    returned mapping, then ``on_change(name, value)`` is called for each.
+    ``check_all(values)`` checks rules between parameters (raise ValueError naming one),
+    at start-up and on every change.
     """
     by_name = {spec.name: spec for spec in specs}
     values: dict[str, Any] = {}
     for spec in specs:
         try:
-            param = node.declare_parameter(spec.name, spec.default, spec.descriptor())
+            if spec.required:  # statically typed, so that it may stay unset
+                desc = descriptor(spec)
+                desc.dynamic_typing = False
+                param = node.declare_parameter(spec.name, _ROS_TYPES[spec.type], desc)
+            else:
+                param = node.declare_parameter(spec.name, spec.default, descriptor(spec))
         except (InvalidParameterValueException, InvalidParameterTypeException,
                 ParameterException) as err:
             raise ConfigError(f'parameter {spec.name}: {err}') from None
+        if spec.required and param.type_ == Parameter.Type.NOT_SET:
+            values[spec.name] = None
+            continue
         try:
             values[spec.name] = spec.check(param.value)
         except ValueError as err:
@@ -270,13 +266,20 @@ def wheel_names(text: str) -> set[str] | None:
     return names or None
 
 
+class Refusal(NamedTuple):
+    """Why a wheel is ignored: the input counter to increment and the log message."""
+
+    counter: str
+    message: str
+
+
 def wheel_refusal(wheel_id: str, allowed: set[str] | None, known: int,
-                  max_wheels: int) -> tuple[str, str] | None:
-    """Return (counter, message) if a new wheel must be ignored, else None."""
+                  max_wheels: int) -> Refusal | None:
+    """Return the refusal if a new wheel must be ignored, else None."""
     if allowed is not None and wheel_id not in allowed:
-        return 'unknown_wheel', f'ignoring wheel {wheel_id!r}: not in parameter wheels'
+        return Refusal('unknown_wheel', f'ignoring wheel {wheel_id!r}: not in parameter wheels')
     if known >= max_wheels:
-        return 'too_many_wheels', f'ignoring wheel {wheel_id!r}: max_wheels reached'
+        return Refusal('too_many_wheels', f'ignoring wheel {wheel_id!r}: max_wheels reached')
     return None
 
 

@@ -35,51 +35,22 @@ from sensor_msgs.msg import JointState
 
 from rwa_monitor.core import keys
 from rwa_monitor.core.events import AnomalyEvent
-from rwa_monitor.core.fss.pipeline import diagnose, FssConfig, load_model, SlidingWindow
+from rwa_monitor.core.fss.pipeline import diagnose, FssConfig, SlidingWindow
+from rwa_monitor.core.schema import FSS, fss_config
 from rwa_monitor.exceptions import ConfigError
 from rwa_monitor.nodes import common, messages
 from rwa_monitor.nodes.common import (declare_parameters, DiagnosticsPublisher, EVENTS_QOS,
-                                      OK, ParamSpec, qos_event_callbacks, run_node,
+                                      OK, qos_event_callbacks, run_node,
                                       telemetry_qos, WARN)
+from rwa_monitor.telemetry.fss_model import load_model
 
 NODE_NAME = 'fss_diagnoser'
 INPUT_ID = 'telemetry/wheels'
 DETECTOR = 'fss'
 
-# Node parameter -> FssConfig field.
-CONFIG_NAMES = {'wglr_window': 'window', 'w_bias': 'w_bias', 'viscous_prior': 'viscous_prior',
-                'p_false': 'p_false', 'dk_error': 'dk_error', 'beam': 'beam',
-                'torque_scale_nm': 'torque_scale_nm', 'speed_scale_rad_s': 'speed_scale_rad_s'}
-PARAMETERS = (
-    ParamSpec('window_length', 80_000, 'Samples per diagnosed window (the paper: ~80,000, a '
-              'few hours).', low=200, high=10_000_000, read_only=True),
-    ParamSpec('window_period', 20_000, 'Samples between two diagnoses of a wheel.', low=1,
-              high=10_000_000),
-    ParamSpec('wglr_window', 20, 'Half-window w of the changepoint statistic (samples).',
-              low=2, high=100_000),
-    ParamSpec('w_bias', 1.0e-4, 'Weight W_b of the viscous prior, eq. (11b).', low=0.0),
-    ParamSpec('viscous_prior', 1.0, 'Prior viscous coefficient f~v (normalised units).'),
-    ParamSpec('p_false', 1.0e-9, 'False-positive probability per sample of the changepoint '
-              'threshold.', low=0.0, high=1.0, low_open=True, high_open=True),
-    ParamSpec('dk_error', 10, 'Samples left out each side of a changepoint in the least '
-              'squares.', low=0, high=100_000),
-    ParamSpec('beam', 256, 'Most DP states kept per changepoint (assignment bound).', low=1,
-              high=1_000_000),
-    ParamSpec('torque_scale_nm', 2.0e-4, 'One normalised torque unit (N m).', low=0.0,
-              low_open=True),
-    ParamSpec('speed_scale_rad_s', 400.0, 'One normalised speed unit (rad/s).', low=0.0,
-              low_open=True),
-    ParamSpec('model', '', 'Classifier model file (JSON from `rwa-monitor fss train`); '
-              'empty = the shipped model.', read_only=True),
-    ParamSpec('wheels', '', 'Comma-separated wheel ids to monitor; empty = every wheel '
-              'seen (up to max_wheels).'),
-    ParamSpec('max_wheels', 16, 'Most wheels monitored at once (bounds memory).', low=1,
-              high=256, read_only=True),
-    ParamSpec('stale_timeout', 3.0, 'Seconds without telemetry before health is STALE.',
-              low=0.0, low_open=True, read_only=True),
-    ParamSpec('diagnostic_period', 1.0, 'Seconds between /diagnostics messages.',
-              low=0.01, high=60.0, read_only=True),
-)
+# Parameters: core/schema.py FSS (the diagnoser's and the node-only ones).
+CONFIG_NAMES = FSS.names(('all',))
+PARAMETERS = FSS.for_node()
 
 
 class _Wheel:
@@ -103,6 +74,7 @@ class FssDiagnoserNode(Node):
     def __init__(self, **kwargs: Any) -> None:
         """Create the node (``kwargs`` go to rclpy's Node: context, cli_args, ...)."""
         super().__init__(NODE_NAME, **kwargs)
+        common.refuse_unknown_overrides(self, FSS)
         self.params = declare_parameters(self, PARAMETERS, self._on_parameter,
                                          self._check_config)
         self._config = self._make_config(self.params)
@@ -136,7 +108,7 @@ class FssDiagnoserNode(Node):
     # ------------------------------------------------------------------- parameters
     @staticmethod
     def _make_config(values: Any) -> FssConfig:
-        return FssConfig(**{field: values[name] for name, field in CONFIG_NAMES.items()})
+        return fss_config(values)
 
     def _check_config(self, values: dict[str, Any]) -> None:
         self._make_config(values)

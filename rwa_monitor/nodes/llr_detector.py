@@ -5,7 +5,7 @@ KeyValues of ``AnomalyEvent.fields()``) and each wheel's health on ``/diagnostic
 every ``diagnostic_period`` s of the node clock: OK until an anomaly, then WARN (dry,
 viscous) or ERROR (both) with the kind and change time; STALE when telemetry stops; with
 the counters of rejected samples. The detector is :class:`rwa_monitor.core.llr.LLRDetector`
-with the keywords of :func:`rwa_monitor.pipelines.llr.detector_kwargs`, so the node, the
+with the keywords of :func:`rwa_monitor.core.schema.llr_kwargs`, so the node, the
 ``detect`` command and the benchmarks share one implementation and one parameter meaning.
 
 Bad input (docs/nodes.md): a message whose arrays differ in length is dropped; entries
@@ -29,42 +29,19 @@ from sensor_msgs.msg import JointState
 
 from rwa_monitor.core import keys
 from rwa_monitor.core.events import AnomalyEvent
+from rwa_monitor.core.schema import LLR, llr_kwargs
 from rwa_monitor.nodes import common, messages
 from rwa_monitor.nodes.common import (declare_parameters, DiagnosticsPublisher, EVENTS_QOS,
-                                      OK, ParamSpec, qos_event_callbacks, run_node,
+                                      OK, qos_event_callbacks, run_node,
                                       telemetry_qos)
-from rwa_monitor.pipelines.llr import detector_kwargs
 
 NODE_NAME = 'llr_detector'
 MAX_KEPT = 10_000  # events kept in memory for in-process users (demo, tests)
 INPUT_ID = 'telemetry/wheels'
 
-DETECTOR_PARAMETERS = ('window', 'k_verif', 'false_alarm_rate', 'noise_std')
-PARAMETERS = (
-    ParamSpec('window', 500, 'Samples after a candidate change used by the LLR test '
-              '(llr-realtime paper, Algorithm 1, w).', low=2, high=1_000_000),
-    ParamSpec('k_verif', 0, 'Verification samples before a declaration; 0 = window / 2.',
-              low=0, high=1_000_000),
-    ParamSpec('false_alarm_rate', 1.0e-5, 'Declare an anomaly when the nominal p-value is at '
-              'most this (per test).', low=0.0, high=1.0, low_open=True, high_open=True),
-    ParamSpec('noise_std', 0.0, 'Friction noise standard deviation (N m); 0 = estimate it '
-              'from the data.', low=0.0),
-    ParamSpec('wheels', '', 'Comma-separated wheel ids to monitor; empty = every wheel '
-              'seen on telemetry/wheels (up to max_wheels).'),
-    ParamSpec('max_wheels', 16, 'Most wheels monitored at once (bounds memory).', low=1,
-              high=256, read_only=True),
-    ParamSpec('time_jump', 1.0, 'A stamp more than this (s) before the last one restarts '
-              "the wheel's detector (replay loop); smaller steps back are dropped.",
-              low=0.0, low_open=True),
-    ParamSpec('stale_timeout', 3.0, 'Seconds without telemetry before health is STALE.',
-              low=0.0, low_open=True, read_only=True),
-    ParamSpec('diagnostic_period', 1.0, 'Seconds between /diagnostics messages.',
-              low=0.01, high=60.0, read_only=True),
-    ParamSpec('telemetry_reliability', 'reliable', 'QoS of the telemetry/wheels '
-              'subscription: reliable (keep all, no loss) or best_effort (to hear a '
-              'sensor-data publisher; samples may be lost).',
-              choices=('reliable', 'best_effort'), read_only=True),
-)
+# Parameters: core/schema.py LLR (the detector's and the node-only ones).
+DETECTOR_PARAMETERS = LLR.names(('all',))
+PARAMETERS = LLR.for_node()
 
 
 class _Wheel:
@@ -104,9 +81,10 @@ class LLRDetectorNode(Node):
         super().__init__(NODE_NAME, **kwargs)
         from rwa_monitor.core.llr import LLRDetector
         self._detector_class = LLRDetector
+        common.refuse_unknown_overrides(self, LLR)
         self.params = declare_parameters(self, PARAMETERS, self._on_parameter,
                                          self._check_detector)
-        self._kwargs = detector_kwargs(self._detector_config())
+        self._kwargs = llr_kwargs(self._detector_config())
         self.wheels: dict[str, _Wheel] = {}
         self.input_counters = {'messages': 0, 'length_mismatch': 0,
                                'empty_name': 0, 'duplicate_name': 0, 'unknown_wheel': 0,
@@ -135,11 +113,11 @@ class LLRDetectorNode(Node):
 
     def _check_detector(self, values: dict[str, Any]) -> None:
         """Build a detector from ``values`` (ValueError naming a parameter if it fails)."""
-        self._detector_class('check', **detector_kwargs(self._detector_config(values)))
+        self._detector_class('check', **llr_kwargs(self._detector_config(values)))
 
     def _on_parameter(self, name: str, value: Any) -> None:
         if name in DETECTOR_PARAMETERS:
-            self._kwargs = detector_kwargs(self._detector_config())
+            self._kwargs = llr_kwargs(self._detector_config())
             for wheel_id, wheel in self.wheels.items():
                 wheel.restart()
                 wheel.detector = self._new_detector(wheel_id)

@@ -28,33 +28,18 @@ from rclpy.node import Node
 from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import Imu, JointState
 
+from rwa_monitor.core.schema import REPLAY
 from rwa_monitor.exceptions import ConfigError, RwaMonitorError
-from rwa_monitor.nodes import messages
+from rwa_monitor.nodes import common, messages
 from rwa_monitor.nodes.common import (CLOCK_QOS, declare_parameters, DiagnosticsPublisher,
-                                      OK, ParamSpec, qos_event_callbacks, run_node,
+                                      OK, qos_event_callbacks, run_node,
                                       telemetry_qos)
 from rwa_monitor.telemetry import read_telemetry, Telemetry
 
 NODE_NAME = 'telemetry_replay'
 
-PARAMETERS = (
-    ParamSpec('file', '', 'Telemetry file to replay (.csv, or .mcap written by rwa_monitor).',
-              read_only=True),
-    ParamSpec('rate', 1.0, 'Time factor: 1.0 real time, 40.0 forty times faster, 0 as fast '
-              'as the subscribers take it without loss.', low=0.0, high=1.0e6),
-    ParamSpec('start_offset', 0.0, 'Seconds from the first sample where the replay (and every '
-              'loop) starts.', low=0.0, read_only=True),
-    ParamSpec('loop', False, 'Start again at start_offset after the last sample.'),
-    ParamSpec('min_subscribers', 0, 'Matched subscriptions on telemetry/wheels to wait for '
-              'before the first sample (rate 0 waits for at least 1).', low=0, high=1000),
-    ParamSpec('burst', 1, 'Rows published per executor turn at rate 0 (keep at most the '
-              'telemetry depth divided by the number of subscriber turns per row).',
-              low=1, high=500),
-    ParamSpec('exit_when_done', True, 'Shut the process down after the last sample (no '
-              'loop); in-process users set false and poll `done`.'),
-    ParamSpec('frame_id', 'body', 'frame_id of the gyro, star-tracker and reference-rate '
-              'messages.', read_only=True),
-)
+# Parameters: core/schema.py REPLAY (``file`` is required and has no default).
+PARAMETERS = REPLAY.for_node()
 
 RCLError = rclpy_implementation.RCLError
 _TICK = 0.005  # s of steady time between publishing turns at rate > 0
@@ -68,10 +53,12 @@ class TelemetryReplay(Node):
     def __init__(self, *, telemetry: Telemetry | None = None, **kwargs: Any) -> None:
         """Create the node; ``telemetry`` replaces the ``file`` parameter (in-process use)."""
         super().__init__(NODE_NAME, **kwargs)
+        common.refuse_unknown_overrides(self, REPLAY)
         self.params = declare_parameters(self, PARAMETERS, self._on_parameter)
         if telemetry is None:
             if not self.params['file']:
-                raise ConfigError('parameter file: a telemetry file is required')
+                raise ConfigError('parameter file: a telemetry file is required '
+                                  '(-p file:=PATH)')
             try:
                 telemetry = read_telemetry(self.params['file'])
             except RwaMonitorError as err:

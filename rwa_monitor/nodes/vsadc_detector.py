@@ -5,7 +5,7 @@ Subscribes ``telemetry/gyro`` (sensor_msgs/Imu, angular_velocity), ``telemetry/s
 it has sent nothing for ``reference_timeout`` s of data time, the ``reference_rate``
 parameter is used). Gyro and star-tracker samples are paired by stamp (within
 ``pair_tolerance`` s) and fed in stamp order to :class:`rwa_monitor.core.vsadc.VsadcDetector`
-with the keywords of :func:`rwa_monitor.pipelines.vsadc.detector_kwargs` (one
+with the keywords of :func:`rwa_monitor.core.schema.vsadc_kwargs` (one
 implementation and one parameter meaning for node, ``detect`` and benchmarks).
 
 Publishes an event on ``anomalies`` at every state change of an axis (kind ``drift``,
@@ -26,81 +26,25 @@ from typing import Any, Sequence
 
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import QuaternionStamped, Vector3Stamped
-from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from rclpy.node import Node
 from sensor_msgs.msg import Imu
 
 from rwa_monitor.core import keys
 from rwa_monitor.core.events import AnomalyEvent
-from rwa_monitor.core.params import check_real
+from rwa_monitor.core.schema import VSADC, vsadc_kwargs
 from rwa_monitor.core.vsadc import STATE_NAMES, VsadcDetector
-from rwa_monitor.exceptions import ConfigError
-from rwa_monitor.nodes import messages
+from rwa_monitor.nodes import common, messages
 from rwa_monitor.nodes.common import (declare_parameters, DiagnosticsPublisher, ERROR,
-                                      EVENTS_QOS, OK, ParamSpec, qos_event_callbacks,
-                                      run_node, telemetry_qos, WARN)
-from rwa_monitor.pipelines.vsadc import DEFAULTS, detector_kwargs
+                                      EVENTS_QOS, OK, qos_event_callbacks, run_node,
+                                      telemetry_qos, WARN)
 
 NODE_NAME = 'vsadc_detector'
 INPUT_ID = 'gyro_star_tracker'
 HEALTH_LEVEL = {0: OK, 1: ERROR, 2: WARN}
 
-DETECTOR_PARAMETERS = ('window', 'sigma_window', 'distance_threshold', 'reference_window',
-                       'margin', 'exit_limit', 'exit_margin', 'hold', 'nominal_tracking',
-                       'freeze_fraction', 'adaptive', 'recovery_fraction', 'max_gap',
-                       'norm_tolerance', 'axes')
-PARAMETERS = (
-    ParamSpec('window', DEFAULTS['window'], 'SW: samples of the nominal batch and of the '
-              'evolving window (vsadc paper, Algorithm 1).', low=2, high=100_000),
-    ParamSpec('sigma_window', DEFAULTS['sigma_window'], 'Distances in the sigma of line 22; '
-              '0 = window (the paper).', low=0, high=100_000),
-    ParamSpec('distance_threshold', DEFAULTS['distance_threshold'], 'thr_dis (rad/s): a '
-              'distance between class centres above it is a fault.', low=0.0, low_open=True),
-    ParamSpec('reference_window', DEFAULTS['reference_window'], 'Healthy sigmas behind the '
-              'sigma limits; 0 = window.', low=0, high=1_000_000),
-    ParamSpec('margin', DEFAULTS['margin'], 'sigma_lim1 = margin x max reference sigma: '
-              'enter drift above it.', low=0.0, low_open=True),
-    ParamSpec('exit_limit', DEFAULTS['exit_limit'], 'Reference statistic of sigma_lim2 '
-              '(stay in drift above it).', choices=('max', 'mean')),
-    ParamSpec('exit_margin', DEFAULTS['exit_margin'], 'Factor of sigma_lim2.', low=0.0,
-              low_open=True),
-    ParamSpec('hold', DEFAULTS['hold'], 'Samples a new label must persist before it is '
-              'adopted (1 = at once).', low=1, high=100_000),
-    ParamSpec('nominal_tracking', DEFAULTS['nominal_tracking'], 'Samples of the running '
-              'mean that tracks the nominal centre while healthy; 0 = fixed (paper).', low=0),
-    ParamSpec('freeze_fraction', DEFAULTS['freeze_fraction'], 'Learning stops while the '
-              'distance exceeds this fraction of distance_threshold.', low=0.0, high=1.0),
-    ParamSpec('adaptive', DEFAULTS['adaptive'], 'Enter drift from a lasting bias above the '
-              'sigmas of that bias (self-adaptive limit).'),
-    ParamSpec('recovery_fraction', DEFAULTS['recovery_fraction'], 'A fault ends when the '
-              'distance falls below this fraction of distance_threshold.', low=0.0, high=1.0,
-              low_open=True),
-    ParamSpec('max_gap', DEFAULTS['max_gap'], 'Seconds between star-tracker samples above '
-              'which the star-tracker rate restarts.', low=0.0, low_open=True),
-    ParamSpec('norm_tolerance', DEFAULTS['norm_tolerance'], 'Quaternions whose norm is '
-              'off 1 by more than this are rejected.', low=0.0, high=1.0, low_open=True,
-              high_open=True),
-    ParamSpec('axes', DEFAULTS['axes'], 'Comma-separated gyro axes to monitor (x, y, z).'),
-    ParamSpec('reference_timeout', 1.0, 'Seconds of data time without telemetry/'
-              'reference_rate after which the reference_rate parameter is used.',
-              low=0.0, low_open=True),
-    ParamSpec('pair_tolerance', 1.0e-3, 'Seconds within which a gyro and a star-tracker '
-              'stamp are the same sample.', low=0.0, high=1.0),
-    ParamSpec('max_lag', 40, 'Gyro samples that may wait for their star-tracker match.',
-              low=1, high=10_000, read_only=True),
-    ParamSpec('time_jump', 1.0, 'A gyro stamp more than this (s) before the last one '
-              'restarts the detector (replay loop).', low=0.0, low_open=True),
-    ParamSpec('stale_timeout', 3.0, 'Seconds without paired input before health is STALE.',
-              low=0.0, low_open=True, read_only=True),
-    ParamSpec('diagnostic_period', 1.0, 'Seconds between /diagnostics messages.',
-              low=0.01, high=60.0, read_only=True),
-)
-
-
-def _check_reference(value: Any) -> list[float]:
-    if not isinstance(value, (list, tuple)) or len(value) != 3:
-        raise ValueError(f'reference_rate must be 3 numbers (rad/s), got {value!r}')
-    return [check_real('reference_rate', v) for v in value]
+# Parameters: core/schema.py VSADC (the detector's, reference_rate and node-only ones).
+DETECTOR_PARAMETERS = tuple(n for n in VSADC.names(('all',)) if n != 'reference_rate')
+PARAMETERS = VSADC.for_node()
 
 
 class VsadcDetectorNode(Node):
@@ -109,17 +53,10 @@ class VsadcDetectorNode(Node):
     def __init__(self, **kwargs: Any) -> None:
         """Create the node (``kwargs`` go to rclpy's Node: context, cli_args, ...)."""
         super().__init__(NODE_NAME, **kwargs)
+        common.refuse_unknown_overrides(self, VSADC)
         self.params = declare_parameters(self, PARAMETERS, self._on_parameter,
                                          self._check_detector)
-        param = self.declare_parameter(
-            'reference_rate', list(DEFAULTS['reference_rate']), ParameterDescriptor(
-                description='Guidance body rate (rad/s, x y z) used when '
-                            'telemetry/reference_rate is silent.'))
-        try:
-            self.reference = _check_reference(param.value)
-        except ValueError as err:
-            raise ConfigError(f'parameter {err}') from None
-        self.add_on_set_parameters_callback(self._check_reference_param)
+        self.reference = list(self.params['reference_rate'])
         self.counters = {'gyro_messages': 0, 'star_tracker_messages': 0,
                          'reference_messages': 0, 'unpaired_gyro': 0,
                          'unpaired_star_tracker': 0, 'reference_from_parameter': 0,
@@ -130,7 +67,7 @@ class VsadcDetectorNode(Node):
         self._star: deque = deque()
         self._refs: deque = deque(maxlen=64)
         self._last_fed = -math.inf
-        self.detector = VsadcDetector(**detector_kwargs(self._detector_config()))
+        self.detector = VsadcDetector(**vsadc_kwargs(self._detector_config()))
         self.diagnostics = DiagnosticsPublisher(
             self, period=self.params['diagnostic_period'],
             stale_timeout=self.params['stale_timeout'])
@@ -153,20 +90,13 @@ class VsadcDetectorNode(Node):
         return {name: values[name] for name in DETECTOR_PARAMETERS}
 
     def _check_detector(self, values: dict[str, Any]) -> None:
-        VsadcDetector(**detector_kwargs(self._detector_config(values)))
-
-    def _check_reference_param(self, params: list) -> SetParametersResult:
-        for p in params:
-            if p.name == 'reference_rate':
-                try:
-                    self.reference = _check_reference(list(p.value))
-                except (ValueError, TypeError) as err:
-                    return SetParametersResult(successful=False, reason=str(err))
-        return SetParametersResult(successful=True)
+        VsadcDetector(**vsadc_kwargs(self._detector_config(values)))
 
     def _on_parameter(self, name: str, value: Any) -> None:
-        if name in DETECTOR_PARAMETERS:
-            self.detector = VsadcDetector(**detector_kwargs(self._detector_config()))
+        if name == 'reference_rate':
+            self.reference = list(value)
+        elif name in DETECTOR_PARAMETERS:
+            self.detector = VsadcDetector(**vsadc_kwargs(self._detector_config()))
             self._axis_checks()
             self.get_logger().info(f'{name} = {value}: detector restarted')
 
@@ -300,7 +230,7 @@ class VsadcDetectorNode(Node):
 
     def _input_health(self) -> tuple[bytes, str, dict[str, Any]]:
         values = dict(self.counters)
-        values.update(self.detector.counters())
+        values.update(self.detector.counters)
         return OK, f'{self.samples} gyro samples, {self.detector.held} held', values
 
 

@@ -1,26 +1,35 @@
 """The LLR friction detector on a file: one detector per wheel that has a friction column.
 
-Parameters are the ``llr_detector`` node's (config/rwa_monitor.yaml), same names:
-``window``, ``k_verif`` (0 = window / 2), ``false_alarm_rate`` and ``noise_std`` (N m;
-0 = estimate from the data). ``friction_model_file`` names a refined friction model
-written by ``rwa-monitor identify`` (its ``friction_model.yaml``); empty = model (1). The
-refined model applies to the wheel it names when the file has that wheel, else to every
-wheel. Other keys of the block (node-only ones) are ignored.
+Parameters are the ``llr_detector`` block of core/schema.py (LLR), the node's names;
+node-only ones are accepted and ignored, unknown ones refused. ``friction_model_file``
+names a refined friction model written by ``rwa-monitor identify`` (its
+``friction_model.yaml``); empty = model (1). The refined model applies to the wheel it
+names when the file has that wheel, else to every wheel.
 """
 
 from __future__ import annotations
 
 import time as _time
-from typing import Any, Mapping
+from typing import Any, Mapping, NamedTuple
 
 from rwa_monitor.core.events import AnomalyEvent
-from rwa_monitor.core.params import check_int, check_real
+from rwa_monitor.core.friction import RegressorSet
+from rwa_monitor.core.schema import LLR, llr_kwargs
 from rwa_monitor.exceptions import ConfigError
+from rwa_monitor.pipelines import Detection
 from rwa_monitor.telemetry import Telemetry
 
-NODE = 'llr_detector'
-DEFAULTS = {'window': 500, 'k_verif': 0, 'false_alarm_rate': 1.0e-5, 'noise_std': 0.0}
+SCHEMA = LLR
+NODE = LLR.name
+DEFAULTS = {name: LLR[name].default for name in LLR.names(('all',))}
 MODEL_KEY = 'friction_model_file'
+
+
+class RefinedModel(NamedTuple):
+    """A refined friction model: the wheel it names (None: every wheel) and its regressors."""
+
+    wheel: str | None
+    regressors: RegressorSet
 
 
 def applies(tele: Telemetry) -> bool:
@@ -29,19 +38,12 @@ def applies(tele: Telemetry) -> bool:
 
 
 def detector_kwargs(config: Mapping[str, Any]) -> dict[str, Any]:
-    """Return the detector keywords for a parameter block (ValueError names a bad one)."""
-    params = {**DEFAULTS, **{k: v for k, v in config.items() if k in DEFAULTS}}
-    window = check_int('window', params['window'], 2)
-    k_verif = check_int('k_verif', params['k_verif'], 0)
-    noise_std = check_real('noise_std', params['noise_std'], 0.0)
-    return {'window': window, 'k_verif': k_verif or None,
-            'false_alarm_rate': check_real('false_alarm_rate', params['false_alarm_rate'],
-                                           0.0, 1.0, low_open=True, high_open=True),
-            'noise_std': noise_std or None}
+    """Return the detector keywords for a parameter block (ConfigError names a bad one)."""
+    return llr_kwargs(LLR.validate(config))
 
 
-def friction_model(path: str, tele: Telemetry) -> tuple[str | None, Any] | None:
-    """Return (wheel or None, RegressorSet) of a refined model file, or None if unset.
+def friction_model(path: str, tele: Telemetry) -> RefinedModel | None:
+    """Return the refined model of a file written by identify, or None if unset.
 
     Raise ConfigError if the file cannot be read or the record lacks a channel it reads.
     """
@@ -62,19 +64,19 @@ def friction_model(path: str, tele: Telemetry) -> tuple[str | None, Any] | None:
         raise ConfigError(f'{MODEL_KEY} {path!r} reads channel(s) the file lacks: '
                           f'{", ".join(missing)}')
     wheel = cfg.get('friction_model', cfg).get('wheel')
-    return (wheel if wheel in tele.wheels else None), regressors_from_config(cfg)
+    return RefinedModel(wheel if wheel in tele.wheels else None, regressors_from_config(cfg))
 
 
-def run_with_summary(tele: Telemetry, config: Mapping[str, Any]
-                     ) -> tuple[list[AnomalyEvent], dict[str, Any]]:
-    """Run one detector per wheel (batch path); return (events, per-wheel summary).
+def run_with_summary(tele: Telemetry, config: Mapping[str, Any]) -> Detection:
+    """Run one detector per wheel (batch path); return the events and a per-wheel summary.
 
     The summary per wheel holds the number of events, samples, the detector's counters
     of rejected samples and its run time.
     """
     from rwa_monitor.core.llr_batch import detect_batch_with_counters
-    kwargs = detector_kwargs(config)
-    refined = friction_model(config.get(MODEL_KEY) or '', tele)
+    values = LLR.validate(config)
+    kwargs = llr_kwargs(values)
+    refined = friction_model(values[MODEL_KEY], tele)
     events: list[AnomalyEvent] = []
     summary: dict[str, Any] = {}
     for wheel_id, wheel in tele.wheels.items():
@@ -82,17 +84,17 @@ def run_with_summary(tele: Telemetry, config: Mapping[str, Any]
             continue
         start = _time.perf_counter()
         model = {}
-        if refined and refined[0] in (None, wheel_id):
-            model = {'regressors': refined[1], 'aux': tele.aux}
+        if refined and refined.wheel in (None, wheel_id):
+            model = {'regressors': refined.regressors, 'aux': tele.aux}
         found, counters = detect_batch_with_counters(
             tele.time, wheel.speed, wheel.friction, component=wheel_id, **kwargs, **model)
         summary[wheel_id] = {'events': len(found), 'samples': len(tele),
                              'rejected': dict(counters),
                              'runtime_s': _time.perf_counter() - start}
         events.extend(found)
-    return events, summary
+    return Detection(events, summary)
 
 
 def run(tele: Telemetry, config: Mapping[str, Any]) -> list[AnomalyEvent]:
     """Return the events of one LLR detector per wheel with a friction column."""
-    return run_with_summary(tele, config)[0]
+    return run_with_summary(tele, config).events

@@ -17,8 +17,6 @@ sign(w^T z + b) (eq. 26) without scikit-learn.
 
 from __future__ import annotations
 
-import json
-import os
 from typing import Sequence
 
 import numpy as np
@@ -145,18 +143,22 @@ class WindowClassifier:
                 out[name] = False
         return out
 
-    def save(self, path: str | os.PathLike) -> None:
-        """Write the model as JSON."""
-        with open(path, 'w') as handle:
-            json.dump(self.spec, handle, indent=1)
-            handle.write('\n')
 
-    @classmethod
-    def load(cls, path: str | os.PathLike) -> 'WindowClassifier':
-        """Read a model written by :meth:`save` (ValueError if it is not one)."""
-        with open(path) as handle:
-            try:
-                spec = json.load(handle)
-            except json.JSONDecodeError as err:
-                raise ValueError(f'{path}: not JSON: {err}') from None
-        return cls(spec)
+def train_model(items: Sequence[dict], *, bins: int = 20, c: float = 1.0, seed: int = 0,
+                use: str = 'both') -> WindowClassifier:
+    """Return a WindowClassifier trained on labelled extractions (``features``, ``status``)."""
+    return WindowClassifier.fit([it['features'] for it in items],
+                                [it['status'] for it in items], bins=bins, c=c, seed=seed,
+                                use=use)
+
+
+def detection_matrix(classifier: WindowClassifier, items: Sequence[dict]
+                     ) -> dict[str, dict[str, float]]:
+    """Return status -> anomaly -> fraction of that status's windows flagged."""
+    out: dict[str, dict[str, list[bool]]] = {}
+    for it in items:
+        flags = classifier.predict(it['features'])
+        row = out.setdefault(it['status'], {k: [] for k in flags})
+        for k, v in flags.items():
+            row[k].append(v)
+    return {st: {k: float(np.mean(v)) for k, v in row.items()} for st, row in out.items()}

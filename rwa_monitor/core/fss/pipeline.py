@@ -10,9 +10,8 @@ samples of one wheel for the node.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-import pathlib
 import time as _time
-from typing import Any, Sequence
+from typing import Sequence
 
 import numpy as np
 
@@ -23,14 +22,12 @@ from rwa_monitor.core.fss.segments import fit_intervals
 from rwa_monitor.core.fss.wglr import detect_changepoints
 from rwa_monitor.core.params import check_int, check_real
 
-DEFAULT_MODEL = pathlib.Path(__file__).resolve().parents[2] / 'data' / 'fss_model.json'
-
 
 @dataclass(frozen=True)
 class FssConfig:
-    """Parameters of the window diagnoser (config/rwa_monitor.yaml, fss_diagnoser)."""
+    """Parameters of the window diagnoser (core/schema.py FSS; same names in the YAML)."""
 
-    window: int = 20                  # wGLR half-window w (samples)
+    wglr_window: int = 20             # wGLR half-window w (samples)
     w_bias: float = 1.0e-4            # W_b, weight of the viscous prior, eq. (11b)
     viscous_prior: float = 1.0        # f~v, normalised
     p_false: float = 1.0e-9           # false-positive probability per sample, stage 1
@@ -41,7 +38,7 @@ class FssConfig:
     systems: tuple[SwitchingSystem, ...] = DEFAULT_SYSTEMS
 
     def __post_init__(self) -> None:
-        check_int('window', self.window, 2, 100_000)
+        check_int('wglr_window', self.wglr_window, 2, 100_000)
         check_real('w_bias', self.w_bias, 0.0)
         check_real('viscous_prior', self.viscous_prior)
         check_real('p_false', self.p_false, 0.0, 1.0, low_open=True, high_open=True)
@@ -49,13 +46,6 @@ class FssConfig:
         check_int('beam', self.beam, 1, 1_000_000)
         check_real('torque_scale_nm', self.torque_scale_nm, 0.0, low_open=True)
         check_real('speed_scale_rad_s', self.speed_scale_rad_s, 0.0, low_open=True)
-
-    @classmethod
-    def from_dict(cls, params: dict[str, Any] | None) -> 'FssConfig':
-        """Build from a parameter block, ignoring names that are not diagnoser parameters."""
-        names = {'window', 'w_bias', 'viscous_prior', 'p_false', 'dk_error', 'beam',
-                 'torque_scale_nm', 'speed_scale_rad_s'}
-        return cls(**{k: v for k, v in (params or {}).items() if k in names})
 
 
 @dataclass
@@ -100,7 +90,8 @@ def extract(speed: np.ndarray, friction: np.ndarray, config: FssConfig = FssConf
     n = speed.size
     timings = {}
     t0, c0 = _time.perf_counter(), _time.thread_time()
-    cps = detect_changepoints(friction, speed, window=config.window, w_bias=config.w_bias,
+    cps = detect_changepoints(friction, speed, window=config.wglr_window,
+                              w_bias=config.w_bias,
                               viscous_prior=config.viscous_prior, p_false=config.p_false)
     t1, c1 = _time.perf_counter(), _time.thread_time()
     fit = fit_intervals(friction, speed, cps.changepoints, dk_error=config.dk_error,
@@ -130,15 +121,6 @@ def extract(speed: np.ndarray, friction: np.ndarray, config: FssConfig = FssConf
                       rmse=refit.rmse, rejected=int(np.sum(assignment.inputs == 0)),
                       iterations=assignment.iterations, exact=assignment.exact,
                       identifiable=refit.identifiable, timings=timings, cpu_timings=cpu)
-
-
-def load_model(path: str | pathlib.Path | None = None) -> WindowClassifier:
-    """Return the classifier at ``path`` or the shipped default model."""
-    path = DEFAULT_MODEL if path is None else pathlib.Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f'FSS model not found: {path} (train one with '
-                                f'`rwa-monitor fss train DATASET -o MODEL`)')
-    return WindowClassifier.load(path)
 
 
 def normalise(speed_rad_s: np.ndarray, friction_nm: np.ndarray, config: FssConfig

@@ -1,0 +1,83 @@
+"""Streaming FSS window diagnosis of one wheel: the detector protocol over the pipeline.
+
+:class:`FssDiagnoser` keeps the last ``window_length`` samples of one wheel
+(:class:`~rwa_monitor.core.fss.pipeline.SlidingWindow`) and, every ``window_period``
+samples once the window is full, runs :func:`~rwa_monitor.core.fss.pipeline.diagnose` on it
+(physics-informed FSS paper, section IV, on a sliding window as the node does). Arrays in,
+no file I/O: the classifier is given (read one with
+``rwa_monitor.telemetry.fss_model.load_model``).
+"""
+
+from __future__ import annotations
+
+from typing import Any, NamedTuple
+
+from rwa_monitor.core.fss.classify import WindowClassifier
+from rwa_monitor.core.fss.pipeline import diagnose, FssConfig, SlidingWindow
+
+
+class WindowDiagnosis(NamedTuple):
+    """One diagnosis: the window's first and last time (s) and the per-wheel JSON object."""
+
+    start_s: float
+    end_s: float
+    result: dict
+
+
+class FssDiagnoser:
+    """Diagnose one wheel's sliding window: ``update(t, speed, friction)`` per sample.
+
+    ``update`` returns the :class:`WindowDiagnosis` when one was due at this sample, else
+    None. Parameters as core/schema.py FSS (``window_length``, ``window_period``,
+    ``wglr_window`` ...; SI telemetry in, rad/s and N m).
+    """
+
+    def __init__(self, classifier: WindowClassifier, *, window_length: int = 80_000,
+                 window_period: int = 20_000, wglr_window: int = 20, w_bias: float = 1.0e-4,
+                 viscous_prior: float = 1.0, p_false: float = 1.0e-9, dk_error: int = 10,
+                 beam: int = 256, torque_scale_nm: float = 2.0e-4,
+                 speed_scale_rad_s: float = 400.0) -> None:
+        self.classifier = classifier
+        self.config = FssConfig(wglr_window=wglr_window, w_bias=w_bias,
+                                viscous_prior=viscous_prior, p_false=p_false,
+                                dk_error=dk_error, beam=beam, torque_scale_nm=torque_scale_nm,
+                                speed_scale_rad_s=speed_scale_rad_s)
+        self.window = SlidingWindow(length=window_length, period=window_period)
+        self._params = {'window_length': window_length, 'window_period': window_period,
+                        **{k: getattr(self.config, k) for k in (
+                            'wglr_window', 'w_bias', 'viscous_prior', 'p_false', 'dk_error',
+                            'beam', 'torque_scale_nm', 'speed_scale_rad_s')}}
+        self.reset()
+
+    @property
+    def params(self) -> dict[str, Any]:
+        """The keyword parameters (checked)."""
+        return dict(self._params)
+
+    @property
+    def counters(self) -> dict[str, int]:
+        """Samples dropped (out of order), kept but non-finite, time gaps, diagnoses run."""
+        w = self.window
+        return {'out_of_order': w.out_of_order, 'non_finite': w.non_finite, 'gaps': w.gaps,
+                'diagnoses': self._diagnoses}
+
+    @property
+    def last_event(self) -> WindowDiagnosis | None:
+        """The latest diagnosis, or None."""
+        return self._last
+
+    def reset(self) -> None:
+        """Forget every sample, counter and diagnosis."""
+        self.window.reset()
+        self._diagnoses = 0
+        self._last: WindowDiagnosis | None = None
+
+    def update(self, t: float, speed: float, friction: float) -> WindowDiagnosis | None:
+        """Add one sample; return the window's diagnosis when one is due, else None."""
+        if not self.window.update(t, speed, friction):
+            return None
+        time_s, speed_w, friction_w = self.window.snapshot()
+        result = diagnose(speed_w, friction_w, time_s, self.classifier, self.config)
+        self._diagnoses += 1
+        self._last = WindowDiagnosis(float(time_s[0]), float(time_s[-1]), result)
+        return self._last

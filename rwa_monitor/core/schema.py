@@ -1,0 +1,496 @@
+"""The parameters of every detector and tool, defined once: name, type, default, range, unit.
+
+Each :class:`Schema` is the block of one node in config/rwa_monitor.yaml, and the same
+names configure the file commands (``rwa-monitor detect``/``diagnose``). From these
+definitions come the ROS ParameterDescriptors (nodes/common.py), the YAML loading of every
+command (telemetry/parameters_file.py), the ``--help`` texts and the tables of
+docs/parameters.md (:func:`markdown_table`). :meth:`Param.check` is the one validation of
+a value; its bounds are the algorithm's own (test/test_schema.py checks that they agree).
+
+An automatic value is spelled :data:`AUTO` (``'auto'``) in Python, YAML and ROS alike.
+Numbers written without a dot (``1e-5``, which YAML 1.1 reads as a string) are accepted for
+float parameters everywhere. A parameter's ``scope`` says where it applies: ``all``
+(nodes and file commands), ``node`` (the ROS node only: topics, QoS, health) or ``file``
+(file commands only). ``required`` parameters have no default and are never written in
+the shipped parameters file.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+import difflib
+import math
+from typing import Any, Callable, Iterator, Mapping, Sequence
+
+from rwa_monitor.core.params import AUTO, check_choice, check_int, check_real
+from rwa_monitor.exceptions import ConfigError
+
+__all__ = ['AUTO', 'FSS', 'IDENTIFY', 'LLR', 'Param', 'REPLAY', 'SCHEMAS', 'Schema', 'VSADC',
+           'help_text', 'markdown_table', 'parameters_document', 'yaml_block']
+
+SCOPES = ('all', 'node', 'file')
+
+
+@dataclass(frozen=True)
+class Param:
+    """One parameter: default, one-line meaning, allowed values, unit, where it applies.
+
+    The value type is ``kind`` (default: the type of ``default``): bool, int, float, str or
+    list (of the element type of ``default``). Numbers lie in ``[low, high]``
+    (``low_open``/``high_open`` exclude an end point); strings may be limited to
+    ``choices``; ``auto`` parameters also take :data:`AUTO`; ``validate`` adds a check of
+    its own (ValueError naming the parameter). ``read_only`` parameters of a node are set
+    at start-up only.
+    """
+
+    name: str
+    default: Any
+    description: str
+    low: float | None = None
+    high: float | None = None
+    low_open: bool = False
+    high_open: bool = False
+    choices: tuple[str, ...] | None = None
+    read_only: bool = False
+    validate: Callable[[Any], Any] | None = None
+    unit: str = ''
+    auto: bool = False
+    required: bool = False
+    scope: str = 'all'
+    kind: type | None = None
+
+    def __post_init__(self) -> None:
+        if self.scope not in SCOPES:
+            raise ValueError(f'{self.name}: scope must be one of {SCOPES}')
+
+    @property
+    def type(self) -> type:
+        """The value type: bool, int, float, str or list."""
+        return self.kind or type(self.default)
+
+    def check(self, value: Any) -> Any:
+        """Return ``value`` normalised if allowed, else raise ValueError naming the parameter."""
+        if self.auto and value == AUTO:
+            return AUTO
+        kind = self.type
+        if kind is bool:
+            if not isinstance(value, bool):
+                raise ValueError(f'{self.name} must be true or false, got {value!r}')
+        elif kind is int:
+            value = check_int(self.name, value,
+                              None if self.low is None else int(self.low),
+                              None if self.high is None else int(self.high))
+        elif kind is float:
+            value = check_real(self.name, _number(value),
+                               -math.inf if self.low is None else self.low,
+                               math.inf if self.high is None else self.high,
+                               self.low_open or self.low is None,
+                               self.high_open or self.high is None)
+        elif kind is str:
+            if not isinstance(value, str):
+                raise ValueError(f'{self.name} must be a string, got {value!r}')
+            if self.choices is not None:
+                check_choice(self.name, value, self.choices)
+        elif kind is list:
+            value = self._check_list(value)
+        if self.validate is not None:
+            self.validate(value)
+        return value
+
+    def _check_list(self, value: Any) -> list:
+        if isinstance(value, (str, bytes)) or not isinstance(value, Sequence):
+            try:
+                value = list(value)  # ROS arrays (array.array)
+            except TypeError:
+                raise ValueError(f'{self.name} must be a list, got {value!r}') from None
+        items = list(value)
+        if self.default and isinstance(self.default[0], float):
+            return [check_real(self.name, _number(v)) for v in items]
+        if not all(isinstance(v, str) for v in items):
+            raise ValueError(f'{self.name} must be a list of strings, got {value!r}')
+        return items
+
+    def allowed(self) -> str:
+        """Return the allowed values in words (for help texts and docs)."""
+        parts = []
+        if self.low is not None or self.high is not None:
+            low = '-inf' if self.low is None else f'{self.low:g}'
+            high = 'inf' if self.high is None else f'{self.high:g}'
+            parts.append(f'{"(" if self.low_open or self.low is None else "["}{low}, '
+                         f'{high}{")" if self.high_open or self.high is None else "]"}')
+        if self.choices:
+            parts.append(', '.join(self.choices))
+        elif self.type is bool:
+            parts.append('true, false')
+        if self.auto:
+            parts.append(AUTO)
+        return ' or '.join(parts)
+
+
+def _number(value: Any) -> Any:
+    """Return a float for a numeric string (``1e-5`` in YAML 1.1 and ROS), else ``value``."""
+    if isinstance(value, str):
+        try:
+            return float(value)
+        except ValueError:
+            return value
+    return value
+
+
+@dataclass(frozen=True)
+class Schema:
+    """The parameters of one detector or tool: the block ``name`` of the parameters file."""
+
+    name: str
+    params: tuple[Param, ...]
+    summary: str = ''
+    relations: Callable[[dict[str, Any]], None] | None = None
+
+    def __iter__(self) -> Iterator[Param]:
+        return iter(self.params)
+
+    def __getitem__(self, name: str) -> Param:
+        for p in self.params:
+            if p.name == name:
+                return p
+        raise KeyError(name)
+
+    def names(self, scopes: Sequence[str] = SCOPES) -> tuple[str, ...]:
+        """Return the parameter names of the given scopes, in order."""
+        return tuple(p.name for p in self.params if p.scope in scopes)
+
+    def for_node(self) -> tuple[Param, ...]:
+        """Return the parameters a node declares (every scope but ``file``)."""
+        return tuple(p for p in self.params if p.scope != 'file')
+
+    def defaults(self) -> dict[str, Any]:
+        """Return name -> default of every parameter that has one (not ``required``)."""
+        return {p.name: p.default for p in self.params if not p.required}
+
+    def nearest(self, name: str) -> str:
+        """Return ``"; did you mean 'x'?"`` for the closest known name, or ``''``."""
+        close = difflib.get_close_matches(name, [p.name for p in self.params], n=1)
+        return f"; did you mean '{close[0]}'?" if close else ''
+
+    def unknown(self, names: Sequence[str]) -> None:
+        """Raise ConfigError for the first name that is not a parameter of this schema."""
+        known = {p.name for p in self.params} | SHARED_NAMES
+        for name in names:
+            if name not in known:
+                raise ConfigError(f'{self.name}: unknown parameter {name!r}'
+                                  f'{self.nearest(name)}')
+
+    def validate(self, values: Mapping[str, Any], *, strict: bool = True) -> dict[str, Any]:
+        """Return every parameter's checked value: ``values`` over the defaults.
+
+        Unknown names raise ConfigError naming the nearest known one (``strict``), or are
+        dropped; a bad value raises ConfigError naming the parameter; then the schema's
+        ``relations`` (rules between parameters, the algorithm's own) are checked.
+        """
+        if strict:
+            self.unknown(list(values))
+        out: dict[str, Any] = {}
+        for p in self.params:
+            if p.name in values:
+                value = values[p.name]
+            elif p.required:
+                raise ConfigError(f'{self.name}: parameter {p.name} is required')
+            else:
+                value = p.default
+            try:
+                out[p.name] = p.check(value)
+            except ValueError as err:
+                raise ConfigError(f'{self.name}: {err}') from None
+        if self.relations is not None:
+            try:
+                self.relations(out)
+            except ValueError as err:
+                raise ConfigError(f'{self.name}: {err}') from None
+        return out
+
+
+# ------------------------------------------------------------------- shared parameters
+
+# Names every node has or ROS adds: accepted in any block, used by none of the algorithms.
+SHARED_NAMES = frozenset({'use_sim_time'})
+
+
+def _wheels(scope: str = 'node') -> Param:
+    return Param('wheels', '', 'Comma-separated wheel ids to monitor; empty = every wheel '
+                 'seen (up to max_wheels).', scope=scope)
+
+
+MAX_WHEELS = Param('max_wheels', 16, 'Most wheels monitored at once (bounds memory).', low=1,
+                   high=256, read_only=True, scope='node')
+STALE_TIMEOUT = Param('stale_timeout', 3.0, 'Seconds without input before health is '
+                      'STALE.', low=0.0, low_open=True, read_only=True, unit='s',
+                      scope='node')
+DIAGNOSTIC_PERIOD = Param('diagnostic_period', 1.0, 'Seconds between /diagnostics '
+                          'messages.', low=0.01, high=60.0, read_only=True, unit='s',
+                          scope='node')
+
+
+def _time_jump(what: str) -> Param:
+    return Param('time_jump', 1.0, f'A stamp more than this before the last one restarts '
+                 f'{what} (replay loop); smaller steps back are dropped.', low=0.0,
+                 low_open=True, unit='s', scope='node')
+
+
+# ---------------------------------------------------------------------------------- LLR
+
+def _llr_relations(values: dict[str, Any]) -> None:
+    from rwa_monitor.core.llr import validate_parameters
+    validate_parameters('rw1', **{n: values[n] for n in LLR.names(('all',))})
+
+
+LLR = Schema('llr_detector', (
+    Param('window', 500, 'w: samples after a candidate change used by the LLR test '
+          '(llr-realtime paper, Algorithm 1).', low=10, unit='samples'),
+    Param('k_verif', AUTO, 'Verification samples before a declaration, below window; '
+          'auto = window / 2 (the paper).', low=0, auto=True, kind=int, unit='samples'),
+    Param('false_alarm_rate', 1.0e-5, 'r: declare when the nominal p-value is at most this '
+          '(per test).', low=0.0, high=1.0, low_open=True, high_open=True),
+    Param('noise_std', AUTO, 'Friction noise standard deviation; auto = estimate it from '
+          'the reference fit.', low=0.0, low_open=True, auto=True, kind=float, unit='N m'),
+    Param('category_level', 1.0e-3, 'Level of each dry / viscous test that names the kind '
+          'of a change.', low=0.0, high=1.0, low_open=True, high_open=True),
+    Param('category_revisions', 3, 'Re-checks of the kind of a change as data arrive.',
+          low=0, high=60),
+    Param('refine_change', True, 'Refine the change time by maximum likelihood.'),
+    Param('min_excitation', 1.0e-6, 'Smallest det(corr(Pi_P)): below it a test is skipped '
+          'and counted ill_conditioned.', low=0.0, high=1.0, high_open=True),
+    Param('max_abs_speed', 1.0e6, 'Samples at or beyond this speed are dropped and counted '
+          'out_of_range.', low=0.0, low_open=True, unit='rad/s'),
+    Param('max_abs_friction', 1.0e6, 'Samples at or beyond this friction are dropped and '
+          'counted out_of_range.', low=0.0, low_open=True, unit='N m'),
+    Param('friction_model_file', '', 'Refined friction model written by `rwa-monitor '
+          'identify` (friction_model.yaml); empty = model (1).', scope='file'),
+    _wheels(),
+    MAX_WHEELS,
+    _time_jump("the wheel's detector"),
+    STALE_TIMEOUT,
+    DIAGNOSTIC_PERIOD,
+    Param('telemetry_reliability', 'reliable', 'QoS of the telemetry/wheels subscription: '
+          'reliable (keep all, no loss) or best_effort (hears a sensor-data publisher; '
+          'samples may be lost).', choices=('reliable', 'best_effort'), read_only=True,
+          scope='node'),
+), 'Online LLR friction-change detector (llr-realtime paper, Algorithm 1); docs/llr.md.',
+    _llr_relations)
+
+# ---------------------------------------------------------------------------------- FSS
+
+FSS = Schema('fss_diagnoser', (
+    Param('window_length', 80_000, 'Samples per diagnosed window (the paper: ~80,000, a few '
+          'hours).', low=200, high=10_000_000, read_only=True, unit='samples', scope='node'),
+    Param('window_period', 20_000, 'Samples between two diagnoses of a wheel.', low=1,
+          high=10_000_000, unit='samples', scope='node'),
+    Param('wglr_window', 20, 'w: half-window of the changepoint statistic.', low=2,
+          high=100_000, unit='samples'),
+    Param('w_bias', 1.0e-4, 'W_b: weight of the viscous prior, eq. (11b).', low=0.0),
+    Param('viscous_prior', 1.0, 'f~v: prior viscous coefficient (normalised units).'),
+    Param('p_false', 1.0e-9, 'False-positive probability per sample of the changepoint '
+          'threshold.', low=0.0, high=1.0, low_open=True, high_open=True),
+    Param('dk_error', 10, 'Samples left out each side of a changepoint in the least squares '
+          '(w / 2).', low=0, high=100_000, unit='samples'),
+    Param('beam', 256, 'Most DP states kept per changepoint (assignment bound).', low=1,
+          high=1_000_000),
+    Param('torque_scale_nm', 2.0e-4, 'One normalised torque unit.', low=0.0, low_open=True,
+          unit='N m'),
+    Param('speed_scale_rad_s', 400.0, 'One normalised speed unit.', low=0.0, low_open=True,
+          unit='rad/s'),
+    Param('model', '', 'Classifier model file (JSON from `rwa-monitor fss train`); empty = '
+          'the shipped model.', read_only=True),
+    _wheels(),
+    MAX_WHEELS,
+    STALE_TIMEOUT,
+    DIAGNOSTIC_PERIOD,
+), 'FSS window diagnoser (physics-informed FSS paper); docs/fss.md.',
+    lambda values: fss_config(values))
+
+# -------------------------------------------------------------------------------- VSADC
+
+
+def _axes(value: str) -> None:
+    names = [a.strip() for a in value.split(',') if a.strip()]
+    if not names:
+        raise ValueError(f'axes must name at least one of x, y, z; got {value!r}')
+    for a in names:
+        check_choice('axes', a, ('x', 'y', 'z'))
+
+
+def _three(value: list) -> None:
+    if len(value) != 3:
+        raise ValueError(f'reference_rate must be 3 numbers (rad/s), got {value!r}')
+
+
+VSADC = Schema('vsadc_detector', (
+    Param('window', 200, 'SW: samples of the nominal batch and of the evolving window '
+          '(vsadc paper, Algorithm 1).', low=2, high=100_000, unit='samples'),
+    Param('sigma_window', 200, 'Distances in the sigma of line 22; auto = window (the '
+          'paper).', low=2, high=100_000, auto=True, unit='samples'),
+    Param('distance_threshold', 1.5e-5, 'thr_dis: a distance between class centres above '
+          'it is a fault.', low=0.0, low_open=True, unit='rad/s'),
+    Param('reference_window', 1200, 'Healthy sigmas behind the sigma limits; auto = '
+          'window.', low=1, high=1_000_000, auto=True, unit='samples'),
+    Param('margin', 1.5, 'sigma_lim1 = margin x max reference sigma: enter drift above it.',
+          low=0.0, low_open=True),
+    Param('exit_limit', 'max', 'Reference statistic of sigma_lim2 (stay in drift above it).',
+          choices=('max', 'mean')),
+    Param('exit_margin', 1.25, 'Factor of sigma_lim2.', low=0.0, low_open=True),
+    Param('hold', 1, 'Samples a new label must persist before it is adopted (1 = at once).',
+          low=1, high=100_000, unit='samples'),
+    Param('nominal_tracking', 0, 'Samples of the running mean that tracks the nominal centre '
+          'while healthy; 0 = fixed centre (the paper).', low=0, unit='samples'),
+    Param('freeze_fraction', 0.5, 'Learning stops while the distance exceeds this fraction '
+          'of distance_threshold.', low=0.0, high=1.0),
+    Param('adaptive', True, 'Enter drift from a lasting bias above the sigmas of that bias '
+          '(self-adaptive limit).'),
+    Param('recovery_fraction', 0.75, 'A fault ends when the distance falls below this '
+          'fraction of distance_threshold.', low=0.0, high=1.0, low_open=True),
+    Param('max_gap', 1.0, 'Seconds between star-tracker samples above which the '
+          'star-tracker rate restarts.', low=0.0, low_open=True, unit='s'),
+    Param('norm_tolerance', 0.1, 'Quaternions whose norm is off 1 by more than this are '
+          'rejected.', low=0.0, high=1.0, low_open=True, high_open=True),
+    Param('axes', 'x,y,z', 'Comma-separated gyro axes to monitor (x, y, z).',
+          validate=_axes),
+    Param('reference_rate', [0.0, 0.0, 0.0], 'Guidance body rate (x y z) used when the '
+          'file has no ref_* columns or telemetry/reference_rate is silent.', unit='rad/s',
+          validate=_three),
+    Param('reference_timeout', 1.0, 'Seconds of data time without telemetry/reference_rate '
+          'after which reference_rate is used.', low=0.0, low_open=True, unit='s',
+          scope='node'),
+    Param('pair_tolerance', 1.0e-3, 'Seconds within which a gyro and a star-tracker stamp '
+          'are the same sample.', low=0.0, high=1.0, unit='s', scope='node'),
+    Param('max_lag', 40, 'Gyro samples that may wait for their star-tracker match.', low=1,
+          high=10_000, read_only=True, unit='samples', scope='node'),
+    _time_jump('the detector'),
+    STALE_TIMEOUT,
+    DIAGNOSTIC_PERIOD,
+), 'VSADC gyro drift/bias classifier (vsadc paper, Algorithm 1); docs/vsadc.md. Samples '
+   'are star-tracker/gyro pairs.', lambda values: _vsadc_detector(values))
+
+# ----------------------------------------------------------------------- identification
+
+IDENTIFY = Schema('identify', (
+    Param('half_width', 5, 'Half window of the local-polynomial differentiator.', low=1,
+          high=1000, unit='samples', scope='file'),
+    Param('alpha', 1.0e-3, 'Family-wise level of the effect and jump tests.', low=0.0,
+          high=1.0, low_open=True, high_open=True, scope='file'),
+    Param('jumps', True, 'Segment friction jumps before fitting.', scope='file'),
+), 'Identification of what the friction model misses (`rwa-monitor identify`); '
+   'docs/identify.md.')
+
+# ------------------------------------------------------------------------------- replay
+
+REPLAY = Schema('telemetry_replay', (
+    Param('file', '', 'Telemetry file to replay (.csv, or .mcap written by rwa_monitor); '
+          'required, give it with -p file:=PATH (never in a parameters file, where it would '
+          'beat the command line).', read_only=True, required=True, scope='node'),
+    Param('rate', 1.0, 'Time factor: 1.0 real time, 40.0 forty times faster, 0.0 as fast as '
+          'the subscribers take it without loss.', low=0.0, high=1.0e6, scope='node'),
+    Param('start_offset', 0.0, 'Seconds from the first sample where the replay (and every '
+          'loop) starts.', low=0.0, read_only=True, unit='s', scope='node'),
+    Param('loop', False, 'Start again at start_offset after the last sample (stamps jump '
+          'back).', scope='node'),
+    Param('min_subscribers', 0, 'Matched subscriptions on telemetry/wheels to wait for '
+          'before the first sample (rate 0 waits for at least 1).', low=0, high=1000,
+          scope='node'),
+    Param('burst', 1, 'Rows published per executor turn at rate 0 (keep at most the '
+          'telemetry depth divided by the number of subscriber turns per row).', low=1,
+          high=500, scope='node'),
+    Param('exit_when_done', True, 'Shut the process down after the last sample (no loop); '
+          'in-process users set false and poll `done`.', scope='node'),
+    Param('frame_id', 'body', 'frame_id of the gyro, star-tracker and reference-rate '
+          'messages.', read_only=True, scope='node'),
+), 'Replay of a telemetry file as ROS topics and /clock; docs/nodes.md.')
+
+SCHEMAS: dict[str, Schema] = {s.name: s for s in (REPLAY, LLR, FSS, VSADC, IDENTIFY)}
+
+
+# ------------------------------------------------- checked values -> algorithm keywords
+
+def llr_kwargs(values: Mapping[str, Any]) -> dict[str, Any]:
+    """Return LLRDetector / detect_batch keywords from checked LLR values."""
+    return {name: values[name] for name in LLR.names(('all',))}
+
+
+def vsadc_kwargs(values: Mapping[str, Any]) -> dict[str, Any]:
+    """Return VsadcDetector keywords from checked VSADC values (axes as a tuple)."""
+    kwargs = {name: values[name] for name in VSADC.names(('all',)) if name != 'reference_rate'}
+    kwargs['axes'] = tuple(a.strip() for a in values['axes'].split(',') if a.strip())
+    return kwargs
+
+
+def _vsadc_detector(values: Mapping[str, Any]) -> Any:
+    from rwa_monitor.core.vsadc import VsadcDetector
+    return VsadcDetector(**vsadc_kwargs(values))
+
+
+def fss_config(values: Mapping[str, Any]) -> Any:
+    """Return the FssConfig of checked FSS values (ValueError from its own checks)."""
+    from rwa_monitor.core.fss.pipeline import FssConfig
+    return FssConfig(**{name: values[name] for name in FSS.names(('all',))
+                        if name != 'model'})
+
+
+# ------------------------------------------------------------------- generated texts
+
+def _yaml_value(value: Any) -> str:
+    if isinstance(value, bool):
+        return 'true' if value else 'false'
+    if isinstance(value, float):
+        text = repr(value)
+        if 'e' in text and '.' not in text.split('e')[0]:
+            mantissa, exponent = text.split('e')
+            text = f'{mantissa}.0e{exponent}'
+        return text
+    if isinstance(value, str):
+        return f'"{value}"' if value == '' or ',' in value else value
+    if isinstance(value, list):
+        return '[' + ', '.join(_yaml_value(v) for v in value) + ']'
+    return str(value)
+
+
+def default_text(param: Param) -> str:
+    """Return a parameter's default as written in the parameters file."""
+    return '(required)' if param.required else _yaml_value(param.default)
+
+
+def markdown_table(schema: Schema) -> str:
+    """Return the markdown table of a schema's parameters (docs/parameters.md)."""
+    rows = ['| name | default | allowed | unit | where | meaning |',
+            '|---|---|---|---|---|---|']
+    for p in schema:
+        where = {'all': 'node, file', 'node': 'node', 'file': 'file'}[p.scope]
+        rows.append(f'| `{p.name}` | `{default_text(p)}` | {p.allowed() or "any"} | '
+                    f'{p.unit or "-"} | {where} | {p.description} |')
+    return '\n'.join(rows)
+
+
+def help_text(schema: Schema, scopes: Sequence[str] = ('all', 'file')) -> str:
+    """Return a plain-text list of a schema's parameters for ``--help`` epilogs."""
+    lines = [f'parameters of the {schema.name} block (docs/parameters.md):']
+    for p in schema:
+        if p.scope in scopes:
+            unit = f' [{p.unit}]' if p.unit else ''
+            lines.append(f'  {p.name} = {default_text(p)}{unit}: {p.description}')
+    return '\n'.join(lines)
+
+
+def parameters_document() -> str:
+    """Return docs/parameters.md: one table per schema (``rwa-monitor params --markdown``)."""
+    parts = ['# Parameters', '',
+             'Generated from `rwa_monitor/core/schema.py` by `rwa-monitor params --markdown`;',
+             'test/test_schema.py fails when this file and the schema differ. The node of each',
+             'block reads it with `--ros-args --params-file`, the file commands with `--config`',
+             '(`detect`) or `--params-file` (`diagnose`); where says which of them uses a',
+             f'parameter. `{AUTO}` is the one spelling of an automatic value. A name that no',
+             'schema knows is refused with the nearest valid one.', '']
+    for schema in SCHEMAS.values():
+        parts += [f'## {schema.name}', '', schema.summary, '', markdown_table(schema), '']
+    return '\n'.join(parts)
+
+
+def yaml_block(schema: Schema) -> dict[str, Any]:
+    """Return the node block of the shipped parameters file: every default but required."""
+    return {schema.name: {'ros__parameters': schema.defaults()}}

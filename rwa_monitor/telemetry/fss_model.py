@@ -1,0 +1,39 @@
+"""FSS classifier files: read and write the JSON of a trained WindowClassifier.
+
+The classifier itself (core/fss/classify.py) is arrays in, booleans out; its files live
+here, above the core. :data:`DEFAULT_MODEL` is the model shipped with the package.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import pathlib
+
+from rwa_monitor.core.fss.classify import WindowClassifier
+from rwa_monitor.telemetry.atomic import write_text_atomic
+
+DEFAULT_MODEL = pathlib.Path(__file__).resolve().parents[1] / 'data' / 'fss_model.json'
+
+
+def load_model(path: str | os.PathLike | None = None) -> WindowClassifier:
+    """Return the classifier at ``path`` or the shipped default model.
+
+    FileNotFoundError names a missing file; ValueError a file that is not a model.
+    """
+    path = DEFAULT_MODEL if path is None else pathlib.Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f'FSS model not found: {path} (train one with '
+                                f'`rwa-monitor fss train DATASET -o MODEL`)')
+    try:
+        spec = json.loads(path.read_text())
+    except json.JSONDecodeError as err:
+        raise ValueError(f'{path}: not JSON: {err}') from None
+    if not isinstance(spec, dict):
+        raise ValueError(f'{path}: not an FSS model (expected a JSON object)')
+    return WindowClassifier(spec)
+
+
+def save_model(classifier: WindowClassifier, path: str | os.PathLike) -> None:
+    """Write a classifier as JSON (atomically)."""
+    write_text_atomic(path, json.dumps(classifier.spec, indent=1) + '\n')
