@@ -12,6 +12,7 @@
 
 from __future__ import annotations
 
+import concurrent.futures
 import json
 import pathlib
 import statistics
@@ -131,54 +132,59 @@ def _undeclared(quick: bool) -> list[dict]:
     return rows
 
 
-def _basilisk(out_dir: pathlib.Path, quick: bool) -> dict[str, Any]:
+def _basilisk(out_dir: pathlib.Path, quick: bool, pool=None) -> dict[str, Any]:
     """Identify every wheel of fault-free bus files (default guidance, null speed 10 rad/s).
 
     Seeds BUS_SEEDS were fixed before any result on them was seen; development used
     seeds 1-99. Goals: every wheel <= 1.05 x noise floor held out, the same named effects
     on the four identical wheels, no fallback, Stribeck speed within 25 % of 1 rad/s.
+    One process per seed when a pool is given.
     """
     exe = pathlib.Path(__file__).resolve().parents[1] / '.venv-bsk' / 'bin' / 'rwa-monitor'
     if not exe.exists():
         return {'skipped': 'the optional Basilisk environment (.venv-bsk) is absent'}
     hours = 0.5 if quick else BUS_HOURS
     seeds = BUS_SEEDS[:1] if quick else BUS_SEEDS
-    out: dict[str, Any] = {'hours': hours, 'seeds': list(seeds), 'files': {}}
+    args = [(out_dir, exe, seed, hours, seed == seeds[0]) for seed in seeds]
+    jobs = [pool.submit(_bus_seed, *a) if pool else None for a in args]
+    files = {str(a[2]): job.result() if job else _bus_seed(*a) for a, job in zip(args, jobs)}
+    return {'hours': hours, 'seeds': list(seeds), 'files': files}
+
+
+def _bus_seed(out_dir: pathlib.Path, exe: pathlib.Path, seed: int, hours: float,
+              plot: bool) -> dict[str, Any]:
+    """Simulate one fault-free bus file and identify its four wheels."""
     with tempfile.TemporaryDirectory() as tmp:
-        for seed in seeds:
-            path = pathlib.Path(tmp) / f'bus{seed}.csv'
-            subprocess.run([str(exe), 'simulate', 'basilisk', '--hours', str(hours), '--seed',
-                            str(seed), '-o', str(path)], check=True, capture_output=True)
-            tele = read_telemetry(path)
-            wheels, reports = {}, {}
-            for wheel in tele.wheels:
-                start = time.perf_counter()
-                sel, _ = identify_wheel(tele, wheel)
-                seconds = time.perf_counter() - start
-                reports[wheel] = write_outputs(sel, pathlib.Path(tmp) / f'{seed}-{wheel}',
-                                               f'bus seed {seed} {wheel}')
-                hyst = [e for e in sel.effects if e.name == 'stribeck_hysteresis']
-                wheels[wheel] = {
-                    'samples': len(sel.data), 'seconds': seconds,
-                    'noise_floor': sel.data.noise_floor,
-                    'held_out_before': sel.baseline_fit.rmse_held_out,
-                    'held_out_after': sel.final_fit.rmse_held_out,
-                    'ratio_after': sel.final_fit.rmse_held_out / sel.data.noise_floor,
-                    'effects': [e.name for e in sel.effects],
-                    'parameters': {e.name: {k: v for k, v in e.params.items()
-                                            if not isinstance(v, list)}
-                                   for e in sel.effects},
-                    'stribeck_speed': hyst[0].params['velocity_rad_s'] if hyst else None,
-                    'fallback': any(e.name == 'smooth_speed' for e in sel.effects),
-                    'zero_passages': sel.data.past.passages,
-                    'jumps': len(sel.segments.starts) - 1,
-                    'failing_after': sel.diagnostics_after['failing']}
-                if seed == seeds[0] and wheel == 'rw1':
-                    plot_residuals(sel, out_dir / 'identify_bus_before.png', 'before')
-                    plot_residuals(sel, out_dir / 'identify_bus_after.png', 'after')
-            out['files'][str(seed)] = {'wheels': wheels,
-                                       'consistency': side_by_side(reports)['consistency']}
-    return out
+        path = pathlib.Path(tmp) / f'bus{seed}.csv'
+        subprocess.run([str(exe), 'simulate', 'basilisk', '--hours', str(hours), '--seed',
+                        str(seed), '-o', str(path)], check=True, capture_output=True)
+        tele = read_telemetry(path)
+        wheels, reports = {}, {}
+        for wheel in tele.wheels:
+            start = time.perf_counter()
+            sel, _ = identify_wheel(tele, wheel)
+            seconds = time.perf_counter() - start
+            reports[wheel] = write_outputs(sel, pathlib.Path(tmp) / f'{seed}-{wheel}',
+                                           f'bus seed {seed} {wheel}')
+            hyst = [e for e in sel.effects if e.name == 'stribeck_hysteresis']
+            wheels[wheel] = {
+                'samples': len(sel.data), 'seconds': seconds,
+                'noise_floor': sel.data.noise_floor,
+                'held_out_before': sel.baseline_fit.rmse_held_out,
+                'held_out_after': sel.final_fit.rmse_held_out,
+                'ratio_after': sel.final_fit.rmse_held_out / sel.data.noise_floor,
+                'effects': [e.name for e in sel.effects],
+                'parameters': {e.name: {k: v for k, v in e.params.items()
+                                        if not isinstance(v, list)} for e in sel.effects},
+                'stribeck_speed': hyst[0].params['velocity_rad_s'] if hyst else None,
+                'fallback': any(e.name == 'smooth_speed' for e in sel.effects),
+                'zero_passages': sel.data.past.passages,
+                'jumps': len(sel.segments.starts) - 1,
+                'failing_after': sel.diagnostics_after['failing']}
+            if plot and wheel == 'rw1':
+                plot_residuals(sel, out_dir / 'identify_bus_before.png', 'before')
+                plot_residuals(sel, out_dir / 'identify_bus_after.png', 'after')
+    return {'wheels': wheels, 'consistency': side_by_side(reports)['consistency']}
 
 
 def stress_case(n: int = 100000, dt: float = 0.1, seed: int = 5):
@@ -309,15 +315,20 @@ def run(out_dir: pathlib.Path, quick: bool) -> dict:
     """Run the benchmark; write JSON, plots and the identify section of docs/results.md."""
     out_dir.mkdir(parents=True, exist_ok=True)
     results: dict[str, Any] = {'quick': quick}
-    results['measured'] = _measured(out_dir, quick)
+    # The accuracy parts run in parallel processes; the timing parts afterwards, alone.
+    with concurrent.futures.ProcessPoolExecutor(max_workers=6) as pool:
+        measured = pool.submit(_measured, out_dir, quick)
+        undeclared = pool.submit(_undeclared, quick)
+        demo = pool.submit(_demo, out_dir, quick)
+        results['basilisk'] = _basilisk(out_dir, quick, pool)
+        results['measured'] = measured.result()
+        results['undeclared'] = undeclared.result()
+        results['demo'] = demo.result()
     if 'runs' in results['measured']:
         results['measured']['pooled'] = _pooled(results['measured']['runs'])
         _plot_measured(out_dir, results['measured']['runs'])
-    results['undeclared'] = _undeclared(quick)
-    results['basilisk'] = _basilisk(out_dir, quick)
     results['stress'] = _stress(quick)
     results['speed'] = _speed(quick)
-    results['demo'] = _demo(out_dir, quick)
     write_outputs(identify(prepare(simulate_undeclared('drag', seed=1))),
                   out_dir / 'identify_example_drag', 'simulated drag (undeclared)')
     write_json(out_dir, 'identify', results)
