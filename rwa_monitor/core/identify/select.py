@@ -11,7 +11,10 @@ LR = n_train log(RSS_0 / RSS_1), chi^2 with k degrees of freedom (k = rank added
    that have none is at most alpha per step), and
 2. it also improves the held-out rows: n_held log(RSS_0,held / RSS_1,held) above the
    chi^2(k) critical value at level ``alpha_held`` (an effect that only fits the noise of
-   the training rows makes the held-out fit worse, not better).
+   the training rows makes the held-out fit worse, not better), and
+3. it pays for its parameters: the BIC gain LR - (k + q) ln(n_train) is positive, q the
+   number of nonlinear parameters searched on its grid (Schwarz's criterion; the many
+   weights of the fallback need a large gain).
 
 Among the significant named candidates the one with the smallest held-out RSS is added.
 The smooth-speed fallback is scored with the same test at every step; it is added when
