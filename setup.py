@@ -12,7 +12,7 @@ setup(
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml']),
-        ('share/' + package_name + '/config', glob('config/*.yaml')),
+        ('share/' + package_name + '/config', glob('config/*.yaml') + glob('config/*.json')),
         ('share/' + package_name + '/launch', glob('launch/*.py')),
     ],
     package_data={package_name: ['config/*.yaml', 'data/*']},
@@ -32,6 +32,8 @@ setup(
             'rwa-monitor-vsadc = rwa_monitor.nodes.vsadc_detector:main',
             'rwa-monitor-fss = rwa_monitor.nodes.fss_diagnoser:main',
             'rwa-monitor-bus = rwa_monitor.nodes.basilisk_bus:main',
+            'rwa-monitor-record = rwa_monitor.nodes.recorder:main',
+            'rwa-monitor-foxglove = rwa_monitor.nodes.foxglove_bridge:main',
         ],
     },
 )

@@ -349,7 +349,8 @@ def _markdown(res: dict) -> str:
                   'github.com/hpvdt/rolling_resistance_rig, see its SOURCE.md)', '',
                   f'Inertia from the pendulum swings: drum {m["inertia_kg_m2"]["drum"]:.2f} '
                   f'kg m^2 (SOURCE.md: about 26.4), wheel {m["inertia_kg_m2"]["wheel"]:.4f} '
-                  f'kg m^2 (about 0.090). Friction = J dw/dt (local quadratic, width h chosen from the data per run; '
+                  f'kg m^2 (about 0.090). Friction = J dw/dt (local quadratic, width h '
+                  f'chosen from the data per run; '
                   f'revolutions). Samplewheel_29 left out (not a free coast).', '',
                   table(['run', 'body', 'n', 'h', 'noise floor', 'torque held-out before',
                          'after', 'cut', 'speed RMSE before (rad/s)', 'after', 'cut',

@@ -44,14 +44,14 @@ def test_simulate_writes_truth_columns(simulated):
 def test_detect_round_trip_finds_the_step(simulated):
     folder, path, config = simulated
     out = folder / 'events.json'
-    assert main(['detect', str(path), '--config', str(config), '-o', str(out)]) == 0
+    assert main(['detect', str(path), '--config', str(config), '-o', str(out)]) == 1
     document = json.loads(out.read_text())
     assert set(document) == {'events', 'summary'}
     events = document['events']
     for event in events:
         assert EVENT_FIELDS <= set(event)
         assert event['detector'] == 'llr'
-        assert event['kind'] in ('dry', 'viscous', 'both')
+        assert event['kind'] in ('dry', 'viscous', 'both', 'undecided')
     assert {e['component'] for e in events} == {'rw2'}
     first = [e for e in events if e['revision'] == 0]
     assert len(first) == 1
@@ -86,7 +86,7 @@ def test_nonfinite_samples_are_counted_not_fatal(tmp_path):
 
 def test_detect_prints_a_table_without_output(simulated, capsys):
     _, path, config = simulated
-    assert main(['detect', str(path), '--config', str(config)]) == 0
+    assert main(['detect', str(path), '--config', str(config)]) == 1  # anomaly found
     text = capsys.readouterr().out
     assert 'rw2' in text and 'llr' in text and '12000 samples' in text
 
@@ -97,7 +97,7 @@ def test_file_without_friction_runs_no_friction_detector(tmp_path):
     path = tmp_path / 'speed_only.csv'
     write_telemetry(path, tele)
     out = tmp_path / 'events.json'
-    assert main(['detect', str(path), '-o', str(out)]) == 0
+    assert main(['detect', str(path), '-o', str(out)]) == 3  # nothing could be examined
     document = json.loads(out.read_text())
     assert document['events'] == []
     assert 'llr' not in document['summary']['pipelines']

@@ -8,8 +8,8 @@ import pytest
 from rwa_monitor.core import keys
 from rwa_monitor.core.friction import dry_column, RegressorSet, viscous_column
 from rwa_monitor.core.gchi2 import gchi2_isf
-from rwa_monitor.core.llr import LLRDetector
-from rwa_monitor.core.llr_batch import _stats, detect_batch, detect_batch_with_counters
+from rwa_monitor.core.llr import detect_batch, detect_batch_with_counters, LLRDetector
+from rwa_monitor.core.llr_common import window_statistics as _stats
 
 
 def paper_speed(n: int, profile: str = 'fig3') -> np.ndarray:
@@ -43,6 +43,11 @@ def stream(det: LLRDetector, t, w, f) -> list:
     for a, b, c in zip(list(t), list(w), list(f)):
         events.extend(det.update(a, b, c))
     return events
+
+
+def guess(event) -> str:
+    """Return the kind, or the better single kind of an undecided event."""
+    return event.details[keys.KIND_GUESS] if event.kind == 'undecided' else event.kind
 
 
 def firsts(events) -> list[tuple[str, int, int]]:
@@ -158,8 +163,9 @@ def test_streaming_and_batch_give_identical_events(name):
 
 
 REGRESSION = {
-    'three_changes_nan': [('viscous', 3003, 3843), ('viscous', 8994, 9755),
-                          ('viscous', 14985, 15929)],
+    # First declarations: ~w + k_verif post-change samples cannot tell the kinds apart.
+    'three_changes_nan': [('undecided', 3003, 3843), ('undecided', 8994, 9755),
+                          ('undecided', 14985, 15929)],
 }
 
 
@@ -175,11 +181,18 @@ def test_regression_detection_indices():
 # -- detection, categorisation, false alarms ----------------------------------------------
 @pytest.mark.slow
 def test_categorisation_accuracy_on_seeded_changes():
-    """Final kind of 40 seeded runs per class (dry +0.5, viscous +0.03, both): >= 95 %."""
+    """Final kind of 40 seeded runs per class (dry +0.5, viscous +0.03, both).
+
+    Never a confident wrong kind: a confirmed single kind needs 90 % power against the
+    other component at half the torque, and each component test has level 1e-3, so
+    confirmed wrong kinds are rare (<= 2 of 40 allowed). Undecided events carry the better
+    single kind as ``kind_guess``: right >= 95 %. Both (the kind that fits only with two
+    components) is confirmed in >= 95 % of the runs on 5000 post-change samples.
+    """
     results = {}
     for kind, d_dry, d_visc in (('dry', 0.5, 0.0), ('viscous', 0.0, 0.03),
                                 ('both', 0.5, 0.03)):
-        correct = detected = 0
+        correct = detected = wrong = confirmed = 0
         for seed in range(40):
             t, w, f = friction_signal(8000, 100 + seed, ((3000, d_dry, d_visc),))
             events = detect_batch(t, w, f)
@@ -189,11 +202,15 @@ def test_categorisation_accuracy_on_seeded_changes():
                 detected += 1
                 final = max((e for e in events if e.index == near[0].index),
                             key=lambda e: e.revision)
-                correct += final.kind == kind
-        results[kind] = (detected, correct)
-    for kind, (detected, correct) in results.items():
+                correct += guess(final) == kind
+                wrong += final.details[keys.KIND_CONFIRMED] and final.kind != kind
+                confirmed += final.details[keys.KIND_CONFIRMED] and final.kind == kind
+        results[kind] = (detected, correct, wrong, confirmed)
+    for kind, (detected, correct, wrong, confirmed) in results.items():
         assert detected >= 38, (kind, results)
         assert correct >= 0.95 * detected, (kind, results)
+        assert wrong <= 2, (kind, results)
+    assert results['both'][3] >= 0.95 * results['both'][0], results
 
 
 def test_change_time_refinement_reduces_the_localisation_error():
@@ -222,7 +239,7 @@ def test_event_fields_and_estimates():
     det = LLRDetector('rw3')
     events = stream(det, t, w, f)
     ev = events[0]
-    assert ev.detector == 'llr' and ev.component == 'rw3' and ev.kind == 'dry'
+    assert ev.detector == 'llr' and ev.component == 'rw3' and guess(ev) == 'dry'
     assert ev.time == t[ev.index] and ev.declared_time == t[ev.declared_index]
     assert ev.declared_index - ev.details[keys.ARGMIN_INDEX] == 500 + 250
     assert ev.p_value <= 1e-5 and ev.p_value == pytest.approx(
@@ -248,7 +265,7 @@ def test_more_regressors_use_the_general_path():
     params = {'window': 150, 'regressors': reg}
     det = LLRDetector('rw1', **params)
     events = stream(det, t, w, f)
-    assert [e.kind for e in events if e.revision == 0] == ['dry']
+    assert [guess(e) for e in events if e.revision == 0] == ['dry']
     assert abs(events[0].index - 1500) <= 30
     assert det.estimate.shape == (3,)
     assert detect_batch(t, w, f, **params) == events
@@ -414,7 +431,7 @@ def test_custom_model_with_auxiliary_channel_batch_equals_streaming():
     assert streamed == batch and counters == det.counters
     assert counters['nonfinite'] == np.count_nonzero(np.isnan(gain))
     assert counters['non_increasing_time'] == 1
-    assert [e.kind for e in batch if e.revision == 0] == ['dry']
+    assert [guess(e) for e in batch if e.revision == 0] == ['dry']
 
 
 def test_inline_default_path_equals_the_generic_two_column_path():

@@ -85,7 +85,9 @@ def test_scheduled_and_live_friction_faults_reported_on_the_right_wheel():
     assert abs(first['rw4'].time - injected_at) <= 5.0
     for w, t0 in (('rw2', 150.0), ('rw4', injected_at)):
         same_change = [e for e in events if e.component == w and e.index == first[w].index]
-        assert max(same_change, key=lambda e: e.revision).kind == 'dry'
+        # 'undecided' when 500 s of the bus profile cannot exclude a viscous part
+        # (docs/llr.md, categorisation); never a confirmed wrong kind
+        assert max(same_change, key=lambda e: e.revision).kind in ('dry', 'undecided')
         # Algorithm 1 declares after the window and k_verif = window / 2 more samples
         assert first[w].declared_time <= t0 + 1.5 * LLR['window'] / RATE_HZ + 1.0
 
@@ -94,15 +96,15 @@ def test_scheduled_and_live_friction_faults_reported_on_the_right_wheel():
 def test_gyro_drift_ramp_classified_as_drift_on_its_axis():
     """Drift 1e-6 rad/s per s on x from 600 s, held at 2e-4 rad/s from 800 s.
 
-    The guidance is scaled to 0.1: at full amplitude the attitude tracking error (up to
-    4e-4 rad/s) is larger than the fault and VSADC declares nothing (docs/basilisk.md).
+    Full guidance: the gyro-minus-star-tracker residual (docs/vsadc.md) does not carry the
+    attitude tracking error that hid the fault from the paper's residuals.
     """
     with RosWorld() as world:
         world.node(VsadcDetectorNode, parameter_overrides=[
             Parameter('use_sim_time', value=True)])
         sink = world.node(Node, 'sink')
         anomalies = Collector(sink, DiagnosticArray, 'anomalies', EVENTS_QOS)
-        bus = _bus(world, duration_s=900.0, guidance_scale=0.1,
+        bus = _bus(world, duration_s=1100.0,
                    faults='gyro:x:600:drift=1e-6,level=2e-4')
         world.wait_until(lambda: bus.done, 120.0, 'the bus done')
         world.wait_until(lambda: any(e.kind == 'bias' for e in _events(anomalies)), 20.0,

@@ -106,7 +106,7 @@ def test_star_tracker_that_stops_makes_the_axes_stale_not_drift():
 
 def test_reference_parameter_used_when_the_topic_is_silent_and_bad_values_rejected():
     with RosWorld() as world:
-        detector = _detector(world, reference_rate=[0.0, 0.0, 1.0e-3])
+        detector = _detector(world, feature='paper', reference_rate=[0.0, 0.0, 1.0e-3])
         assert detector.reference == [0.0, 0.0, 1.0e-3]
         detector.on_gyro(messages.imu(1.0, [0.0, 0.0, 1.0e-3]))
         detector.on_star_tracker(messages.quaternion(1.0, [0.0, 0.0, 0.0, 1.0]))

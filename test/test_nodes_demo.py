@@ -143,3 +143,37 @@ def test_demo_with_gyro_channels_feeds_every_detector(tmp_path):
     assert result.gyro_faults[0][:2] == ('gyro_y', 'drift')
     assert result.gyro_faults[0][2] == pytest.approx(180.0, abs=0.1)
     assert 'injected gyro fault: gyro_y drift from t=180.0 s' in cmd_demo.summary(result)
+
+
+def test_dashboard_keeps_spacecraft_apart_and_shows_a_silent_node_as_lost():
+    from rwa_monitor.nodes.llr_detector import LLRDetectorNode
+    from rclpy.parameter import Parameter
+    with RosWorld() as world:
+        sat1 = world.node(LLRDetectorNode, namespace='/sat1', parameter_overrides=[
+            Parameter('diagnostic_period', value=0.2)])
+        sat2 = world.node(LLRDetectorNode, namespace='/sat2', parameter_overrides=[
+            Parameter('diagnostic_period', value=0.2)])
+        event = AnomalyEvent('llr', 'rw2', 'dry', 120.5, 1205, 150.0, 1500, 1e-9)
+        sat1._publish_events(sat1._wheel('rw2'), [event])
+        sat2._wheel('rw2')
+        board = cmd_dashboard.Board(stale_timeout=1.0)
+        view = world.add(cmd_dashboard.make_node(board, 0.2, context=world.context))
+        world.wait_until(lambda: board.by_namespace.get('/sat1') == 1, 10.0, 'sat1 anomaly')
+        world.wait_until(lambda: {'/sat1', '/sat2'} <= set(board.namespaces()), 10.0,
+                         'both namespaces')
+        text = cmd_dashboard.render(board)
+        sections = text.split('== ')
+        one = next(s for s in sections if s.startswith('/sat1 =='))
+        two = next(s for s in sections if s.startswith('/sat2 =='))
+        assert 'anomalies: 1' in one and 'anomalies: 0' in two
+        assert any(line.startswith('rw2') and 'WARN' in line for line in one.splitlines())
+        assert not any(line.startswith('rw2') and 'WARN' in line for line in two.splitlines())
+        world.remove(sat2)                      # a killed node: its statuses stop
+        world.spin_for(1.5)
+        two = next(s for s in cmd_dashboard.render(board).split('== ')
+                   if s.startswith('/sat2 =='))
+        assert all('LOST' in line for line in two.splitlines()
+                   if line.startswith(('rw2', 'telemetry/wheels', 'alarms')))
+        assert 'LOST' not in next(s for s in cmd_dashboard.render(board).split('== ')
+                                  if s.startswith('/sat1 =='))
+        del view

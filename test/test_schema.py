@@ -6,9 +6,10 @@ import pytest
 import yaml
 
 from rwa_monitor.core.fss.pipeline import FssConfig
+from rwa_monitor.core.gyro_diagnosis import make_gyro_detector
 from rwa_monitor.core.llr import LLRDetector
 from rwa_monitor.core.schema import (AUTO, FSS, LLR, parameters_document, REPLAY, SCHEMAS,
-                                     VSADC, vsadc_kwargs)
+                                     VSADC)
 from rwa_monitor.core.vsadc import VsadcDetector
 from rwa_monitor.exceptions import ConfigError
 from rwa_monitor.telemetry.parameters_file import (block_values, load_block,
@@ -120,7 +121,7 @@ def _core(schema, name, value):
         LLRDetector('rw1', **{n: values[n] for n in LLR.names(('all',))
                               if n != 'friction_model_file'})
     elif schema is VSADC:
-        VsadcDetector(**vsadc_kwargs(values))
+        make_gyro_detector(values)          # builds VsadcDetector and the residual axes
     else:
         FssConfig(**{n: values[n] for n in FSS.names(('all',)) if n != 'model'})
 

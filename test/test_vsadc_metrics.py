@@ -38,7 +38,7 @@ def test_every_baseline_fits_and_predicts():
     # Bias step of 2e-4 rad/s on x: per-sample gyro residuals are 20 noise sigmas apart,
     # so every non-linear method (and the linear SVM) separates healthy from bias rows.
     tele = simulate_aocs(600.0, fault=named_fault('bias', 'x', 300.0), seed=5)
-    res = baselines.residuals(tele, 0)
+    res = baselines.residuals(tele.time, tele.gyro, tele.attitude, tele.reference_rate, 0)
     ok = np.isfinite(res).all(axis=1)
     y = tele.truth['gyro_x'].astype(int)
     x, y = res[ok], y[ok]

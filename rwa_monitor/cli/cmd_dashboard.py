@@ -1,9 +1,16 @@
 """``rwa-monitor dashboard``: a terminal view of ``anomalies`` and ``/diagnostics``.
 
 The ground-tool use case: point it at any running rwa_monitor system (same ROS domain)
-and it shows the health of every monitored component and the anomaly log. The anomaly
-subscription is TRANSIENT_LOCAL, so a dashboard that starts late still receives the
-recent events the detectors keep. The demo draws its live view with the same classes.
+and it shows the health of every monitored component and the anomaly log. It discovers
+every namespace that publishes ``anomalies`` or diagnostics (``/sat1/anomalies``,
+``/sat2/anomalies``, ...; re-checked every ``--discovery-period`` s) and keeps each
+spacecraft in its own section: a status named ``"sat1/llr_detector: rw1 friction"``
+belongs to ``/sat1``. The anomaly subscriptions are TRANSIENT_LOCAL, so a dashboard that
+starts late still receives the events the detectors keep (latched ones are re-published
+when a detector restarts). Every status ages: one not refreshed for ``--stale-timeout``
+s is shown LOST whatever its last level (a killed node). Discovery stays on this host
+(``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``) unless the environment sets it otherwise
+(docs/nodes.md: watching another host). The demo draws its live view with these classes.
 """
 
 from __future__ import annotations
@@ -15,8 +22,11 @@ import sys
 import time
 from typing import Any, TextIO
 
-LEVEL_NAMES = {0: 'OK', 1: 'WARN', 2: 'ERROR', 3: 'STALE'}
-_COLOURS = {0: '\x1b[32m', 1: '\x1b[33m', 2: '\x1b[31m', 3: '\x1b[90m'}
+LEVEL_NAMES = {0: 'OK', 1: 'WARN', 2: 'ERROR', 3: 'STALE', 4: 'LOST'}
+LOST = 4
+ROOT = '/'
+
+_COLOURS = {0: '\x1b[32m', 1: '\x1b[33m', 2: '\x1b[31m', 3: '\x1b[90m', 4: '\x1b[35m'}
 _RESET = '\x1b[0m'
 
 
@@ -26,38 +36,76 @@ def level_of(status: Any) -> int:
     return level[0] if isinstance(level, (bytes, bytearray)) else int(level)
 
 
-class Board:
-    """What the view shows: latest health per component, and the anomaly log."""
+def namespace_of(status_name: str) -> str:
+    """Return the namespace of a status named ``"[ns/]node: check"`` (``/`` if none)."""
+    node = status_name.split(':', 1)[0].strip().strip('/')
+    return '/' + node.rsplit('/', 1)[0] if '/' in node else ROOT
 
-    def __init__(self, max_events: int = 200) -> None:
+
+def topic_namespace(topic: str) -> str:
+    """Return the namespace of a topic (``/sat1/anomalies`` -> ``/sat1``)."""
+    head = topic.rsplit('/', 1)[0]
+    return head or ROOT
+
+
+class Board:
+    """What the view shows: latest health per component and anomalies, per namespace.
+
+    ``clock`` gives the wall time used to age statuses (``stale_timeout`` s without a
+    refresh: LOST).
+    """
+
+    def __init__(self, max_events: int = 200, stale_timeout: float = 5.0,
+                 clock: Any = time.monotonic) -> None:
         self.health: dict[tuple[str, str], dict[str, Any]] = {}
         self.events: collections.deque[dict[str, Any]] = collections.deque(maxlen=max_events)
         self.n_events = 0
         self.by_detector: dict[str, int] = {}
+        self.by_namespace: dict[str, int] = {}
+        self.stale_timeout = stale_timeout
+        self.clock = clock
         self._seen: set[tuple] = set()
 
     def on_diagnostics(self, msg: Any) -> None:
-        """Keep the latest status of each (name, hardware_id)."""
+        """Keep the latest status of each (name, hardware_id), with when it arrived."""
         from rwa_monitor.nodes.messages import status_fields
+        now = self.clock()
         for status in msg.status:
             self.health[(status.name, status.hardware_id)] = {
                 'level': level_of(status), 'message': status.message,
-                'fields': status_fields(status)}
+                'fields': status_fields(status), 'received': now,
+                'namespace': namespace_of(status.name)}
 
-    def on_anomalies(self, msg: Any) -> None:
+    def on_anomalies(self, msg: Any, namespace: str = ROOT) -> None:
         """Append each event of an ``anomalies`` message (once, even if re-delivered)."""
         from rwa_monitor.nodes.messages import status_fields
         for status in msg.status:
             fields = status_fields(status)
-            key = (status.name, status.hardware_id, tuple(sorted(fields.items(), key=str)))
+            key = (namespace, status.name, status.hardware_id,
+                   tuple(sorted(fields.items(), key=str)))
             if key in self._seen:
                 continue
             self._seen.add(key)
             self.n_events += 1
             detector = str(fields.get('detector', '?'))
             self.by_detector[detector] = self.by_detector.get(detector, 0) + 1
+            self.by_namespace[namespace] = self.by_namespace.get(namespace, 0) + 1
             self.events.append({'level': level_of(status), 'name': status.name,
-                                'component': status.hardware_id, 'fields': fields})
+                                'component': status.hardware_id, 'fields': fields,
+                                'namespace': namespace})
+
+    def aged(self, item: dict[str, Any]) -> tuple[int, str]:
+        """Return (level, message) of a status, LOST if not refreshed in time."""
+        age = self.clock() - item.get('received', self.clock())
+        if age > self.stale_timeout:
+            return LOST, (f'LOST: no status for {age:.0f} s; last '
+                          f'{LEVEL_NAMES.get(item["level"], "?")}: {item["message"]}')
+        return item['level'], item['message']
+
+    def namespaces(self) -> list[str]:
+        """Return every namespace seen (statuses or anomalies), sorted."""
+        seen = {item.get('namespace', ROOT) for item in self.health.values()}
+        return sorted(seen | set(self.by_namespace))
 
 
 def _paint(text: str, level: int, colour: bool) -> str:
@@ -74,33 +122,38 @@ def _number(value: Any) -> float:
 
 def render(board: Board, *, title: str = 'rwa_monitor', progress: str | None = None,
            colour: bool = False, max_log: int = 10) -> str:
-    """Return the view as text: optional progress line, health table, anomaly log."""
+    """Return the view as text: progress line, then per namespace health and anomalies."""
     lines = [title]
     if progress:
         lines.append(progress)
-    lines.append('')
-    lines.append(f'{"component":<18} {"node":<16} {"level":<6} {"kind":<9} {"change s":>10}'
-                 '  status')
-    for (name, hardware_id), item in sorted(board.health.items(),
-                                            key=lambda kv: (kv[0][1], kv[0][0])):
-        fields = item['fields']
-        kind = fields.get('kind', '')
-        change = fields.get('change_time_s', '')
-        node = name.split(':', 1)[0] if ':' in name else ''
-        row = (f'{hardware_id or name:<18} {node:<16} {LEVEL_NAMES.get(item["level"], "?"):<6} '
-               f'{str(kind):<9} {_seconds(change):>10}  {item["message"]}')
-        lines.append(_paint(row, item['level'], colour))
     if not board.health:
-        lines.append('(no /diagnostics yet)')
-    lines.append('')
-    lines.append(f'anomalies: {board.n_events}')
-    for event in list(board.events)[-max_log:]:
-        f = event['fields']
-        text = (f'  {event["component"]:<10} {str(f.get("detector", "")):<6} '
-                f'{str(f.get("kind", "")):<8} change t={_seconds(f.get("change_time_s", "?"))}'
-                f' s  declared t={_seconds(f.get("declaration_time_s", "?"))} s'
-                f'  p={_number(f.get("p_value")):.3g}  rev {f.get("revision", 0)}')
-        lines.append(_paint(text, event['level'], colour))
+        lines += ['', '(no /diagnostics yet)']
+    for namespace in board.namespaces() or [ROOT]:
+        lines.append('')
+        lines.append(f'== {namespace} ==')
+        lines.append(f'{"component":<18} {"node":<16} {"level":<6} {"kind":<9} '
+                     f'{"change s":>10}  status')
+        items = [(key, item) for key, item in board.health.items()
+                 if item.get('namespace', ROOT) == namespace]
+        for (name, hardware_id), item in sorted(items, key=lambda kv: (kv[0][1], kv[0][0])):
+            fields = item['fields']
+            kind = fields.get('kind', fields.get('latched_kind', ''))
+            change = fields.get('change_time_s', fields.get('latched_change_time_s', ''))
+            node = name.split(':', 1)[0].rsplit('/', 1)[-1] if ':' in name else ''
+            level, message = board.aged(item)
+            row = (f'{hardware_id or name:<18} {node:<16} {LEVEL_NAMES.get(level, "?"):<6} '
+                   f'{str(kind):<9} {_seconds(change):>10}  {message}')
+            lines.append(_paint(row, level, colour))
+        lines.append(f'anomalies: {board.by_namespace.get(namespace, 0)}')
+        events = [e for e in board.events if e.get('namespace', ROOT) == namespace]
+        for event in events[-max_log:]:
+            f = event['fields']
+            text = (f'  {event["component"]:<10} {str(f.get("detector", "")):<6} '
+                    f'{str(f.get("kind", "")):<8} change '
+                    f't={_seconds(f.get("change_time_s", "?"))} s  declared '
+                    f't={_seconds(f.get("declaration_time_s", "?"))} s'
+                    f'  p={_number(f.get("p_value")):.3g}  rev {f.get("revision", 0)}')
+            lines.append(_paint(text, event['level'], colour))
     return '\n'.join(lines)
 
 
@@ -129,16 +182,49 @@ class Screen:
         self.out.flush()
 
 
-def make_node(board: Board, **kwargs: Any) -> Any:
-    """Return a node that feeds ``board`` from ``anomalies`` and ``/diagnostics``."""
+DIAGNOSTICS_TYPE = 'diagnostic_msgs/msg/DiagnosticArray'
+
+
+def make_node(board: Board, discovery_period: float = 2.0, **kwargs: Any) -> Any:
+    """Return a node that feeds ``board`` from every ``anomalies`` and diagnostics topic.
+
+    It subscribes ``/anomalies`` and ``/diagnostics`` at once, then every
+    ``discovery_period`` s (steady clock) any other DiagnosticArray topic named
+    ``.../anomalies`` or ``.../diagnostics`` that appeared (one per spacecraft namespace).
+    """
     from diagnostic_msgs.msg import DiagnosticArray
+    from rclpy.clock import Clock
+    from rclpy.clock_type import ClockType
     from rclpy.node import Node
 
     from rwa_monitor.nodes.common import DIAGNOSTICS_QOS, EVENTS_QOS
     node = Node('rwa_monitor_dashboard', **kwargs)
-    node.create_subscription(DiagnosticArray, 'anomalies', board.on_anomalies, EVENTS_QOS)
-    node.create_subscription(DiagnosticArray, '/diagnostics', board.on_diagnostics,
-                             DIAGNOSTICS_QOS)
+    subscribed: set[str] = set()
+
+    def subscribe(topic: str) -> None:
+        if topic in subscribed:
+            return
+        subscribed.add(topic)
+        if topic.endswith('/anomalies'):
+            namespace = topic_namespace(topic)
+            node.create_subscription(DiagnosticArray, topic,
+                                     lambda msg: board.on_anomalies(msg, namespace),
+                                     EVENTS_QOS)
+        else:
+            node.create_subscription(DiagnosticArray, topic, board.on_diagnostics,
+                                     DIAGNOSTICS_QOS)
+
+    def discover() -> None:
+        for topic, types in node.get_topic_names_and_types():
+            if DIAGNOSTICS_TYPE in types and (topic.endswith('/anomalies')
+                                              or topic.endswith('/diagnostics')):
+                subscribe(topic)
+
+    subscribe('/anomalies')
+    subscribe('/diagnostics')
+    node.dashboard_discover = discover
+    node.create_timer(discovery_period, discover,
+                      clock=Clock(clock_type=ClockType.STEADY_TIME))
     return node
 
 
@@ -150,8 +236,8 @@ def run(args: argparse.Namespace) -> int:
     os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     context = Context()
     rclpy.init(context=context, domain_id=args.domain_id)
-    board = Board()
-    node = make_node(board, context=context)
+    board = Board(stale_timeout=getattr(args, 'stale_timeout', 5.0))
+    node = make_node(board, getattr(args, 'discovery_period', 2.0), context=context)
     executor = SingleThreadedExecutor(context=context)
     executor.add_node(node)
     screen = Screen(interval=args.interval, plain_interval=args.interval)
@@ -183,4 +269,9 @@ def register(subparsers: Any) -> None:
                         help='stop after this many seconds (default: until Ctrl-C)')
     parser.add_argument('--interval', type=float, default=1.0,
                         help='seconds between redraws (default: 1.0)')
+    parser.add_argument('--stale-timeout', type=float, default=5.0,
+                        help='seconds without a status after which a component is shown '
+                             'LOST (default: 5.0)')
+    parser.add_argument('--discovery-period', type=float, default=2.0,
+                        help='seconds between searches for new namespaces (default: 2.0)')
     parser.set_defaults(func=run)

@@ -7,6 +7,13 @@ one file configures the nodes and the command line alike. A pipeline with
 ``run_with_summary`` also reports per-component facts (samples, rejected-sample counters,
 run time); events are sorted by estimated change time. A bad parameter value is a
 ConfigError naming the pipeline and the parameter (exit code 2).
+
+Exit codes (docs/usage.md): 0 every component of the file was examined and nothing was
+found; 1 an anomaly was found; 3 nothing found, but not everything could be examined (no
+detector could run, a wheel has no friction column, or a component had no usable sample
+or never became ready: the summary's ``not_examined`` says which and why); 2 error. The
+summary's ``detectors`` lists each detector as ``ran`` or the reason it could not.
+Outputs never destroy data (:mod:`rwa_monitor.cli.output`).
 """
 
 from __future__ import annotations
@@ -17,6 +24,9 @@ import pathlib
 import sys
 from typing import Any
 
+from rwa_monitor import pipelines
+from rwa_monitor.cli.options import add_topics, INPUT_HELP
+from rwa_monitor.cli.output import check_output, quiet_broken_pipe, STDOUT, write_output
 from rwa_monitor.core.events import AnomalyEvent
 from rwa_monitor.core.schema import help_text, LLR, SCHEMAS, VSADC
 from rwa_monitor.pipelines import detect
@@ -33,15 +43,19 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                     'a table. Times are seconds of the file, torques N m.',
         epilog=f'{help_text(LLR)}\n{help_text(VSADC)}',
         formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument('file', type=pathlib.Path, help='telemetry file (.csv or .mcap)')
+    parser.add_argument('file', type=pathlib.Path, help=INPUT_HELP)
+    add_topics(parser)
     parser.add_argument('--config', type=pathlib.Path, metavar='YAML',
                         help='parameters file in the node format (node blocks with '
                              'ros__parameters; default: the installed config/rwa_monitor.yaml)')
     parser.add_argument('-o', '--output', type=pathlib.Path, metavar='FILE',
-                        help='write the events JSON here (default: print a table)')
+                        help='write the events JSON here, atomically (- = standard output; '
+                             'an input file is refused; default: print a table)')
     parser.add_argument('--friction-model', type=pathlib.Path, metavar='YAML',
                         help='refined friction model for the LLR detector, as written by '
                              'rwa-monitor identify (DIR/friction_model.yaml)')
+    parser.epilog = ('exit codes: 0 examined, nothing found; 1 anomaly found; 3 nothing '
+                     'found but not everything could be examined; 2 error')
     parser.set_defaults(func=run)
 
 
@@ -55,21 +69,77 @@ def node_parameters(config: dict[str, Any], node: str) -> dict[str, Any]:
     return block_values(config, SCHEMAS[node])
 
 
+EXIT_NOTHING_FOUND = 0
+EXIT_ANOMALY = 1
+EXIT_ERROR = 2
+EXIT_NOT_EXAMINED = 3
+DETECTOR_NEEDS = {'llr': 'needs <wheel>_speed and <wheel>_friction columns',
+                  'vsadc': 'needs gyro_x/y/z and q_x/y/z/w columns'}
+
+
+def coverage(tele: Any, summary: dict[str, Any]) -> dict[str, Any]:
+    """Add to ``summary`` which detectors ran and which components were not examined.
+
+    ``detectors``: name -> ``ran`` or why it could not; ``not_examined``: component ->
+    reason (no usable sample, or the detector never became ready). Returns the summary.
+    """
+    detectors: dict[str, str] = {}
+    not_examined: dict[str, str] = {}
+    for name in sorted(pipelines.available()):
+        if name in summary['pipelines']:
+            detectors[name] = 'ran'
+        else:
+            detectors[name] = 'not run: ' + DETECTOR_NEEDS.get(
+                name, 'the file lacks its input columns')
+    for wheel_id, wheel in tele.wheels.items():
+        if wheel.friction is None:
+            not_examined[wheel_id] = 'no friction column (the friction detectors need one)'
+    for name, info in summary['pipelines'].items():
+        for component, entry in info.get('components', {}).items():
+            if not isinstance(entry, dict):
+                continue
+            if entry.get('ready') is False:
+                not_examined[component] = f'{name}: never ready (learning the nominal class)'
+            rejected = entry.get('rejected')
+            samples = entry.get('samples')
+            if isinstance(rejected, dict) and samples:
+                unusable = sum(v for k, v in rejected.items() if k != 'ill_conditioned')
+                if unusable >= samples:
+                    not_examined[component] = f'{name}: no usable sample'
+    summary['detectors'] = detectors
+    summary['not_examined'] = not_examined
+    return summary
+
+
+def exit_code(events: list[AnomalyEvent], summary: dict[str, Any]) -> int:
+    """Return 1 if an anomaly was found, else 3 if something was not examined, else 0."""
+    if any(e.kind != 'healthy' for e in events):
+        return EXIT_ANOMALY
+    if summary.get('not_examined') or not summary['pipelines']:
+        return EXIT_NOT_EXAMINED
+    return EXIT_NOTHING_FOUND
+
+
 def run(args: argparse.Namespace) -> int:
     """Read the file, detect, and write the JSON or print the table."""
-    tele = read_telemetry(args.file)
+    check_output(args.output, args.file, args.config, args.friction_model)
+    tele = read_telemetry(args.file, args.topics)
     config = load_config(args.config)
     if args.friction_model is not None:
         block = config.setdefault('llr_detector', {}).setdefault('ros__parameters', {})
         block['friction_model_file'] = str(args.friction_model)
     events, summary = detect(tele, config, args.config or 'installed parameters')
-    if args.output is not None:
-        document = {'events': [e.to_json() for e in events], 'summary': summary}
-        args.output.write_text(json.dumps(document, indent=2) + '\n')
-        print(f'wrote {args.output}: {len(events)} events')
-    else:
-        print_table(events, summary, sys.stdout)
-    return 0
+    coverage(tele, summary)
+    code = exit_code(events, summary)
+    with quiet_broken_pipe():
+        if args.output is not None:
+            document = {'events': [e.to_json() for e in events], 'summary': summary}
+            write_output(args.output, json.dumps(document, indent=2) + '\n')
+            if str(args.output) != STDOUT:
+                print(f'wrote {args.output}: {len(events)} events')
+        else:
+            print_table(events, summary, sys.stdout)
+    return code
 
 
 def print_table(events: list[AnomalyEvent], summary: dict[str, Any], out) -> None:
@@ -86,6 +156,10 @@ def print_table(events: list[AnomalyEvent], summary: dict[str, Any], out) -> Non
     if not events:
         print('(no anomaly declared)', file=out)
     print(f'{summary["samples"]} samples', file=out)
+    for name, state in summary.get('detectors', {}).items():
+        print(f'detector {name}: {state}', file=out)
+    for component, why in summary.get('not_examined', {}).items():
+        print(f'not examined: {component}: {why}', file=out)
     for name, info in summary['pipelines'].items():
         print(f'{name}: {info["events"]} events in {info["runtime_s"]:.2f} s', file=out)
         for component, entry in info['components'].items():

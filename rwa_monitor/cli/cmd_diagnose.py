@@ -4,9 +4,12 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 
 import numpy as np
 
+from rwa_monitor.cli.options import add_topics, INPUT_HELP
+from rwa_monitor.cli.output import check_output, quiet_broken_pipe, STDOUT, write_output
 from rwa_monitor.core.schema import FSS, fss_config, help_text
 from rwa_monitor.exceptions import ConfigError, RwaMonitorError
 from rwa_monitor.telemetry import read_telemetry
@@ -21,8 +24,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         description='Run the four-stage FSS window diagnoser on the whole file, per wheel, '
                     'and write the JSON of DESIGN.md (docs/fss.md).',
         epilog=help_text(FSS), formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument('file', help='telemetry file (.csv or .mcap)')
-    parser.add_argument('-o', '--output', required=True, help='output JSON file')
+    parser.add_argument('file', help=INPUT_HELP)
+    add_topics(parser)
+    parser.add_argument('-o', '--output', required=True,
+                        help='output JSON file, written atomically (- = standard output; an '
+                             'input file is refused)')
     parser.add_argument('--model', default=None,
                         help='classifier model (default: the shipped one)')
     parser.add_argument('--params-file', default=None,
@@ -42,13 +48,14 @@ def run(args: argparse.Namespace) -> int:
     """Diagnose each wheel and write the JSON."""
     from rwa_monitor.core.fss.pipeline import diagnose
     from rwa_monitor.telemetry.fss_model import load_model
+    check_output(args.output, args.file, args.params_file, args.model)
     params = load_params(args.params_file)
     try:
         config = fss_config(params)
         model = load_model(args.model or params['model'] or None)
     except (ValueError, OSError) as err:
         raise ConfigError(str(err)) from None
-    tele = read_telemetry(args.file)
+    tele = read_telemetry(args.file, args.topics).only('wheels')
     wheels = {}
     for wheel_id, wheel in tele.wheels.items():
         if wheel.friction is None:
@@ -61,11 +68,11 @@ def run(args: argparse.Namespace) -> int:
         wheels[wheel_id] = diagnose(speed, friction, time, model, config)
     if not wheels:
         raise RwaMonitorError(f'{args.file}: no wheel with both speed and friction columns')
-    with open(args.output, 'w') as handle:
-        json.dump({'wheels': wheels}, handle, indent=1)
-        handle.write('\n')
-    for wheel_id, result in wheels.items():
-        flags = result.get('anomalies', {})
-        found = [k for k, v in flags.items() if v] or ['none']
-        print(f'{wheel_id}: anomalies {", ".join(found)}')
+    with quiet_broken_pipe():
+        write_output(args.output, json.dumps({'wheels': wheels}, indent=1) + '\n')
+        out = sys.stderr if args.output == STDOUT else sys.stdout
+        for wheel_id, result in wheels.items():
+            flags = result.get('anomalies', {})
+            found = [k for k, v in flags.items() if v] or ['none']
+            print(f'{wheel_id}: anomalies {", ".join(found)}', file=out)
     return 0

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 from dataclasses import replace
 
+from rwa_monitor.cli.options import OUTPUT_HELP
 from rwa_monitor.exceptions import ConfigError
 from rwa_monitor.sim.aocs import (AocsConfig, AXES, DEFAULT_LEVEL, DRIFT_SLOPES, FAULT_NAMES,
                                   GyroFault, named_fault, simulate_aocs)
@@ -45,8 +46,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument('--sign-flips', type=float, default=0.0, metavar='P',
                         help='probability that a star-tracker sample is output as -q')
     parser.add_argument('--seed', type=int, default=0, help='random seed (default 0)')
-    parser.add_argument('-o', '--output', required=True, metavar='FILE',
-                        help='output file (.csv, or .mcap)')
+    parser.add_argument('-o', '--output', required=True, metavar='PATH', help=OUTPUT_HELP)
     parser.set_defaults(func=run)
 
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
+from rwa_monitor.cli.options import OUTPUT_HELP
 from rwa_monitor.exceptions import ConfigError
 from rwa_monitor.sim.basilisk_config import (BusConfig, describe, parse_fault, require,
                                              WHEEL_IDS)
@@ -52,8 +53,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help='std of the friction telemetry noise (default '
                              f'{BusConfig.friction_noise_std:g} N m)')
     parser.add_argument('--seed', type=int, default=0, help='random seed (default 0)')
-    parser.add_argument('-o', '--output', required=True, metavar='FILE',
-                        help='output file (.csv, or .mcap)')
+    parser.add_argument('-o', '--output', required=True, metavar='PATH', help=OUTPUT_HELP)
     parser.set_defaults(func=run)
 
 

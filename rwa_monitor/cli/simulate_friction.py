@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 
+from rwa_monitor.cli.options import OUTPUT_HELP
 from rwa_monitor.exceptions import ConfigError
 from rwa_monitor.sim.friction import parse_anomaly, REGIMES, simulate_friction_with_truth
 from rwa_monitor.sim.profiles import PROFILES
@@ -49,8 +50,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument('--anomaly', action='append', default=[], metavar='SPEC',
                         help='step anomaly WHEEL:KIND:TIME_S:SIZE[:SIZE] (repeatable)')
     parser.add_argument('--seed', type=int, default=0, help='random seed (default 0)')
-    parser.add_argument('-o', '--output', required=True, metavar='FILE',
-                        help='output file (.csv, or .mcap)')
+    parser.add_argument('-o', '--output', required=True, metavar='PATH', help=OUTPUT_HELP)
     parser.set_defaults(func=run)
 
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 
+from rwa_monitor.cli.options import OUTPUT_HELP
 from rwa_monitor.exceptions import ConfigError
 from rwa_monitor.sim.fss import (RATE_HZ, simulate_fss, SPEED_SCALE_RAD_S, STATUSES,
                                  TORQUE_SCALE_NM, WINDOW_SAMPLES)
@@ -35,8 +36,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument('--profile', choices=('realistic', 'biased', 'constant'),
                         default='realistic', help='spin-rate profile (default realistic)')
     parser.add_argument('--seed', type=int, default=0, help='random seed (default 0)')
-    parser.add_argument('-o', '--output', required=True, metavar='FILE',
-                        help='output file (.csv, or .mcap)')
+    parser.add_argument('-o', '--output', required=True, metavar='PATH', help=OUTPUT_HELP)
     parser.set_defaults(func=run)
 
 

@@ -25,7 +25,6 @@ from sklearn.svm import SVC
 
 from rwa_monitor.core.attitude import star_tracker_rates
 from rwa_monitor.core.params import check_int, check_real
-from rwa_monitor.telemetry import Telemetry
 
 KNN_NEIGHBOURS = (1, 2, 3, 4, 5, 10, 15, 20, 50, 100, 200)
 SVM_KERNELS = {'svm-linear': dict(kernel='linear'),
@@ -49,19 +48,22 @@ def methods() -> dict[str, Callable[[], object]]:
     return out
 
 
-def residuals(tele: Telemetry, axis: int, max_gap: float = 1.0,
-              reference: np.ndarray | None = None) -> np.ndarray:
+def residuals(time: np.ndarray, gyro: np.ndarray, quaternions: np.ndarray,
+              reference: np.ndarray | None, axis: int, max_gap: float = 1.0) -> np.ndarray:
     """Return per-row residuals ``[res_sst, res_gyr]`` (eqs. (3), (7)); NaN where unusable.
 
-    ``reference`` (3,) replaces a missing ``ref_*`` group (rad/s).
+    ``time`` (n,) s, ``gyro`` (n, 3) rad/s, ``quaternions`` (n, 4) scalar last,
+    ``reference`` (n, 3) or (3,) guidance rate in rad/s (None: zero).
     """
     check_int('axis', axis, 0, 2)
-    if tele.gyro is None or tele.attitude is None:
-        raise ValueError('telemetry needs gyro_* and q_* columns')
-    ref = (tele.reference_rate[:, axis] if tele.reference_rate is not None
-           else np.full(len(tele), 0.0 if reference is None else float(reference[axis])))
-    sst = star_tracker_rates(tele.time, tele.attitude, max_gap)[:, axis]
-    out = np.column_stack([ref - sst, ref - tele.gyro[:, axis]])
+    time = np.asarray(time, dtype=float)
+    gyro = np.asarray(gyro, dtype=float)
+    if gyro.shape != (len(time), 3):
+        raise ValueError(f'gyro must be (n, 3) with n = len(time); got {gyro.shape}')
+    ref = np.zeros(3) if reference is None else np.asarray(reference, dtype=float)
+    ref = np.broadcast_to(ref, (len(time), 3))[:, axis]
+    sst = star_tracker_rates(time, quaternions, max_gap)[:, axis]
+    out = np.column_stack([ref - sst, ref - gyro[:, axis]])
     out[~np.isfinite(out).all(axis=1)] = np.nan
     return out
 

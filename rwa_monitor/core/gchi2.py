@@ -152,8 +152,11 @@ def log_lower_bound(b: float) -> float:
     """Return a lower bound of ``log erfc(sqrt(b))`` (closed form, b >= 0).
 
     Uses ``erfc(z) > 2 exp(-z^2) / (sqrt(pi) (z + sqrt(z^2 + 2)))``. With ``b = x / (2
-    w_max)`` this bounds ``log P(Q > x)`` from below for any weights.
+    w_max)`` this bounds ``log P(Q > x)`` from below for any weights. A ``b`` below 0
+    (rounding) is taken as 0, where the bound is largest (it is decreasing in ``b``).
     """
+    if not b > 0.0:
+        b = 0.0
     z = math.sqrt(b)
     return -b + _LOG_2_OVER_SQRT_PI - math.log(z + math.sqrt(b + 2.0))
 

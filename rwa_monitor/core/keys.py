@@ -35,6 +35,9 @@ Z_VISCOUS = 'z_viscous'
 KIND_CONFIRMED = 'kind_confirmed'   # False: the data cannot tell dry from viscous yet
 ARGMIN_INDEX = 'argmin_index'
 LOG10_P_VALUE = 'log10_p_value'
+KIND_GUESS = 'kind_guess'           # better single kind when kind is 'undecided'
+DETECTABLE_DRY = 'detectable_dry_nm'          # dry step found with 90 % power after
+DETECTABLE_VISCOUS = 'detectable_viscous_nms'  # the change (inf: not separable)
 
 # FSS window diagnoser (physics-informed FSS paper): window and extracted components.
 WINDOW_START = 'window_start_s'

@@ -16,120 +16,19 @@ from typing import Any, Mapping
 import numpy as np
 from scipy import linalg
 
-from rwa_monitor.core import keys, llr_stats
+from rwa_monitor.core import llr_batch, llr_stats
 from rwa_monitor.core.events import AnomalyEvent
-from rwa_monitor.core.friction import coulomb_viscous, RegressorSet
-from rwa_monitor.core.gchi2 import (gchi2_logsf_general, log_lower_bound, log_sf2,
-                                    log_sf2_t, skip_threshold)
-from rwa_monitor.core.params import AUTO, check_int, check_real
+from rwa_monitor.core.friction import RegressorSet
+from rwa_monitor.core.gchi2 import (gchi2_logsf_general, log_sf2, log_sf2_t,
+                                    skip_threshold)
+from rwa_monitor.core.llr_common import (candidate_log_p2, checkpoints, COUNTER_NAMES,
+                                         declaration, fit_noise_model, make_event,
+                                         NoiseModel, reference_base, validate_parameters,
+                                         window_statistics)
+from rwa_monitor.core.params import AUTO
 
-COUNTER_NAMES = ('nonfinite', 'out_of_range', 'non_increasing_time', 'missing_aux',
-                 'ill_conditioned')
-_LN10 = math.log(10.0)
-
-
-def validate_parameters(component: str = 'rw1', *, window: int = 500,
-                        k_verif: int | str | None = AUTO, false_alarm_rate: float = 1e-5,
-                        noise_std: float | str | None = AUTO,
-                        regressors: RegressorSet | None = None,
-                        min_excitation: float = 1e-6, category_level: float = 1e-3,
-                        category_revisions: int = 3, refine_change: bool = True,
-                        max_abs_speed: float = 1e6, max_abs_friction: float = 1e6
-                        ) -> dict[str, Any]:
-    """Check the detector's keyword parameters; return them normalised (ValueError if bad).
-
-    ``k_verif`` and ``noise_std`` :data:`AUTO` (core/schema.py) become ``window // 2`` and
-    None (estimated) in the returned mapping.
-    """
-    if not isinstance(component, str) or not component:
-        raise ValueError(f'component must be a non-empty string, got {component!r}')
-    if regressors is None:
-        regressors = coulomb_viscous()
-    if not isinstance(regressors, RegressorSet):
-        raise ValueError(f'regressors must be a RegressorSet or None, got {regressors!r}')
-    p = regressors.p
-    window = check_int('window', window, max(10, p + 2))
-    if k_verif is None or k_verif == AUTO:
-        k_verif = window // 2
-    k_verif = check_int('k_verif', k_verif, 0, window - 1)
-    r = check_real('false_alarm_rate', false_alarm_rate, 0.0, 1.0, True, True)
-    if noise_std == AUTO:
-        noise_std = None
-    if noise_std is not None:
-        noise_std = check_real('noise_std', noise_std, 0.0, math.inf, True, True)
-    min_excitation = check_real('min_excitation', min_excitation, 0.0, 1.0, False, True)
-    if category_level is None:
-        category_level = r
-    category_level = check_real('category_level', category_level, 0.0, 1.0, True, True)
-    category_revisions = check_int('category_revisions', category_revisions, 0, 60)
-    if not isinstance(refine_change, bool):
-        raise ValueError(f'refine_change must be True or False, got {refine_change!r}')
-    max_abs_speed = check_real('max_abs_speed', max_abs_speed, 0.0, math.inf, True, True)
-    max_abs_friction = check_real('max_abs_friction', max_abs_friction, 0.0, math.inf, True,
-                                  True)
-    return dict(component=component, window=window, k_verif=k_verif,
-                false_alarm_rate=r, noise_std=noise_std, regressors=regressors,
-                min_excitation=min_excitation, category_level=category_level,
-                category_revisions=category_revisions, refine_change=refine_change,
-                max_abs_speed=max_abs_speed, max_abs_friction=max_abs_friction)
-
-
-def make_event(component: str, kind: str, rows: tuple[int, int, int],
-               times: tuple[float, float], log_p: float, dx: np.ndarray,
-               z: tuple[float, float], s2: float, revision: int, confirmed: bool
-               ) -> AnomalyEvent:
-    """Build the AnomalyEvent of a declaration or revision.
-
-    ``rows = (change row, argmin row, declaration row)``, ``times = (change time,
-    declaration time)``; ``confirmed``: the data tell the kind apart (docs/llr.md).
-    """
-    details = {keys.DELTA_DRY: float(dx[0]), keys.DELTA_VISCOUS: float(dx[1]),
-               keys.NOISE_STD: math.sqrt(s2), keys.Z_DRY: z[0], keys.Z_VISCOUS: z[1],
-               keys.KIND_CONFIRMED: bool(confirmed),
-               keys.ARGMIN_INDEX: rows[1], keys.LOG10_P_VALUE: log_p / _LN10}
-    return AnomalyEvent(detector='llr', component=component, kind=kind, time=times[0],
-                        index=rows[0], declared_time=times[1], declared_index=rows[2],
-                        p_value=math.exp(log_p), revision=revision, details=details)
-
-
-def declaration(prefix: np.ndarray, first: int, c: int, k_min: int, n: int,
-                cfg: Mapping[str, Any], z_thr: float) -> tuple[int, int, str, np.ndarray,
-                                                               tuple[float, float], float,
-                                                               bool]:
-    """Return ``(change position, restart, kind, dx, z, sigma^2, confirmed)`` at a declaration.
-
-    ``prefix[i]`` is the prefix-sum row (reference start ``c``) at position ``first + i``,
-    covering ``[max(c, k_min - window), n + 1]``. Change position ``tau``: the ML refinement
-    (:func:`llr_stats.refine_change`) over ``k_min +- window`` if enabled, else ``k_min``
-    (the argmin of p_k, Algorithm 1 line 15). Categorisation: before = ``[c, tau)``, after
-    = ``[tau, n]`` (:func:`llr_stats.categorise`). The new reference starts at
-    ``max(tau, k_min)``, the later of the two change estimates, so that an estimate that
-    falls before the true change does not put pre-change samples in it (they would be
-    declared as the same change again).
-    """
-    p = cfg['regressors'].p
-    noise_var = None if cfg['noise_std'] is None else cfg['noise_std'] ** 2
-    tau = k_min
-    if cfg['refine_change']:
-        w = cfg['window']
-        tau = llr_stats.refine_change(prefix, first, c, n, k_min - w, k_min + w, p,
-                                      noise_var, z_thr, k_min)
-    before = prefix[tau - first]
-    after = prefix[n + 1 - first] - before
-    kind, dx, z, s2, confirmed = llr_stats.categorise(before, tau - c, after, p, noise_var,
-                                                      z_thr)
-    return tau, max(tau, k_min), kind, dx, z, s2, confirmed
-
-
-def checkpoints(start: int, n: int, count: int, window: int) -> list[int]:
-    """Return the positions where the kind of a change declared at ``n`` is re-checked.
-
-    The after-segment ``[start, n]`` holds ``n - start + 1`` samples at declaration; with
-    ``L0 = max(n - start + 1, window)`` the kind is re-evaluated when it holds ``2 L0, 4 L0,
-    ...`` samples (``count`` checks).
-    """
-    length = max(n - start + 1, window)
-    return [start + length * 2 ** i - 1 for i in range(1, count + 1)]
+__all__ = ['candidate_log_p2', 'COUNTER_NAMES', 'detect_batch', 'detect_batch_with_counters',
+           'LLRDetector', 'NoiseModel', 'validate_parameters']
 
 
 class LLRDetector:
@@ -145,8 +44,14 @@ class LLRDetector:
     ``category_revisions`` (re-checks of the kind as data arrive), ``refine_change`` (ML
     refinement of the change time), ``max_abs_speed`` / ``max_abs_friction`` (samples at or
     beyond are dropped and counted as ``out_of_range``: absurd values never reach the sums;
-    default 1e6 rad/s and 1e6 N m). Positions count accepted samples; events carry the row
-    index (number of ``update`` calls before that sample since construction or reset).
+    default 1e6 rad/s and 1e6 N m), ``noise_ar_max_order`` (largest order of the
+    autoregressive noise model fitted on the first ``noise_fit_samples`` accepted samples
+    and used to prewhiten the data; default 3 with an estimated noise level, 0 = white
+    noise as in the paper), ``reference_max`` (None: the reference grows from its start as
+    in the paper; else at most that many samples before the window: a sliding reference
+    that follows slow drifts of the nominal friction). Positions count accepted samples;
+    events carry the row index (number of ``update`` calls before that sample since
+    construction or reset). docs/llr.md "Noise beyond white" and "Slow drifts".
     """
 
     def __init__(self, component: str = 'rw1', *, window: int = 500,
@@ -154,13 +59,16 @@ class LLRDetector:
                  noise_std: float | str = AUTO, regressors: RegressorSet | None = None,
                  min_excitation: float = 1e-6, category_level: float = 1e-3,
                  category_revisions: int = 3, refine_change: bool = True,
-                 max_abs_speed: float = 1e6, max_abs_friction: float = 1e6) -> None:
+                 max_abs_speed: float = 1e6, max_abs_friction: float = 1e6,
+                 noise_ar_max_order: int | str = AUTO, noise_fit_samples: int | str = AUTO,
+                 reference_max: int | None = 0) -> None:
         self._cfg = validate_parameters(
             component, window=window, k_verif=k_verif, false_alarm_rate=false_alarm_rate,
             noise_std=noise_std, regressors=regressors, min_excitation=min_excitation,
             category_level=category_level, category_revisions=category_revisions,
             refine_change=refine_change, max_abs_speed=max_abs_speed,
-            max_abs_friction=max_abs_friction)
+            max_abs_friction=max_abs_friction, noise_ar_max_order=noise_ar_max_order,
+            noise_fit_samples=noise_fit_samples, reference_max=reference_max)
         cfg = self._cfg
         self._component = cfg['component']
         self._w = cfg['window']
@@ -172,7 +80,10 @@ class LLRDetector:
         self._default = self._regressors.is_coulomb_viscous
         self._min_exc = cfg['min_excitation']
         self._z_thr = llr_stats.z_threshold(cfg['category_level'])
-        self._L = 2 * self._w + self._kverif + 2
+        self._R = cfg['reference_max']
+        self._L = 2 * self._w + self._kverif + 2 + (self._R or 0)
+        self._ar_max = cfg['noise_ar_max_order']
+        self._fit_n = cfg['noise_fit_samples']
         self._max_w = cfg['max_abs_speed']
         self._max_f = cfg['max_abs_friction']
         self.reset()
@@ -226,13 +137,19 @@ class LLRDetector:
             return math.nan
         if self._p != 2:
             return self._last_y
-        from rwa_monitor.core.llr_batch import _stats
         cfg = {'min_excitation': self._min_exc,
                'noise_std': None if self._noise_var is None else math.sqrt(self._noise_var)}
-        pp = np.asarray(self._rpref[k % self._L], dtype=float)[:, None]
-        pt = np.asarray(self._pref, dtype=float)[:, None]
-        ok, _, y, *_ = _stats(pp, pt, np.array([float(k - self._c)]), cfg)
+        base, n_p = self._base(k)
+        pp = (np.asarray(self._rpref[k % self._L], dtype=float) - base)[:, None]
+        pt = (np.asarray(self._pref, dtype=float) - base)[:, None]
+        ok, _, y, *_ = window_statistics(pp, pt, np.array([float(n_p)]), cfg)
         return float(y[0]) if ok[0] else math.nan
+
+    def _base(self, k: int) -> tuple[np.ndarray, int]:
+        """Return the prefix row where P_k starts and the length of P_k."""
+        if self._R is not None and k - self._R > self._c:
+            return np.asarray(self._rpref[(k - self._R) % self._L], dtype=float), self._R
+        return np.zeros(llr_stats.width(self._p)), k - self._c
 
     def _latest_k(self) -> int:
         """Return the candidate k of the latest test of the current reference, or -1."""
@@ -244,10 +161,16 @@ class LLRDetector:
         """Row index where the current reference segment starts (-1 if no sample yet)."""
         return self._c_row
 
+    @property
+    def noise_model(self) -> NoiseModel | None:
+        """Autoregressive noise model in use (None while fitting or when white by setting)."""
+        return self._noise
+
     def _reference_row(self) -> tuple[Any, int]:
         k = self._latest_k()
         if k > self._c:
-            return self._rpref[k % self._L], k - self._c
+            base, n_p = self._base(k)
+            return np.asarray(self._rpref[k % self._L], dtype=float) - base, n_p
         return self._pref, self._pos - self._c
 
     @property
@@ -300,6 +223,12 @@ class LLRDetector:
         self._checks: list[int] = []
         self._cat: dict[str, Any] | None = None
         self._checkpoint = -1
+        self._noise: NoiseModel | None = None
+        self._ar: tuple[float, ...] = ()
+        self._lags: list[tuple[float, Any]] = []
+        self._fitting = self._ar_max > 0
+        self._buffer: list[tuple[int, float, float, Any]] = []
+        self._plain = self._default and not self._fitting
         self._last_event: AnomalyEvent | None = None
 
     def update(self, t: float, speed: float, friction: float,
@@ -327,9 +256,9 @@ class LLRDetector:
         if not t > self._last_t:
             self._counters['non_increasing_time'] += 1
             return []
-        if self._default:
-            # Inline copy of _add2 for the paper's model (one method call less per sample;
-            # test_llr checks that both give the same events).
+        if self._plain:
+            # Inline copy of _add2 for the paper's model, white noise (one method call less
+            # per sample; test_llr checks that both give the same events).
             self._last_t = t
             h1 = -1.0 if w > 0.0 else (1.0 if w < 0.0 else 0.0)
             h2 = -w
@@ -357,9 +286,12 @@ class LLRDetector:
             if k > self._c + self._w and self._test2(k, P):
                 events.extend(self._declare(j))
             return events
-        h = self._row(t, w, aux)
-        if h is None:
-            return []
+        if self._default:
+            h = (-1.0 if w > 0.0 else (1.0 if w < 0.0 else 0.0), -w)
+        else:
+            h = self._row(t, w, aux)
+            if h is None:
+                return []
         self._last_t = t
         return self.ingest_row(row, t, f, h)
 
@@ -367,11 +299,62 @@ class LLRDetector:
         """Process an accepted sample whose regressor row ``h`` is already computed.
 
         For :func:`detect_batch` with a model other than eq. (1): the rows are computed
-        once for the whole file and validated there (finite, increasing time).
+        once for the whole file and validated there (finite, increasing time). While the
+        noise model is being fitted the sample is buffered; once fitted the buffer is
+        replayed, and every sample is prewhitened before it enters the sums.
         """
+        if self._fitting:
+            self._buffer.append((row, t, f, h))
+            if len(self._buffer) < self._fit_n:
+                return []
+            return self._fit_and_replay()
+        return self._ingest_fitted(row, t, f, h)
+
+    def _fit_and_replay(self) -> list[AnomalyEvent]:
+        """Fit the noise model on the buffered samples, then process them."""
+        buffer, self._buffer = self._buffer, []
+        self._fitting = False
+        rows = np.array([np.asarray(item[3], dtype=float) for item in buffer])
+        model = fit_noise_model(rows, np.array([item[2] for item in buffer]), self._ar_max)
+        self._noise = model
+        self._ar = model.ar
+        self._plain = self._default and not self._ar
+        events: list[AnomalyEvent] = []
+        for row, t, f, h in buffer:
+            events.extend(self._ingest_fitted(row, t, f, h))
+        return events
+
+    def _ingest_fitted(self, row: int, t: float, f: float, h) -> list[AnomalyEvent]:
+        if self._ar:
+            f, h = self._whiten(f, h)
         if self._p == 2:
             return self._add2(row, t, f, float(h[0]), float(h[1]))
         return self._update_general(row, t, f, np.asarray(h, dtype=float))
+
+    def _whiten(self, f: float, h) -> tuple[float, Any]:
+        """Apply the AR filter ``v_l - sum_i a_i v_(l-1-i)`` to one sample (missing lags omitted).
+
+        Same operations in the same order as :func:`llr_common.whiten` (batch path).
+        """
+        lags = self._lags
+        fw = f
+        if self._p == 2:
+            h1, h2 = float(h[0]), float(h[1])
+            for a, (lf, lh) in zip(self._ar, lags):
+                fw = fw - a * lf
+                h1 = h1 - a * lh[0]
+                h2 = h2 - a * lh[1]
+            lags.insert(0, (f, (float(h[0]), float(h[1]))))
+            hw: Any = (h1, h2)
+        else:
+            h = np.asarray(h, dtype=float)
+            hw = h
+            for a, (lf, lh) in zip(self._ar, lags):
+                fw = fw - a * lf
+                hw = hw - a * lh
+            lags.insert(0, (f, h))
+        del lags[len(self._ar):]
+        return fw, hw
 
     def _add2(self, row: int, t: float, f: float, h1: float, h2: float
               ) -> list[AnomalyEvent]:
@@ -411,6 +394,15 @@ class LLRDetector:
         """
         A, B, C, U, V, E = self._rpref[k % self._L]
         At, Bt, Ct, Ut, Vt, _ = P
+        R = self._R
+        if R is not None and k - R > self._c:
+            # Sliding reference: P_k = [k - R, k - 1] (docs/llr.md, "Slow drifts").
+            b0, b1, b2, b3, b4, b5 = self._rpref[(k - R) % self._L]
+            A, B, C, U, V, E = A - b0, B - b1, C - b2, U - b3, V - b4, E - b5
+            At, Bt, Ct, Ut, Vt = At - b0, Bt - b1, Ct - b2, Ut - b3, Vt - b4
+            n_p = R
+        else:
+            n_p = k - self._c
         ac = A * C
         det = ac - B * B
         dett = At * Ct - Bt * Bt
@@ -418,7 +410,6 @@ class LLRDetector:
             x1 = (C * U - B * V) / det
             x2 = (A * V - B * U) / det
             if self._noise_var is None:
-                n_p = k - self._c
                 dof = float(n_p - 2)
                 s2 = (E - (x1 * U + x2 * V)) / dof
                 floor = llr_stats.NOISE_FLOOR_REL * E / n_p + llr_stats.NOISE_FLOOR_ABS
@@ -480,17 +471,18 @@ class LLRDetector:
         L = self._L
         c, k_min = self._c, self._kmin
         first = max(c, k_min - self._w)
+        base = reference_base(c, first, self._R)
         prefix = self._prefix_block(first, n + 1)
-        tau, start, kind, dx, z, s2, confirmed = declaration(prefix, first, c, k_min, n,
-                                                             self._cfg, self._z_thr)
+        if base != c:
+            prefix = prefix - np.asarray(self._rpref[base % L], dtype=float)
+        tau, start, cat = declaration(prefix, first, base, k_min, n, self._cfg, self._z_thr)
         rows = (self._rrow[tau % L], self._rrow[k_min % L], self._rrow[n % L])
         times = (self._rtime[tau % L], self._rtime[n % L])
-        event = make_event(self._component, kind, rows, times, self._logpmin, dx, z, s2, 0,
-                           confirmed)
+        event = make_event(self._component, cat, rows, times, self._logpmin, 0)
         self._last_event = event
-        self._cat = dict(before=prefix[tau - first].copy(), n_before=tau - c, kind=kind,
-                         confirmed=confirmed, revision=0, rows=rows, time=times[0],
-                         log_p=self._logpmin, start=tau,
+        self._cat = dict(before=prefix[tau - first].copy(), n_before=tau - base,
+                         kind=cat.kind, guess=cat.guess, confirmed=cat.confirmed,
+                         revision=0, rows=rows, time=times[0], log_p=self._logpmin, start=tau,
                          gap=prefix[start - first] - prefix[tau - first])
         self._checks = checkpoints(tau, n, self._cfg['category_revisions'], self._w)
         self._checkpoint = self._checks.pop(0) if self._checks else -1
@@ -527,17 +519,19 @@ class LLRDetector:
         cat = self._cat
         self._checkpoint = self._checks.pop(0) if self._checks else -1
         after = cat['gap'] + np.asarray(self._pref, dtype=float)
-        kind, dx, z, s2, confirmed = llr_stats.categorise(
-            cat['before'], cat['n_before'], after, self._p, self._noise_var, self._z_thr)
-        if kind == cat['kind'] and (cat['confirmed'] or not confirmed):
-            return []   # revision: new kind, or the same kind now confirmed
-        cat['kind'] = kind
-        cat['confirmed'] = confirmed
+        new = llr_stats.categorise(cat['before'], cat['n_before'], after, self._p,
+                                   self._noise_var, self._z_thr)
+        if ((new.kind, new.guess) == (cat['kind'], cat['guess'])
+                and (cat['confirmed'] or not new.confirmed)):
+            return []   # revision: new kind or guess, or the same kind now confirmed
+        cat['kind'] = new.kind
+        cat['guess'] = new.guess
+        cat['confirmed'] = new.confirmed
         cat['revision'] += 1
         rows = cat['rows'][:2] + (self._rrow[j % self._L],)
         times = (cat['time'], self._rtime[j % self._L])
-        self._last_event = make_event(self._component, kind, rows, times, cat['log_p'], dx,
-                                      z, s2, cat['revision'], confirmed)
+        self._last_event = make_event(self._component, new, rows, times, cat['log_p'],
+                                      cat['revision'])
         return [self._last_event]
 
     # -- general model (p > 2): numpy per sample -------------------------------------
@@ -566,10 +560,10 @@ class LLRDetector:
         """:meth:`_test2` for p > 2 (numpy; weights from the generalised eigenproblem)."""
         p = self._p
         self._last_y = math.nan
-        pi_p, q_p, e = llr_stats.unpack(self._rpref[k % self._L], p)
-        pi_t, q_t, _ = llr_stats.unpack(P, p)
+        base, n_p = self._base(k)
+        pi_p, q_p, e = llr_stats.unpack(self._rpref[k % self._L] - base, p)
+        pi_t, q_t, _ = llr_stats.unpack(P - base, p)
         if bool(llr_stats.well_conditioned(pi_p, self._min_exc)):
-            n_p = k - self._c
             x = np.linalg.solve(pi_p, q_p)
             if self._noise_var is None:
                 dof = float(n_p - p)
@@ -600,48 +594,78 @@ class LLRDetector:
         return self._logpmin <= self._logr and k > self._kmin + self._kverif
 
 
-def candidate_log_p2(y: float, tr: float, dm: float, log_p_min: float,
-                     dof: float | None = None) -> float | None:
-    """Return log p_k (eq. (7), Algorithm 2) if it may be below ``log_p_min``, else None.
-
-    ``y = LLR_k / sigma^2``; ``tr`` and ``dm`` are the trace and determinant of ``Pi_T^-1
-    Pi_W`` (``Pi_W = Pi_T - Pi_P``), whose eigenvalues are those of Lemma 1's ``I -
-    Pi_P^1/2 Pi_T^-1 Pi_P^1/2`` (similar matrices). ``dof``: residual degrees of freedom
-    of the estimated noise variance (studentised tail, :func:`log_sf2_t`), None when the
-    noise level is given (Lemma 1's tail, :func:`log_sf2`). With ``b = y / (2 l1)``, ``rho =
-    l2 / l1`` and ``a = b (1 - rho)``, ``p_k >= exp(-b rho) erfc(sqrt(a))`` (drop ``rho
-    sin^2`` in the integral of :mod:`rwa_monitor.core.gchi2`), and the studentised
-    analogue below; when the bound already exceeds ``p_min`` the sample cannot be a new
-    minimum and the exact tail is not computed. Shared by the streaming and the batch path
-    (same floats, same decision).
-    """
-    half = 0.5 * tr
-    disc = half * half - dm
-    lam1 = half + math.sqrt(disc) if disc > 0.0 else half
-    lam2 = dm / lam1
-    if lam2 < 0.0:
-        lam2 = 0.0
-    b = y / (2.0 * lam1)
-    rho = lam2 / lam1
-    a = b * (1.0 - rho)
-    if dof is None:
-        lower = -b * rho + log_lower_bound(a)
-    else:
-        # Studentised: h <= tan^2 and (1 + u)^-m >= exp(-m u) give p_k >= (1 + 2 b /
-        # dof)^(-dof/2) exp(A) erfc(sqrt(A)), A = dof a / (dof + 2 b) (tighter than the
-        # Gaussian bound, which also holds).
-        big_a = dof * a / (dof + 2.0 * b)
-        lower = -0.5 * dof * math.log1p(2.0 * b / dof) + big_a + log_lower_bound(big_a)
-    if lower > log_p_min + 1e-9 * (1.0 - log_p_min):
-        return None
-    if dof is None:
-        return log_sf2(y, lam1, lam2)
-    return log_sf2_t(y, lam1, lam2, dof)
-
-
 def detect_batch(time, speed, friction, *, component: str = 'rw1',
                  aux: Mapping[str, np.ndarray] | None = None, **params: Any
                  ) -> list[AnomalyEvent]:
-    """Run Algorithm 1 over whole arrays; same events as streaming (see llr_batch)."""
-    from rwa_monitor.core.llr_batch import detect_batch as run
-    return run(time, speed, friction, component=component, aux=aux, **params)
+    """Run Algorithm 1 over whole arrays and return the events of the streaming detector.
+
+    ``time``, ``speed``, ``friction``: 1-D arrays of the same length (one row per sample;
+    event indices are row indices). Keyword parameters as :class:`LLRDetector`.
+    """
+    events, _ = detect_batch_with_counters(time, speed, friction, component=component,
+                                           aux=aux, **params)
+    return events
+
+
+def detect_batch_with_counters(time, speed, friction, *, component: str = 'rw1',
+                               aux: Mapping[str, np.ndarray] | None = None, **params: Any
+                               ) -> tuple[list[AnomalyEvent], dict[str, int]]:
+    """Return ``(events, counters)`` of :func:`detect_batch` (counters as the detector's).
+
+    The paper's model runs vectorised (:mod:`rwa_monitor.core.llr_batch`); other regressor
+    sets run the streaming engine on rows computed once.
+    """
+    cfg = validate_parameters(component, **params)
+    t, w, f = llr_batch.as_arrays(time, speed, friction)
+    if cfg['regressors'].is_coulomb_viscous:
+        return llr_batch.detect_paper_model(t, w, f, cfg)
+    return _streamed(t, w, f, aux, component, params)
+
+
+def _streamed(t: np.ndarray, w: np.ndarray, f: np.ndarray,
+              aux: Mapping[str, np.ndarray] | None, component: str,
+              params: Mapping[str, Any]) -> tuple[list[AnomalyEvent], dict[str, int]]:
+    """Run the streaming detector on precomputed rows (models other than eq. (1)).
+
+    The regressor matrix is computed once for the whole file; acceptance follows the
+    streaming order of checks (finite time, speed and friction; increasing time; finite
+    row). If the model cannot be evaluated on the file (missing auxiliary channel), the
+    rows are fed one by one through ``update`` instead.
+    """
+    det = LLRDetector(component, **params)
+    aux_arrays = None
+    if aux:
+        aux_arrays = {}
+        for name, values in aux.items():
+            col = np.asarray(values, dtype=float)
+            if col.shape != t.shape:
+                raise ValueError(f'aux[{name!r}] must have the length of time ({t.size}), '
+                                 f'got {col.size}')
+            aux_arrays[name] = col
+    try:
+        with np.errstate(all='ignore'):
+            h = det.parameters['regressors'].matrix(w, t, aux_arrays)
+    except (KeyError, TypeError):
+        return _row_by_row(det, t, w, f, aux_arrays)
+    cfg = det.parameters
+    accepted, counts = llr_batch.accepted_mask(t, w, f, cfg['max_abs_speed'],
+                                               cfg['max_abs_friction'],
+                                               np.all(np.isfinite(h), axis=1))
+    events: list[AnomalyEvent] = []
+    for i in np.flatnonzero(accepted):
+        events.extend(det.ingest_row(int(i), float(t[i]), float(f[i]), h[i]))
+    counters = det.counters
+    for name, value in counts.items():
+        counters[name] += value
+    return events, counters
+
+
+def _row_by_row(det: LLRDetector, t: np.ndarray, w: np.ndarray, f: np.ndarray,
+                aux: Mapping[str, np.ndarray] | None
+                ) -> tuple[list[AnomalyEvent], dict[str, int]]:
+    names = list(aux) if aux else []
+    events: list[AnomalyEvent] = []
+    for i in range(t.size):
+        row_aux = {name: float(aux[name][i]) for name in names} if aux else None
+        events.extend(det.update(float(t[i]), float(w[i]), float(f[i]), row_aux))
+    return events, det.counters

@@ -11,7 +11,8 @@ superset of the samples the streaming path evaluates. The only other Python loop
 over candidates, declarations and revision checkpoints.
 
 Only the paper's two-column model is vectorised; other regressor sets (p > 2, auxiliary
-channels) run the streaming detector sample by sample.
+channels) run the streaming detector (:func:`rwa_monitor.core.llr.detect_batch`, the
+public entry point, dispatches). This module does not import the streaming one.
 """
 
 from __future__ import annotations
@@ -23,15 +24,15 @@ import numpy as np
 
 from rwa_monitor.core import llr_stats
 from rwa_monitor.core.events import AnomalyEvent
-from rwa_monitor.core.gchi2 import log_lower_bound_array, skip_threshold
-from rwa_monitor.core.llr import (candidate_log_p2, checkpoints, declaration, LLRDetector,
-                                  make_event, validate_parameters)
+from rwa_monitor.core.gchi2 import skip_threshold
+from rwa_monitor.core.llr_common import (candidate_log_p2, checkpoints, declaration,
+                                         fit_noise_model, make_event, reference_base,
+                                         whiten, window_statistics)
 
 CHUNK = 1 << 13
-_PI_4 = math.pi / 4.0
 
 
-def _arrays(time, speed, friction) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def as_arrays(time, speed, friction) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     arrays = []
     for name, values in (('time', time), ('speed', speed), ('friction', friction)):
         a = np.asarray(values, dtype=float)
@@ -71,55 +72,6 @@ def accepted_mask(t: np.ndarray, w: np.ndarray, f: np.ndarray, max_speed: float,
               'out_of_range': int(np.count_nonzero(finite & ~inrange)),
               'non_increasing_time': int(np.count_nonzero(inrange & ~timely))}
     return accepted, counts
-
-
-def _stats(pp: np.ndarray, pt: np.ndarray, n_p: np.ndarray, cfg: Mapping[str, Any]):
-    """Vectorised statistic of the streaming path (same operations, same order).
-
-    ``pp``, ``pt``: prefix rows at ``k`` and ``k + w``, shape ``(6, n)``.
-    """
-    A, B, C, U, V, E = pp[0], pp[1], pp[2], pp[3], pp[4], pp[5]
-    At, Bt, Ct, Ut, Vt = pt[0], pt[1], pt[2], pt[3], pt[4]
-    ac = A * C
-    det = ac - B * B
-    dett = At * Ct - Bt * Bt
-    ok = (det > cfg['min_excitation'] * ac) & (dett > 0.0)
-    with np.errstate(all='ignore'):
-        x1 = (C * U - B * V) / det
-        x2 = (A * V - B * U) / det
-        if cfg['noise_std'] is None:
-            s2 = (E - (x1 * U + x2 * V)) / (n_p - 2.0)
-            floor = llr_stats.NOISE_FLOOR_REL * E / n_p + llr_stats.NOISE_FLOOR_ABS
-            s2 = np.fmax(s2, floor)
-        else:
-            s2 = cfg['noise_std'] ** 2
-        Aw = At - A
-        Bw = Bt - B
-        Cw = Ct - C
-        g1 = (Ut - U) - (Aw * x1 + Bw * x2)
-        g2 = (Vt - V) - (Bw * x1 + Cw * x2)
-        d1 = (Ct * g1 - Bt * g2) / dett
-        d2 = (At * g2 - Bt * g1) / dett
-        y = (A * d1 * d1 + 2.0 * B * d1 * d2 + C * d2 * d2) / s2
-        tr = (Ct * Aw - 2.0 * Bt * Bw + At * Cw) / dett
-        dm = (Aw * Cw - Bw * Bw) / dett
-        half = 0.5 * tr
-        lam1 = half + np.sqrt(np.maximum(half * half - dm, 0.0))
-        testable = ok & (tr > 0.0) & (y > 0.0)
-        b = y / (2.0 * lam1)
-        rho = np.maximum(dm / lam1, 0.0) / lam1
-        a = np.maximum(b - b * rho, 0.0)
-        # Bounds of log p_k: candidate_log_p2 (lower); upper: J <= i0e(a/2) (gchi2) and
-        # i0e(z) = (1/pi) int_0^pi exp(-2 z sin^2(t/2)) dt <= int_0^1 exp(-2 z u^2) du
-        # <= sqrt(pi / (8 z)) (sin s >= 2 s / pi), i.e. log J <= log(pi / (4 a)) / 2.
-        if cfg['noise_std'] is None:
-            # Studentised tail (log_sf2_t): at most its value at psi = 0.
-            dof = n_p - 2.0
-            upper = np.where(testable, -0.5 * dof * np.log1p(2.0 * b / dof), 0.0)
-        else:
-            upper = np.where(testable, np.minimum(0.5 * np.log(_PI_4 / a), 0.0) - b, 0.0)
-        lower = log_lower_bound_array(a) - b * rho
-    return ok, testable, y, tr, dm, upper, lower
 
 
 class _Terms:
@@ -177,22 +129,34 @@ class _Reference:
         """Return the prefix rows at ``positions`` (shape ``(..., 6)``)."""
         return self.rows[:, np.asarray(positions) - self.pos0].T
 
+    def bases(self, ks: np.ndarray, reference_max: int | None) -> tuple[Any, np.ndarray]:
+        """Return the prefix rows where P_k starts (``(6, n)`` or 0.0) and the lengths of P_k.
+
+        Sliding reference (``reference_max``): ``P_k = [max(c, k - R), k - 1]``.
+        """
+        if reference_max is None:
+            return 0.0, (ks - self.c).astype(float)
+        start = np.maximum(ks - reference_max, self.c)
+        return self.rows[:, start - self.pos0], (ks - start).astype(float)
+
 
 def _scan(ref: _Reference, k0: int, k1: int, state: dict, cfg: Mapping[str, Any],
           logr: float) -> int | None:
     """Run the tests k0..k1 of Algorithm 1; return the declaration k or None."""
     w, kverif = cfg['window'], cfg['k_verif']
-    c = ref.c
     ks = np.arange(k0, k1 + 1)
     ref.extend(k1 + w)
-    ok, testable, y, tr, dm, upper, lower = _stats(ref.span(k0, k1), ref.span(k0 + w, k1 + w),
-                                                   (ks - c).astype(float), cfg)
+    base, n_p = ref.bases(ks, cfg['reference_max'])
+    pp, pt = ref.span(k0, k1), ref.span(k0 + w, k1 + w)
+    if cfg['reference_max'] is not None:
+        pp, pt = pp - base, pt - base
+    ok, testable, y, tr, dm, upper, lower = window_statistics(pp, pt, n_p, cfg)
     bound = np.minimum.accumulate(np.concatenate([[state['bound']], upper]))
     state['bound'] = float(bound[-1])
     prev = bound[:-1]
     margin = 1e-6 * (1.0 + np.abs(prev))
     cand = np.flatnonzero(testable & (lower <= prev + margin))
-    dof = None if cfg['noise_std'] is not None else (ks - c - 2).astype(float)
+    dof = None if cfg['noise_std'] is not None else n_p - 2.0
     declared = _candidates(ks, cand, y, tr, dm, dof, state, kverif, logr)
     last = k1 if declared is None else declared
     state['ill'] += int(np.count_nonzero(~ok[:last - k0 + 1]))
@@ -221,27 +185,21 @@ def _candidates(ks, cand, y, tr, dm, dof, state: dict, kverif: int, logr: float
     return None
 
 
-def detect_batch(time, speed, friction, *, component: str = 'rw1',
-                 aux: Mapping[str, np.ndarray] | None = None, **params: Any
-                 ) -> list[AnomalyEvent]:
-    """Run Algorithm 1 over whole arrays and return the events of the streaming detector.
+def paper_h1(speed: np.ndarray) -> np.ndarray:
+    """Return ``-sign(w)`` as the streaming detector forms it (``+0.0`` at rest)."""
+    return np.where(speed > 0.0, -1.0, np.where(speed < 0.0, 1.0, 0.0))
 
-    ``time``, ``speed``, ``friction``: 1-D arrays of the same length (one row per sample;
-    event indices are row indices). Keyword parameters as :class:`LLRDetector`.
+
+def detect_paper_model(t: np.ndarray, w: np.ndarray, f: np.ndarray, cfg: Mapping[str, Any]
+                       ) -> tuple[list[AnomalyEvent], dict[str, int]]:
+    """Return ``(events, counters)`` of the streaming detector on the paper's model (eq. (1)).
+
+    ``cfg``: validated parameters (:func:`llr_common.validate_parameters`). With an
+    autoregressive noise model the first ``noise_fit_samples`` accepted samples fit it
+    (none fitted, no test, if there are fewer) and all samples are prewhitened
+    (:func:`llr_common.whiten`) before the sums, as in the streaming path.
     """
-    events, _ = detect_batch_with_counters(time, speed, friction, component=component,
-                                           aux=aux, **params)
-    return events
-
-
-def detect_batch_with_counters(time, speed, friction, *, component: str = 'rw1',
-                               aux: Mapping[str, np.ndarray] | None = None, **params: Any
-                               ) -> tuple[list[AnomalyEvent], dict[str, int]]:
-    """Return ``(events, counters)`` of :func:`detect_batch` (counters as the detector's)."""
-    cfg = validate_parameters(component, **params)
-    t, w, f = _arrays(time, speed, friction)
-    if not cfg['regressors'].is_coulomb_viscous:
-        return _streamed(t, w, f, aux, component, params)
+    component = cfg['component']
     accepted, counts = accepted_mask(t, w, f, cfg['max_abs_speed'], cfg['max_abs_friction'])
     if accepted.all():
         rows = np.arange(t.size)
@@ -249,14 +207,25 @@ def detect_batch_with_counters(time, speed, friction, *, component: str = 'rw1',
     else:
         rows = np.flatnonzero(accepted)
         tv, wv, fv = t[rows], w[rows], f[rows]
-    terms = _Terms(-np.sign(wv), -wv, fv)
+    counters = dict(counts, missing_aux=0, ill_conditioned=0)
+    h1, h2 = -np.sign(wv), -wv
+    if cfg['noise_ar_max_order'] > 0:
+        m = cfg['noise_fit_samples']
+        if rows.size < m:
+            return [], counters
+        h_fit = np.column_stack([paper_h1(wv[:m]), -wv[:m]])
+        ar = fit_noise_model(h_fit, fv[:m], cfg['noise_ar_max_order']).ar
+        if ar:
+            h1, h2, fv = whiten(paper_h1(wv), ar), whiten(h2, ar), whiten(fv, ar)
+    terms = _Terms(h1, h2, fv)
     n_total = rows.size
     win, kverif = cfg['window'], cfg['k_verif']
+    ref_max = cfg['reference_max']
     logr = math.log(cfg['false_alarm_rate'])
     z_thr = llr_stats.z_threshold(cfg['category_level'])
-    keep = 2 * win + kverif + 2
+    keep = 2 * win + kverif + 2 + (ref_max or 0)
+    noise_var = None if cfg['noise_std'] is None else cfg['noise_std'] ** 2
     events: list[AnomalyEvent] = []
-    counters = dict(counts, missing_aux=0, ill_conditioned=0)
     state = {'ill': 0}
     cat: dict[str, Any] | None = None
     checks: list[int] = []
@@ -266,16 +235,17 @@ def detect_batch_with_counters(time, speed, friction, *, component: str = 'rw1',
             j = checks.pop(0)
             ref.extend(j + 1)
             after = cat['gap'] + ref.at(j + 1)
-            kind, dx, z, s2, confirmed = llr_stats.categorise(
-                cat['before'], cat['n_before'], after, 2,
-                None if cfg['noise_std'] is None else cfg['noise_std'] ** 2, z_thr)
-            if kind != cat['kind'] or (confirmed and not cat['confirmed']):
-                cat['kind'] = kind
-                cat['confirmed'] = confirmed
+            new = llr_stats.categorise(cat['before'], cat['n_before'], after, 2, noise_var,
+                                       z_thr)
+            if ((new.kind, new.guess) != (cat['kind'], cat['guess'])
+                    or (new.confirmed and not cat['confirmed'])):
+                cat['kind'] = new.kind
+                cat['guess'] = new.guess
+                cat['confirmed'] = new.confirmed
                 cat['revision'] += 1
                 ev_rows = cat['rows'][:2] + (int(rows[j]),)
-                events.append(make_event(component, kind, ev_rows, (cat['time'], float(tv[j])),
-                                         cat['log_p'], dx, z, s2, cat['revision'], confirmed))
+                events.append(make_event(component, new, ev_rows, (cat['time'], float(tv[j])),
+                                         cat['log_p'], cat['revision']))
 
     c = 0
     while True:
@@ -297,67 +267,21 @@ def detect_batch_with_counters(time, speed, friction, *, component: str = 'rw1',
         n = declared + win - 1
         k_min = state['kmin']
         first = max(c, k_min - win)
+        base = reference_base(c, first, ref_max)
         ref.extend(n + 1)
         prefix = ref.at(np.arange(first, n + 2))
-        tau, start, kind, dx, z, s2, confirmed = declaration(prefix, first, c, k_min, n, cfg,
-                                                             z_thr)
+        if base != c:
+            prefix = prefix - ref.at(base)
+        tau, start, category = declaration(prefix, first, base, k_min, n, cfg, z_thr)
         ev_rows = (int(rows[tau]), int(rows[k_min]), int(rows[n]))
         times = (float(tv[tau]), float(tv[n]))
-        events.append(make_event(component, kind, ev_rows, times, state['logp'], dx, z, s2,
-                                 0, confirmed))
-        cat = dict(before=prefix[tau - first].copy(), n_before=tau - c, kind=kind,
-                   confirmed=confirmed, revision=0, rows=ev_rows, time=times[0],
-                   log_p=state['logp'], start=tau,
+        events.append(make_event(component, category, ev_rows, times, state['logp'], 0))
+        cat = dict(before=prefix[tau - first].copy(), n_before=tau - base,
+                   kind=category.kind, guess=category.guess,
+                   confirmed=category.confirmed, revision=0,
+                   rows=ev_rows, time=times[0], log_p=state['logp'], start=tau,
                    gap=prefix[start - first] - prefix[tau - first])
         checks = checkpoints(tau, n, cfg['category_revisions'], win)
         c = start
     counters['ill_conditioned'] = state['ill']
     return events, counters
-
-
-def _streamed(t: np.ndarray, w: np.ndarray, f: np.ndarray,
-              aux: Mapping[str, np.ndarray] | None, component: str,
-              params: Mapping[str, Any]) -> tuple[list[AnomalyEvent], dict[str, int]]:
-    """Run the streaming detector on precomputed rows (models other than eq. (1)).
-
-    The regressor matrix is computed once for the whole file; acceptance follows the
-    streaming order of checks (finite time, speed and friction; increasing time; finite
-    row). If the model cannot be evaluated on the file (missing auxiliary channel), the
-    rows are fed one by one through ``update`` instead.
-    """
-    det = LLRDetector(component, **params)
-    aux_arrays = None
-    if aux:
-        aux_arrays = {}
-        for name, values in aux.items():
-            col = np.asarray(values, dtype=float)
-            if col.shape != t.shape:
-                raise ValueError(f'aux[{name!r}] must have the length of time ({t.size}), '
-                                 f'got {col.size}')
-            aux_arrays[name] = col
-    try:
-        with np.errstate(all='ignore'):
-            h = det.parameters['regressors'].matrix(w, t, aux_arrays)
-    except (KeyError, TypeError):
-        return _row_by_row(det, t, w, f, aux_arrays)
-    cfg = det.parameters
-    accepted, counts = accepted_mask(t, w, f, cfg['max_abs_speed'], cfg['max_abs_friction'],
-                                     np.all(np.isfinite(h), axis=1))
-    events: list[AnomalyEvent] = []
-    for i in np.flatnonzero(accepted):
-        events.extend(det.ingest_row(int(i), float(t[i]), float(f[i]), h[i]))
-    counters = det.counters
-    for name, value in counts.items():
-        counters[name] += value
-    return events, counters
-
-
-def _row_by_row(det: LLRDetector, t: np.ndarray, w: np.ndarray, f: np.ndarray,
-                aux: Mapping[str, np.ndarray] | None
-                ) -> tuple[list[AnomalyEvent], dict[str, int]]:
-    names = list(aux) if aux else []
-    events: list[AnomalyEvent] = []
-    for i in range(t.size):
-        row_aux = {name: float(aux[name][i]) for name in names} if aux else None
-        events.extend(det.update(float(t[i]), float(w[i]), float(f[i]), row_aux))
-    return events, det.counters

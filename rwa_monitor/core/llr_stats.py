@@ -17,6 +17,7 @@ checkpoint, never per sample.
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 
@@ -25,6 +26,12 @@ import numpy as np
 NOISE_FLOOR_REL = 1e-20
 NOISE_FLOOR_ABS = 1e-300
 KINDS = ('dry', 'viscous', 'both')
+# The data cannot tell dry from viscous (docs/llr.md "Categorisation"): an event kind.
+UNDECIDED = 'undecided'
+# A single-component kind is confirmed only if the other component, at this fraction of the
+# change's torque at the post-change mean speed, would have been found with this power.
+EXCLUDE_FRACTION = 0.5
+EXCLUDE_POWER_Z = 1.2815515655446004   # one-sided normal quantile of 0.9
 
 
 def width(p: int) -> int:
@@ -81,7 +88,7 @@ def segment_fit(row: np.ndarray, n: int, p: int, noise_var: float | None
     return x, pi, s2 if s2 > floor else floor
 
 
-def _solve(m: np.ndarray, r: np.ndarray) -> np.ndarray:
+def solve_scaled(m: np.ndarray, r: np.ndarray) -> np.ndarray:
     """Return ``m^+ r`` for stacked symmetric matrices (Jacobi-scaled pseudo-inverse).
 
     Scaling by the diagonal first makes the cut-off relative to the correlation matrix;
@@ -112,8 +119,8 @@ def change_fits(before: np.ndarray, after: np.ndarray, p: int
     pi_b, q_b, _ = unpack(before, p)
     pi_a, q_a, _ = unpack(after, p)
     lead = pi_b.shape[:-2]
-    x_b = _solve(pi_b, q_b)
-    x_a = _solve(pi_a, q_a)
+    x_b = solve_scaled(pi_b, q_b)
+    x_a = solve_scaled(pi_a, q_a)
     explained = np.empty(lead + (3,))
     dx = np.zeros(lead + (3, p))
     explained[..., 2] = (np.einsum('...i,...i->...', x_b, q_b)
@@ -128,16 +135,63 @@ def change_fits(before: np.ndarray, after: np.ndarray, p: int
         m[..., p, :p] = pi_a[..., i, :]
         m[..., p, p] = pi_a[..., i, i]
         r[..., p] = q_a[..., i]
-        theta = _solve(m, r)
+        theta = solve_scaled(m, r)
         explained[..., i] = np.einsum('...i,...i->...', theta, r)
         dx[..., i, i] = theta[..., p]
     return explained, dx
 
 
+class Category(NamedTuple):
+    """Kind of one change, its estimate, the component z values and the noise variance.
+
+    ``kind`` is ``undecided`` when the data cannot tell dry from viscous; ``guess`` is then
+    the single-component kind that fits better (else ``guess == kind``); ``dx`` is the
+    estimate under ``guess``. ``detectable`` = smallest dry step (N m) and viscous step
+    (N m s) the after segment would reveal with 90 % power at the category level.
+    """
+
+    kind: str
+    dx: np.ndarray
+    z: tuple[float, float]
+    noise_var: float
+    confirmed: bool
+    guess: str = ''
+    detectable: tuple[float, float] = (math.inf, math.inf)
+
+
+def detectable_steps(before: np.ndarray, after: np.ndarray, p: int, noise_var: float,
+                     z_threshold: float) -> tuple[float, float]:
+    """Return the dry and viscous steps found with 90 % power by the component tests.
+
+    Not in the paper. In the joint fit (``x`` before, ``x + dx`` after) the information
+    on ``dx`` is the Schur complement ``S = Pi_a - Pi_a (Pi_b + Pi_a)^+ Pi_a`` (its
+    inverse is ``Pi_b^-1 + Pi_a^-1`` when both exist); on one component with the others
+    free it is ``I_i = S_ii - S_ir S_rr^+ S_ri``. The likelihood-ratio test of that
+    component at level ``z_threshold`` has power 0.9 for a step of ``(z* + z_0.9) sigma /
+    sqrt(I_i)``: infinite when the post-change speed range cannot separate the two.
+    """
+    pi_b, _, _ = unpack(before, p)
+    pi_a, _, _ = unpack(after, p)
+    total = pi_b + pi_a
+    s_mat = pi_a - pi_a @ np.column_stack([solve_scaled(total, col) for col in pi_a.T])
+    s_mat = 0.5 * (s_mat + s_mat.T)
+    out = []
+    for i in (0, 1):
+        rest = [j for j in range(p) if j != i]
+        s_rr = s_mat[np.ix_(rest, rest)]
+        s_ri = s_mat[rest, i]
+        info = float(s_mat[i, i] - s_ri @ solve_scaled(s_rr, s_ri))
+        scale = max(float(s_mat[i, i]), 1e-300)
+        if not info > 1e-9 * scale:
+            out.append(math.inf)
+        else:
+            out.append((z_threshold + EXCLUDE_POWER_Z) * math.sqrt(noise_var / info))
+    return out[0], out[1]
+
+
 def categorise(before: np.ndarray, n_before: int, after: np.ndarray, p: int,
-               noise_var: float | None, z_threshold: float
-               ) -> tuple[str, np.ndarray, tuple[float, float], float, bool]:
-    """Return ``(kind, dx, (z_dry, z_viscous), sigma^2, confirmed)`` for one change.
+               noise_var: float | None, z_threshold: float) -> Category:
+    """Return the :class:`Category` (kind, dx, z, sigma^2, confirmed) of one change.
 
     Not in the paper (which promises a categorisation but gives none); the design is in
     docs/llr.md. Nested likelihood-ratio tests on the joint fit of :func:`change_fits`,
@@ -147,16 +201,20 @@ def categorise(before: np.ndarray, n_before: int, after: np.ndarray, p: int,
     identifiable they equal the squared marginal z of ``dx``). ``z_dry = sign(dx_dry)
     sqrt(chi_d)``, ``z_viscous`` likewise. Both rejected -> ``both``; one rejected -> the
     other kind; these are *confirmed*. None rejected (the data cannot tell dry from
-    viscous, e.g. the speed barely varied after the change) -> the single-component kind
-    that fits better, *not confirmed*. ``dx`` is always the estimate of the reported
-    kind's hypothesis (constrained fit for a single component), never the free fit of an
-    unidentifiable segment.
+    viscous, e.g. the speed barely varied after the change) -> :data:`UNDECIDED`, with
+    ``guess`` the single-component kind that fits better. A single kind is confirmed only
+    if, besides, the other component would have been found (90 % power,
+    :func:`detectable_steps`) at :data:`EXCLUDE_FRACTION` of the change's torque at the
+    post-change mean speed ``|w|_a`` (a dry step ``a`` and a viscous step ``a / |w|_a``
+    give the same torque); otherwise the kind is :data:`UNDECIDED` too. ``dx`` is always
+    the estimate of the hypothesis of ``guess`` (constrained fit for a single component),
+    never the free fit of an unidentifiable segment.
     """
     explained, dx = change_fits(np.asarray(before, dtype=float),
                                 np.asarray(after, dtype=float), p)
     if noise_var is None:
         pi_b, q_b, e_b = unpack(before, p)
-        rss = float(e_b) - float(_solve(pi_b, q_b) @ q_b)
+        rss = float(e_b) - float(solve_scaled(pi_b, q_b) @ q_b)
         floor = NOISE_FLOOR_REL * float(e_b) / n_before + NOISE_FLOOR_ABS
         s2 = max(rss / (n_before - p), floor)
     else:
@@ -168,13 +226,22 @@ def categorise(before: np.ndarray, n_before: int, after: np.ndarray, p: int,
     limit = z_threshold * z_threshold
     no_dry_only = chi_v > limit
     no_viscous_only = chi_d > limit
+    detectable = detectable_steps(np.asarray(before, dtype=float),
+                                  np.asarray(after, dtype=float), p, s2, z_threshold)
     if no_dry_only and no_viscous_only:
-        h, confirmed = 2, True
-    elif no_dry_only or no_viscous_only:
-        h, confirmed = (1 if no_dry_only else 0), True
+        return Category(KINDS[2], dx[2].copy(), (z_d, z_v), s2, True, KINDS[2], detectable)
+    if no_dry_only or no_viscous_only:
+        h = 1 if no_dry_only else 0
+        pi_a = unpack(after, p)[0]
+        mean_speed = float(pi_a[0, 1] / pi_a[0, 0]) if pi_a[0, 0] > 0.0 else 0.0
+        torque = abs(float(dx[h, h])) * (mean_speed if h == 1 else 1.0)
+        other = detectable[1 - h] * (mean_speed if h == 0 else 1.0)
+        if other <= EXCLUDE_FRACTION * torque:
+            return Category(KINDS[h], dx[h].copy(), (z_d, z_v), s2, True, KINDS[h],
+                            detectable)
     else:
-        h, confirmed = (0 if explained[0] >= explained[1] else 1), False
-    return KINDS[h], dx[h].copy(), (z_d, z_v), s2, confirmed
+        h = 0 if explained[0] >= explained[1] else 1
+    return Category(UNDECIDED, dx[h].copy(), (z_d, z_v), s2, False, KINDS[h], detectable)
 
 
 def refine_change(prefix: np.ndarray, first: int, c: int, n: int, lo: int, hi: int, p: int,

@@ -20,8 +20,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 import difflib
 import math
+import textwrap
 from typing import Any, Callable, Iterator, Mapping, Sequence
 
+from rwa_monitor.core import gyro_calibration as gc
 from rwa_monitor.core.params import AUTO, check_choice, check_int, check_real
 from rwa_monitor.exceptions import ConfigError
 
@@ -230,6 +232,15 @@ DIAGNOSTIC_PERIOD = Param('diagnostic_period', 1.0, 'Seconds between /diagnostic
                           scope='node')
 
 
+EVENTS_FILE = Param('events_file', '', 'JSON Lines journal of every event and '
+                    'acknowledgement, flushed and fsynced per line; its unacknowledged '
+                    'anomalies are reloaded at start. Empty = none (anomalies are latched '
+                    'in memory only).', read_only=True, scope='node')
+WHEEL_TIMEOUT = Param('wheel_timeout', 600.0, 'Seconds of wall time without input after '
+                      'which a wheel is freed (its detector and state; latched anomalies '
+                      'stay); 0 = never.', low=0.0, unit='s', scope='node')
+
+
 def _time_jump(what: str) -> Param:
     return Param('time_jump', 1.0, f'A stamp more than this before the last one restarts '
                  f'{what} (replay loop); smaller steps back are dropped.', low=0.0,
@@ -263,6 +274,15 @@ LLR = Schema('llr_detector', (
           'out_of_range.', low=0.0, low_open=True, unit='rad/s'),
     Param('max_abs_friction', 1.0e6, 'Samples at or beyond this friction are dropped and '
           'counted out_of_range.', low=0.0, low_open=True, unit='N m'),
+    Param('noise_ar_max_order', AUTO, 'Largest order of the AR noise model fitted on the '
+          'first samples and used to prewhiten them (docs/llr.md); auto = 3 with an '
+          'estimated noise level, 0 with noise_std given (white noise, the paper).', low=0,
+          high=10, auto=True, kind=int),
+    Param('noise_fit_samples', AUTO, 'Samples that fit the AR noise model; auto = '
+          '2 window + 1.', low=20, high=10_000_000, auto=True, kind=int, unit='samples'),
+    Param('reference_max', 0, 'Longest reference segment (sliding reference that follows '
+          'slow drifts, docs/llr.md); 0 = growing reference (the paper).', low=0,
+          high=10_000_000, unit='samples'),
     Param('friction_model_file', '', 'Refined friction model written by `rwa-monitor '
           'identify` (friction_model.yaml); empty = model (1).', scope='file'),
     _wheels(),
@@ -270,6 +290,8 @@ LLR = Schema('llr_detector', (
     _time_jump("the wheel's detector"),
     STALE_TIMEOUT,
     DIAGNOSTIC_PERIOD,
+    EVENTS_FILE,
+    WHEEL_TIMEOUT,
     Param('telemetry_reliability', 'reliable', 'QoS of the telemetry/wheels subscription: '
           'reliable (keep all, no loss) or best_effort (hears a sensor-data publisher; '
           'samples may be lost).', choices=('reliable', 'best_effort'), read_only=True,
@@ -304,6 +326,8 @@ FSS = Schema('fss_diagnoser', (
     MAX_WHEELS,
     STALE_TIMEOUT,
     DIAGNOSTIC_PERIOD,
+    EVENTS_FILE,
+    WHEEL_TIMEOUT,
 ), 'FSS window diagnoser (physics-informed FSS paper); docs/fss.md.',
     lambda values: fss_config(values))
 
@@ -323,7 +347,44 @@ def _three(value: list) -> None:
         raise ValueError(f'reference_rate must be 3 numbers (rad/s), got {value!r}')
 
 
+#: Parameters of the residual gyro diagnosis (core/gyro_diagnosis.py), not VsadcDetector's.
+RESIDUAL_PARAMETERS = ('feature', 'calibration_file', 'saturation_rad_s', 'residual_block',
+                       'residual_nominal_blocks', 'residual_tracking_blocks',
+                       'residual_guard_blocks', 'residual_fit_blocks',
+                       'residual_decide_blocks', 'residual_confirm_blocks',
+                       'residual_max_wait_blocks', 'residual_decide_chi2',
+                       'residual_freeze_fraction', 'residual_recovery_fraction')
+
 VSADC = Schema('vsadc_detector', (
+    Param('feature', 'residual', 'residual: gyro minus star-tracker rate, the true rate '
+          'cancels (works under guidance); paper: the two residuals of Algorithm 1 '
+          '(docs/vsadc.md).', choices=('residual', 'paper')),
+    Param('calibration_file', '', 'calibration.yaml whose gyro block sets the residual '
+          'thresholds; empty = defaults.', read_only=True),
+    Param('saturation_rad_s', 0.35, 'A gyro rate at or above this is saturated: held and '
+          'reported, never diagnosed.', low=0.0, low_open=True, unit='rad/s'),
+    Param('residual_block', gc.DEFAULT_BLOCK, 'Residual steps per block mean (the '
+          'statistic).', low=2, high=100_000, unit='samples'),
+    Param('residual_nominal_blocks', 6, 'Blocks of the first nominal level.', low=1,
+          high=100_000),
+    Param('residual_tracking_blocks', 30, 'Running-mean length of the tracked nominal; 0 = '
+          'fixed.', low=0, high=1_000_000),
+    Param('residual_guard_blocks', 3, 'Blocks between the newest one and the one that '
+          'teaches the nominal.', low=0, high=1000),
+    Param('residual_fit_blocks', gc.DEFAULT_FIT_BLOCKS, 'Blocks of the slope that turns a '
+          'drift into a bias and back.', low=3, high=10_000),
+    Param('residual_decide_blocks', 24, 'Blocks of the step-or-ramp decision.', low=3,
+          high=10_000),
+    Param('residual_confirm_blocks', 2, 'Successive blocks that confirm a change.', low=1,
+          high=1000),
+    Param('residual_max_wait_blocks', 6, 'Blocks after which an undecided kind is the '
+          'better fit.', low=0, high=1000),
+    Param('residual_decide_chi2', 9.0, 'Margin (block variances) by which step or ramp '
+          'must fit better.', low=0.0),
+    Param('residual_freeze_fraction', 0.5, 'The nominal stops learning beyond this '
+          'fraction of the level threshold.', low=0.0, high=1.0),
+    Param('residual_recovery_fraction', 0.5, 'A fault ends below this fraction of the '
+          'level threshold.', low=0.0, high=1.0, low_open=True),
     Param('window', 200, 'SW: samples of the nominal batch and of the evolving window '
           '(vsadc paper, Algorithm 1).', low=2, high=100_000, unit='samples'),
     Param('sigma_window', 200, 'Distances in the sigma of line 22; auto = window (the '
@@ -366,6 +427,7 @@ VSADC = Schema('vsadc_detector', (
     _time_jump('the detector'),
     STALE_TIMEOUT,
     DIAGNOSTIC_PERIOD,
+    EVENTS_FILE,
 ), 'VSADC gyro drift/bias classifier (vsadc paper, Algorithm 1); docs/vsadc.md. Samples '
    'are star-tracker/gyro pairs.', lambda values: _vsadc_detector(values))
 
@@ -383,9 +445,13 @@ IDENTIFY = Schema('identify', (
 # ------------------------------------------------------------------------------- replay
 
 REPLAY = Schema('telemetry_replay', (
-    Param('file', '', 'Telemetry file to replay (.csv, or .mcap written by rwa_monitor); '
-          'required, give it with -p file:=PATH (never in a parameters file, where it would '
-          'beat the command line).', read_only=True, required=True, scope='node'),
+    Param('file', '', 'Telemetry to replay: CSV file, rosbag2 folder, or bare .mcap or .db3 '
+          'file; required, give it with -p file:=PATH (never in a parameters file, where it '
+          'would beat the command line).', read_only=True, required=True, scope='node'),
+    Param('topics', '', 'Topics of the streams in a recording, as wheels=/a,gyro=/b,'
+          'star_tracker=/c,reference_rate=/d; streams not named keep the DESIGN.md topics '
+          '(/telemetry/wheels, /telemetry/gyro, /telemetry/star_tracker, '
+          '/telemetry/reference_rate).', read_only=True, scope='node'),
     Param('rate', 1.0, 'Time factor: 1.0 real time, 40.0 forty times faster, 0.0 as fast as '
           'the subscribers take it without loss.', low=0.0, high=1.0e6, scope='node'),
     Param('start_offset', 0.0, 'Seconds from the first sample where the replay (and every '
@@ -416,7 +482,8 @@ def llr_kwargs(values: Mapping[str, Any]) -> dict[str, Any]:
 
 def vsadc_kwargs(values: Mapping[str, Any]) -> dict[str, Any]:
     """Return VsadcDetector keywords from checked VSADC values (axes as a tuple)."""
-    kwargs = {name: values[name] for name in VSADC.names(('all',)) if name != 'reference_rate'}
+    kwargs = {name: values[name] for name in VSADC.names(('all',))
+              if name != 'reference_rate' and name not in RESIDUAL_PARAMETERS}
     kwargs['axes'] = tuple(a.strip() for a in values['axes'].split(',') if a.strip())
     return kwargs
 
@@ -473,7 +540,9 @@ def help_text(schema: Schema, scopes: Sequence[str] = ('all', 'file')) -> str:
     for p in schema:
         if p.scope in scopes:
             unit = f' [{p.unit}]' if p.unit else ''
-            lines.append(f'  {p.name} = {default_text(p)}{unit}: {p.description}')
+            lines.append(textwrap.fill(f'{p.name} = {default_text(p)}{unit}: {p.description}',
+                                       width=88, initial_indent='  ',
+                                       subsequent_indent='      '))
     return '\n'.join(lines)
 
 

@@ -346,10 +346,12 @@ class VsadcDetector:
     """VSADC on the three gyro axes from raw telemetry: gyro, star-tracker q, reference rate.
 
     ``update(time, gyro, q, ref)`` per row returns the AnomalyEvents of label changes.
-    Bad input never reaches the axes: a stamp that is not after the last accepted one, a
-    non-finite gyro or reference, and rows without a star-tracker rate (NaN, non-unit or
-    missing quaternion, first sample after a gap) are counted and the axes *hold* their
-    labels, so a star tracker that stops cannot turn into a drift.
+    Bad input never reaches the axes: a stamp that is not after the last accepted one and
+    rows without a star-tracker rate (NaN, non-unit or missing quaternion, first sample
+    after a gap) are counted and the axes *hold* their labels, so a star tracker that
+    stops cannot turn into a drift. A non-finite gyro or reference value is rejected per
+    axis (``bad_axis_<a>``): the other axes still take the row; a row no axis can use
+    counts as ``bad_gyro``.
     """
 
     def __init__(self, *, window: int = 200, distance_threshold: float = 1.5e-5,
@@ -388,6 +390,7 @@ class VsadcDetector:
         self.held = 0
         self.bad_gyro = 0
         self.out_of_order = 0
+        self.bad_axis = {a: 0 for a in self.axes}
         self._last_time = -math.inf
         self.last_event: AnomalyEvent | None = None
 
@@ -407,7 +410,8 @@ class VsadcDetector:
         st = self.star_tracker
         return {'rows': self.rows, 'accepted': self.accepted, 'held': self.held,
                 'bad_gyro': self.bad_gyro, 'out_of_order': self.out_of_order,
-                'invalid_quaternions': st.invalid, 'star_tracker_gaps': st.gaps}
+                'invalid_quaternions': st.invalid, 'star_tracker_gaps': st.gaps,
+                **{f'bad_axis_{a}': n for a, n in self.bad_axis.items()}}
 
     def update(self, time: float, gyro: Sequence[float], q: Sequence[float] | None,
                ref: Sequence[float], index: int | None = None) -> list[AnomalyEvent]:
@@ -425,8 +429,8 @@ class VsadcDetector:
             return []
         g, r = gyro, ref
         isfinite = math.isfinite
-        if not (isfinite(g[0]) and isfinite(g[1]) and isfinite(g[2]) and isfinite(r[0])
-                and isfinite(r[1]) and isfinite(r[2])):
+        usable = [isfinite(g[i]) and isfinite(r[i]) for i in self._index]
+        if not any(usable):
             self.bad_gyro += 1
             return []
         self._last_time = time
@@ -437,7 +441,10 @@ class VsadcDetector:
         self.accepted += 1
         stamp = (time, index)
         events = []
-        for axis, i, ch in zip(self.axes, self._index, self.channels):
+        for axis, i, ch, ok in zip(self.axes, self._index, self.channels, usable):
+            if not ok:
+                self.bad_axis[axis] += 1
+                continue
             tr = ch.update(r[i] - rate[i], r[i] - g[i], stamp)
             if tr is not None:
                 events.append(make_event(axis, tr))

@@ -12,7 +12,7 @@ The API (documented in docs/nodes.md):
   with a reason naming the parameter. The returned :class:`Parameters` mapping always holds
   the current values.
 - Diagnostics: :class:`DiagnosticsPublisher` publishes one DiagnosticStatus per component
-  on ``/diagnostics`` every period (1 s) of the node clock, named ``"<node>: <check>"``,
+  on ``/diagnostics`` every period (1 s) of wall time, named ``"<node>: <check>"``,
   ``hardware_id`` = component, KeyValues with units in the key, STALE when the component's
   input stops.
 - :func:`run_node`: the body of every console script's ``main``.
@@ -20,11 +20,13 @@ The API (documented in docs/nodes.md):
 
 from __future__ import annotations
 
+import contextlib
 import sys
+import textwrap
 import time
 from typing import Any, Callable, Iterator, Mapping, NamedTuple, Sequence
 
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
                                 SetParametersResult)
 import rclpy
@@ -41,6 +43,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from rwa_monitor.core.params import AUTO
 from rwa_monitor.core.schema import Param, Schema, SCHEMAS, SHARED_NAMES
 from rwa_monitor.exceptions import ConfigError
+from rwa_monitor.telemetry.codecs import format_value, key_values  # noqa: F401
 
 # --------------------------------------------------------------------------------- QoS
 
@@ -283,20 +286,6 @@ def wheel_refusal(wheel_id: str, allowed: set[str] | None, known: int,
     return None
 
 
-def key_values(values: Mapping[str, Any]) -> list[KeyValue]:
-    """Return KeyValues; floats keep every digit (``repr``), so they read back exactly."""
-    return [KeyValue(key=str(k), value=format_value(v)) for k, v in values.items()]
-
-
-def format_value(value: Any) -> str:
-    """Return a KeyValue value string: ``repr`` of floats (exact), ``str`` otherwise."""
-    if isinstance(value, float):
-        return repr(value)
-    if isinstance(value, bool):
-        return 'true' if value else 'false'
-    return str(value)
-
-
 class ComponentHealth:
     """The health of one component: level, message, KeyValues, time of the last input."""
 
@@ -308,18 +297,20 @@ class ComponentHealth:
         self.values: dict[str, Any] = {}
         self.last_input: float | None = None
         self.provider: Callable[[], tuple[bytes, str, dict[str, Any]]] | None = None
+        self.stale_timeout: float | None = None  # None: the publisher's
 
 
 class DiagnosticsPublisher:
     """Publish component health on ``/diagnostics`` the way diagnostic_updater does.
 
-    Every ``period`` seconds of the node clock (sim time under a replay) one
-    DiagnosticArray holds a status per component, named ``"<node>: <check>"``. A
-    component whose input has not arrived for ``stale_timeout`` seconds is reported
-    STALE (its last level is kept in the KeyValue ``last_level``). Staleness is measured
-    on the steady clock, because a stopped replay stops the sim clock too; for the same
-    reason a steady-clock timer publishes when the node clock has not ticked for 1.5
-    periods. Only level constants are assigned to ``level``.
+    Every ``period`` seconds of wall (steady) time, whatever the replay rate, one
+    DiagnosticArray holds a status per component, named ``"<node>: <check>"`` (``"<ns>/<node>:
+    <check>"`` when the node runs in a namespace); its
+    stamp is the node clock (sim time under a replay). A component whose input has not
+    arrived for ``stale_timeout`` seconds (its own, if set) is reported STALE (its last
+    level is kept in the KeyValue ``last_level``). Staleness is measured on the steady
+    clock too, because a stopped replay stops the sim clock. Only level constants are
+    assigned to ``level``.
     """
 
     def __init__(self, node: Node, *, period: float = 1.0, stale_timeout: float = 3.0,
@@ -329,12 +320,15 @@ class DiagnosticsPublisher:
         self.stale_timeout = stale_timeout
         self.components: dict[str, ComponentHealth] = {}
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
+        self.steady_clock = self._steady  # for the node's own wall-time timers
+        # "<node>" in the root namespace, "sat1/<node>" under /sat1 (the dashboard and
+        # diagnostic aggregators tell spacecraft apart by it).
+        self.prefix = node.get_fully_qualified_name().lstrip('/')
         self._started = self.now()
         self._last_publish = self._started
         self._pub = node.create_publisher(DiagnosticArray, topic, DIAGNOSTICS_QOS)
-        self._timer = node.create_timer(period, self.publish)
-        self._watchdog = node.create_timer(period, self._publish_if_clock_stopped,
-                                           clock=self._steady)
+        self._timer = node.create_timer(period, self.publish, clock=self._steady)
+        self.published = 0
 
     @staticmethod
     def now() -> float:
@@ -387,11 +381,12 @@ class DiagnosticsPublisher:
                 health.level, health.message = ERROR, f'health check failed: {err!r}'
         values = dict(health.values)
         level, message = health.level, health.message
-        if since > self.stale_timeout:
+        timeout = self.stale_timeout if health.stale_timeout is None else health.stale_timeout
+        if since > timeout:
             values['last_level'] = LEVEL_NAMES[health.level]
             level, message = STALE, f'no input for {since:.1f} s; last: {health.message}'
         values['since_input_s'] = round(since, 3)
-        return DiagnosticStatus(level=level, name=f'{self._node.get_name()}: {health.check}',
+        return DiagnosticStatus(level=level, name=f'{self.prefix}: {health.check}',
                                 message=message, hardware_id=health.hardware_id,
                                 values=key_values(values))
 
@@ -401,17 +396,13 @@ class DiagnosticsPublisher:
         self._last_publish = now
         msg = DiagnosticArray()
         msg.header.stamp = self._node.get_clock().now().to_msg()
-        msg.status = [self.status(h, now) for h in self.components.values()]
+        msg.status = [self.status(h, now) for h in list(self.components.values())]
         self._pub.publish(msg)
-
-    def _publish_if_clock_stopped(self) -> None:
-        if self.now() - self._last_publish > 1.5 * self.period:
-            self.publish()
+        self.published += 1
 
     def destroy(self) -> None:
-        """Destroy the timers and the publisher."""
+        """Destroy the timer and the publisher."""
         self._node.destroy_timer(self._timer)
-        self._node.destroy_timer(self._watchdog)
         self._node.destroy_publisher(self._pub)
 
 
@@ -427,19 +418,61 @@ def with_sim_time(argv: list[str]) -> list[str]:
     return [*argv[:1], '--ros-args', '-p', 'use_sim_time:=true', '--', *argv[1:]]
 
 
+def wants_help(argv: Sequence[str]) -> bool:
+    """Return True if ``-h``/``--help`` comes before any ``--ros-args`` in ``argv[1:]``."""
+    user = list(argv[1:])
+    if '--ros-args' in user:
+        user = user[:user.index('--ros-args')]
+    return '-h' in user or '--help' in user
+
+
+def node_help(prog: str, description: str | None, specs: Sequence[Any] = ()) -> str:
+    """Return the ``--help`` text of a node's console script: usage, summary, parameters."""
+    lines = [f'usage: {prog} [-h] [--ros-args [-p NAME:=VALUE ...] [--params-file YAML] '
+             '[-r FROM:=TO ...]]', '']
+    summary = (description or '').strip().split('\n\n')[0]
+    if summary:
+        lines += [' '.join(summary.split()), '']
+    if specs:
+        lines.append('parameters (set with -p NAME:=VALUE or a --params-file):')
+        for spec in specs:
+            default = getattr(spec, 'default', '')
+            flags = ' (read-only)' if getattr(spec, 'read_only', False) else ''
+            lines.append(f'  {spec.name} (default {default!r}){flags}')
+            lines += textwrap.wrap(str(getattr(spec, 'description', '')), 86,
+                                   initial_indent='      ', subsequent_indent='      ')
+    lines += ['', 'Stops cleanly on Ctrl-C (SIGINT) and SIGTERM. docs/nodes.md has the topics, '
+              'diagnostics and alarms.']
+    return '\n'.join(lines)
+
+
 def run_node(factory: Callable[[], Node], args: Sequence[str] | None = None,
-             executor: str = 'single') -> int:
+             executor: str = 'single', *, help_text: str | Callable[[], str] | None = None
+             ) -> int:
     """Initialise rclpy with ``args``, create the node, spin it; return an exit code.
 
     ``args`` (default ``sys.argv``) get ``use_sim_time`` true as a default (see
-    :func:`with_sim_time`).
+    :func:`with_sim_time`). ``-h``/``--help`` before ``--ros-args`` prints ``help_text``
+    (default: :func:`node_help` of the docstring and ``PARAMETERS`` of the module that
+    defines ``factory``) and returns 0 without starting ROS.
 
-    A :class:`ConfigError` at start-up (a bad parameter) is printed and gives 2; Ctrl-C
-    and an external shutdown end cleanly with 0. The node may end itself by calling
-    ``rclpy.try_shutdown(context=node.context)`` (the replay does when it is done).
-    ``executor`` is ``'single'`` or ``'events'`` (rclpy.experimental.EventsExecutor).
+    A :class:`ConfigError` at start-up (a bad parameter) is printed and gives 2; Ctrl-C,
+    SIGTERM and an external shutdown end cleanly with 0 (an error raised by a call into a
+    context that the signal already shut down is part of that shutdown, not a failure).
+    The node may end itself by calling ``rclpy.try_shutdown(context=node.context)`` (the
+    replay does when it is done). ``executor`` is ``'single'`` or ``'events'``
+    (rclpy.experimental.EventsExecutor).
     """
-    rclpy.init(args=with_sim_time(sys.argv if args is None else list(args)))
+    argv = sys.argv if args is None else list(args)
+    if wants_help(argv):
+        text = help_text() if callable(help_text) else help_text
+        if text is None:   # the docstring and PARAMETERS of the module defining ``factory``
+            module = sys.modules.get(getattr(factory, '__module__', ''))
+            text = node_help(str(argv[0]).rsplit('/', 1)[-1], getattr(module, '__doc__', None),
+                             getattr(module, 'PARAMETERS', ()))
+        print(text)
+        return 0
+    rclpy.init(args=with_sim_time(argv))
     node = None
     try:
         node = factory()
@@ -455,8 +488,13 @@ def run_node(factory: Callable[[], Node], args: Sequence[str] | None = None,
         return 2
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
+    except Exception:  # noqa: BLE001 - see below
+        if rclpy.ok():
+            raise
+        # The context was shut down (SIGINT/SIGTERM) while a callback was using it.
     finally:
         if node is not None:
-            node.destroy_node()
+            with contextlib.suppress(Exception):
+                node.destroy_node()
         rclpy.try_shutdown()
     return getattr(node, 'exit_code', 0)

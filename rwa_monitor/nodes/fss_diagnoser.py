@@ -19,10 +19,17 @@ when telemetry stops), with the counters of bad input. Bad input: as the llr_det
 node for messages; per wheel, a stamp not after the last one is dropped and counted,
 NaN/Inf samples are kept in the window (the stages skip them) and counted, and gaps in
 the stamps are counted (the stages count in samples).
+
+Reliability (docs/nodes.md): flagged anomalies are latched (:mod:`rwa_monitor.nodes.latched`:
+``events_file``, ``~/acknowledge``, re-published at start); a failed diagnosis or an
+exception in one wheel's input handling is caught, logged once, counted and shown as
+ERROR on that wheel (its window restarts), other wheels go on; a wheel silent for
+``wheel_timeout`` s of wall time is freed; events kept in memory are bounded.
 """
 
 from __future__ import annotations
 
+import collections
 import concurrent.futures
 import queue
 from typing import Any, Sequence
@@ -33,20 +40,24 @@ from rclpy.clock_type import ClockType
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 
-from rwa_monitor.core import keys
+from rwa_monitor.core import keys, streams
 from rwa_monitor.core.events import AnomalyEvent
 from rwa_monitor.core.fss.pipeline import diagnose, FssConfig, SlidingWindow
 from rwa_monitor.core.schema import FSS, fss_config
 from rwa_monitor.exceptions import ConfigError
 from rwa_monitor.nodes import common, messages
-from rwa_monitor.nodes.common import (declare_parameters, DiagnosticsPublisher, EVENTS_QOS,
-                                      OK, qos_event_callbacks, run_node,
-                                      telemetry_qos, WARN)
+from rwa_monitor.nodes.common import (declare_parameters, DiagnosticsPublisher, ERROR,
+                                      EVENTS_QOS, node_help, OK, qos_event_callbacks,
+                                      run_node, STALE, telemetry_qos, WARN)
+from rwa_monitor.nodes.latched import LatchedAlarms
+from rwa_monitor.telemetry.alarms import kind_key
 from rwa_monitor.telemetry.fss_model import load_model
 
 NODE_NAME = 'fss_diagnoser'
 INPUT_ID = 'telemetry/wheels'
 DETECTOR = 'fss'
+MAX_KEPT = 10_000  # events kept in memory for in-process users (demo, tests)
+ERROR_HOLD_S = 60.0  # a wheel whose diagnosis failed shows ERROR this long (wall time)
 
 # Parameters: core/schema.py FSS (the diagnoser's and the node-only ones).
 CONFIG_NAMES = FSS.names(('all',))
@@ -61,6 +72,8 @@ class _Wheel:
         self.samples = 0
         self.diagnoses = 0
         self.skipped_busy = 0
+        self.failures = 0
+        self.last_failure: tuple[float, str] | None = None
         self.busy = False
         self.flags: dict[str, bool] = {}
         self.result: dict | None = None
@@ -83,10 +96,11 @@ class FssDiagnoserNode(Node):
         except (OSError, ValueError) as err:
             raise ConfigError(f'parameter model: {err}') from None
         self.wheels: dict[str, _Wheel] = {}
-        self.events: list[AnomalyEvent] = []
+        self.events: collections.deque[AnomalyEvent] = collections.deque(maxlen=MAX_KEPT)
         self.input_counters = {'messages': 0, 'length_mismatch': 0, 'empty_name': 0,
                                'duplicate_name': 0, 'unknown_wheel': 0, 'too_many_wheels': 0,
-                               'out_of_order': 0, 'diagnosis_failed': 0}
+                               'out_of_order': 0, 'diagnosis_failed': 0,
+                               'wheel_failures': 0, 'wheels_freed': 0}
         self._logged: set[tuple[str, str]] = set()
         self._allowed = common.wheel_names(self.params['wheels'])
         self._worker = concurrent.futures.ThreadPoolExecutor(
@@ -99,6 +113,11 @@ class FssDiagnoserNode(Node):
         self._anomaly_pub = self.create_publisher(
             DiagnosticArray, 'anomalies', EVENTS_QOS,
             event_callbacks=qos_event_callbacks(self, 'anomalies', True))
+        self.alarms = LatchedAlarms(self, self._anomaly_pub, self.diagnostics,
+                                    self.params['events_file'], key=kind_key)
+        self._silence = streams.SilenceTracker(self.params['wheel_timeout'])
+        self._sweeper = self.create_timer(1.0, self._free_silent_wheels,
+                                          clock=self.diagnostics.steady_clock)
         self.create_subscription(
             JointState, 'telemetry/wheels', self.on_wheels, telemetry_qos(),
             event_callbacks=qos_event_callbacks(self, 'telemetry/wheels'))
@@ -148,15 +167,25 @@ class FssDiagnoserNode(Node):
             if wheel is None:
                 continue
             wheel.health.last_input = now
-            before = wheel.window.out_of_order
-            due = wheel.window.update(seconds, speed, friction)
-            if wheel.window.out_of_order != before:
-                self._count('out_of_order', wheel_id, f'{wheel_id}: dropped a sample whose '
-                            f'stamp is not after the last one (t={seconds!r})')
-                continue
-            wheel.samples += 1
-            if due:
-                self._submit(wheel_id, wheel)
+            self._silence.heard(wheel_id, now)
+            try:
+                self._append(wheel_id, wheel, seconds, speed, friction)
+            except Exception as err:  # noqa: BLE001 - one wheel never stops the others
+                self._failed(wheel_id, wheel, 'wheel_failures', err)
+                wheel.window.reset()
+
+    def _append(self, wheel_id: str, wheel: _Wheel, seconds: float, speed: float,
+                friction: float) -> None:
+        """Add one sample to a wheel's window; submit a diagnosis when one is due."""
+        before = wheel.window.out_of_order
+        due = wheel.window.update(seconds, speed, friction)
+        if wheel.window.out_of_order != before:
+            self._count('out_of_order', wheel_id, f'{wheel_id}: dropped a sample whose '
+                        f'stamp is not after the last one (t={seconds!r})')
+            return
+        wheel.samples += 1
+        if due:
+            self._submit(wheel_id, wheel)
 
     def _wheel(self, wheel_id: str) -> _Wheel | None:
         wheel = self.wheels.get(wheel_id)
@@ -199,11 +228,29 @@ class FssDiagnoserNode(Node):
             wheel.busy = False
             try:
                 result = future.result()
+                self._record(wheel_id, wheel, result, first, start, end)
             except Exception as err:  # noqa: BLE001 - a failed window never stops the node
-                self._count('diagnosis_failed', wheel_id,
-                            f'{wheel_id}: diagnosis failed: {err!r}')
-                continue
-            self._record(wheel_id, wheel, result, first, start, end)
+                self._failed(wheel_id, wheel, 'diagnosis_failed', err)
+
+    def _failed(self, wheel_id: str, wheel: _Wheel, reason: str, err: Exception) -> None:
+        """Count and log (once per wheel and reason) a failure; show ERROR on the wheel."""
+        wheel.failures += 1
+        wheel.last_failure = (self.diagnostics.now(), f'{type(err).__name__}: {err}')
+        self._count(reason, wheel_id, f'{wheel_id}: {reason.replace("_", " ")}: '
+                    f'{wheel.last_failure[1]}')
+
+    def _free_silent_wheels(self) -> None:
+        """Free the wheels silent for ``wheel_timeout`` s (timer on the steady clock)."""
+        self._silence.timeout = self.params['wheel_timeout']
+        for wheel_id in self._silence.silent(self.diagnostics.now()):
+            self._silence.forget(wheel_id)
+            wheel = self.wheels.get(wheel_id)
+            if wheel is not None and not wheel.busy:
+                del self.wheels[wheel_id]
+                self.diagnostics.remove(wheel_id)
+                self.input_counters['wheels_freed'] += 1
+                self.get_logger().info(f'wheel {wheel_id!r} silent for more than '
+                                       f'{self._silence.timeout:g} s: freed')
 
     def _record(self, wheel_id: str, wheel: _Wheel, result: dict, first: int,
                 start: float, end: float) -> None:
@@ -230,6 +277,7 @@ class FssDiagnoserNode(Node):
             self.get_logger().warning(f'{wheel_id}: {event.kind} anomaly in the window '
                                       f't={start:.1f}..{end:.1f} s')
         self.events.extend(found)
+        self.alarms.record(found)
 
     # --------------------------------------------------------------------- health
     def _wheel_health(self, wheel: _Wheel) -> tuple[bytes, str, dict[str, Any]]:
@@ -237,10 +285,16 @@ class FssDiagnoserNode(Node):
                                   'window_samples': wheel.window.size,
                                   'non_finite': wheel.window.non_finite,
                                   'gaps': wheel.window.gaps,
-                                  'skipped_busy': wheel.skipped_busy}
+                                  'skipped_busy': wheel.skipped_busy,
+                                  'failures': wheel.failures}
+        failure = wheel.last_failure
+        if failure is not None and self.diagnostics.now() - failure[0] < ERROR_HOLD_S:
+            return self.alarms.merge(wheel.health.hardware_id, ERROR,
+                                     f'diagnosis failed ({failure[1]})', values)
         if wheel.result is None:
-            return OK, f'waiting for a full window ({wheel.window.size}/' \
-                f'{wheel.window.length} samples)', values
+            return self.alarms.merge(
+                wheel.health.hardware_id, STALE, f'unknown: not examined yet, waiting for '
+                f'a full window ({wheel.window.size}/{wheel.window.length} samples)', values)
         start, end = wheel.window_bounds
         est = wheel.result['estimates']
         values.update({keys.WINDOW_START: start, keys.WINDOW_END: end,
@@ -250,8 +304,10 @@ class FssDiagnoserNode(Node):
         values.update({f'anomaly_{k}': v for k, v in wheel.flags.items()})
         found = [k for k, v in wheel.flags.items() if v]
         if found:
-            return WARN, f'anomalies {", ".join(found)} in t={start:.1f}..{end:.1f} s', values
-        return OK, f'no anomaly in t={start:.1f}..{end:.1f} s', values
+            level, text = WARN, f'anomalies {", ".join(found)} in t={start:.1f}..{end:.1f} s'
+        else:
+            level, text = OK, f'no anomaly in t={start:.1f}..{end:.1f} s'
+        return self.alarms.merge(wheel.health.hardware_id, level, text, values)
 
     def _input_health(self) -> tuple[bytes, str, dict[str, Any]]:
         rejected = sum(v for k, v in self.input_counters.items() if k != 'messages')
@@ -270,7 +326,8 @@ NODE_CLASS = FssDiagnoserNode
 
 def main(args: Sequence[str] | None = None) -> int:
     """Run the FSS window diagnoser node (console script ``rwa-monitor-fss``)."""
-    return run_node(lambda: FssDiagnoserNode(), args)
+    return run_node(lambda: FssDiagnoserNode(), args, help_text=lambda: node_help(
+        'rwa-monitor-fss', __doc__, PARAMETERS))
 
 
 if __name__ == '__main__':

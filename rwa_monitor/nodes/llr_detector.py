@@ -14,7 +14,15 @@ beyond ``max_wheels`` are dropped; a stamp equal to (duplicate) or up to
 ``time_jump`` s before (out of order) the wheel's last one is dropped; a stamp more than
 ``time_jump`` s before it (a replay loop) restarts that wheel's detector. NaN/Inf values
 go to the detector, which skips and counts them. Each case is counted in diagnostics and
-logged once; none reaches the detector's statistics.
+logged once; none reaches the detector's statistics. The stamp rules are
+:class:`rwa_monitor.core.streams.StampGate` (shared with the other nodes).
+
+Reliability (docs/nodes.md "Alarms" and "Failures"): declared anomalies are latched
+(:mod:`rwa_monitor.nodes.latched`: ``events_file`` journal, ``~/acknowledge``, reloaded
+and re-published at start) and survive detector restarts; an exception in one wheel's
+detector is caught, logged once, counted, shown as ERROR on that wheel and its detector
+restarts, while other wheels go on; a wheel silent for ``wheel_timeout`` s of wall time
+is freed.
 """
 
 from __future__ import annotations
@@ -27,17 +35,19 @@ from rclpy.node import Node
 from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import JointState
 
-from rwa_monitor.core import keys
+from rwa_monitor.core import keys, streams
 from rwa_monitor.core.events import AnomalyEvent
 from rwa_monitor.core.schema import LLR, llr_kwargs
 from rwa_monitor.nodes import common, messages
-from rwa_monitor.nodes.common import (declare_parameters, DiagnosticsPublisher, EVENTS_QOS,
-                                      OK, qos_event_callbacks, run_node,
-                                      telemetry_qos)
+from rwa_monitor.nodes.common import (declare_parameters, DiagnosticsPublisher, ERROR,
+                                      EVENTS_QOS, node_help, OK, qos_event_callbacks,
+                                      run_node, telemetry_qos)
+from rwa_monitor.nodes.latched import LatchedAlarms
 
 NODE_NAME = 'llr_detector'
 MAX_KEPT = 10_000  # events kept in memory for in-process users (demo, tests)
 INPUT_ID = 'telemetry/wheels'
+ERROR_HOLD_S = 60.0  # a wheel whose detector failed shows ERROR this long (wall time)
 
 # Parameters: core/schema.py LLR (the detector's and the node-only ones).
 DETECTOR_PARAMETERS = LLR.names(('all',))
@@ -47,22 +57,27 @@ PARAMETERS = LLR.for_node()
 class _Wheel:
     """One monitored wheel: its detector, last stamp, counters and health."""
 
-    def __init__(self, detector: Any) -> None:
+    def __init__(self, detector: Any, time_jump: float) -> None:
         self.detector = detector
-        self.last_time: float | None = None
+        self.gate = streams.StampGate(time_jump)
+        self.counters = self.gate.counters
         self.samples = 0
         self.events = 0
-        self.counters = {'duplicate_stamp': 0, 'out_of_order': 0, 'time_jump_reset': 0}
+        self.failures = 0
+        self.last_failure: tuple[float, str] | None = None
         self.earlier_rejects: dict[str, int] = {}
         self.last_event: AnomalyEvent | None = None
         self.health: Any = None
 
     def restart(self) -> None:
         """Reset the detector, keeping its counters of rejected samples in the totals."""
-        for reason, count in self.detector.counters.items():
-            self.earlier_rejects[reason] = self.earlier_rejects.get(reason, 0) + count
-        self.detector.reset()
-        self.last_time = None
+        try:
+            for reason, count in self.detector.counters.items():
+                self.earlier_rejects[reason] = self.earlier_rejects.get(reason, 0) + count
+            self.detector.reset()
+        except Exception:  # noqa: BLE001 - a broken detector is replaced by the caller
+            pass
+        self.gate.reset()
         self.last_event = None
 
     def rejected(self) -> dict[str, int]:
@@ -88,7 +103,8 @@ class LLRDetectorNode(Node):
         self.wheels: dict[str, _Wheel] = {}
         self.input_counters = {'messages': 0, 'length_mismatch': 0,
                                'empty_name': 0, 'duplicate_name': 0, 'unknown_wheel': 0,
-                               'too_many_wheels': 0, 'undecodable': 0}
+                               'too_many_wheels': 0, 'undecodable': 0, 'detector_failures': 0,
+                               'wheels_freed': 0}
         self.events: collections.deque[AnomalyEvent] = collections.deque(maxlen=MAX_KEPT)
         self._codec: messages.JointStateCodec | None = None
         self._logged: set[tuple[str, str]] = set()
@@ -100,6 +116,11 @@ class LLRDetectorNode(Node):
         self._anomaly_pub = self.create_publisher(
             DiagnosticArray, 'anomalies', EVENTS_QOS,
             event_callbacks=qos_event_callbacks(self, 'anomalies', True))
+        self.alarms = LatchedAlarms(self, self._anomaly_pub, self.diagnostics,
+                                    self.params['events_file'])
+        self._silence = streams.SilenceTracker(self.params['wheel_timeout'])
+        self._sweeper = self.create_timer(1.0, self._free_silent_wheels,
+                                          clock=self.diagnostics.steady_clock)
         reliable = self.params['telemetry_reliability'] == 'reliable'
         self.create_subscription(
             JointState, 'telemetry/wheels', self.on_raw_wheels,
@@ -121,7 +142,8 @@ class LLRDetectorNode(Node):
             for wheel_id, wheel in self.wheels.items():
                 wheel.restart()
                 wheel.detector = self._new_detector(wheel_id)
-            self.get_logger().info(f'{name} = {value}: every wheel detector restarted')
+            self.get_logger().info(f'{name} = {value}: every wheel detector restarted '
+                                   '(latched anomalies stay)')
         elif name == 'wheels':
             self._allowed = common.wheel_names(self.params['wheels'])
 
@@ -185,6 +207,7 @@ class LLRDetectorNode(Node):
             wheel = self._wheel(wheel_id)
             if wheel is not None:
                 wheel.health.last_input = now
+                self._silence.heard(wheel_id, now)
                 self._feed(wheel_id, wheel, seconds, speed, friction)
 
     def _wheel(self, wheel_id: str) -> _Wheel | None:
@@ -196,7 +219,8 @@ class LLRDetectorNode(Node):
         if refusal is not None:
             self._reject(refusal[0], wheel_id, refusal[1])
             return None
-        wheel = self.wheels[wheel_id] = _Wheel(self._new_detector(wheel_id))
+        wheel = self.wheels[wheel_id] = _Wheel(self._new_detector(wheel_id),
+                                               self.params['time_jump'])
         wheel.health = self.diagnostics.component(wheel_id, f'{wheel_id} friction')
         self.diagnostics.provide(wheel_id, f'{wheel_id} friction',
                                  lambda: self._wheel_health(wheel))
@@ -205,24 +229,51 @@ class LLRDetectorNode(Node):
 
     def _feed(self, wheel_id: str, wheel: _Wheel, seconds: float, speed: float,
               friction: float) -> None:
-        if wheel.last_time is not None and seconds <= wheel.last_time:
-            back = wheel.last_time - seconds
-            if back > self.params['time_jump']:
-                wheel.counters['time_jump_reset'] += 1
-                self._log_once('time_jump_reset', wheel_id, f'{wheel_id}: time jumped back '
-                               f'{back:.3f} s: detector restarted')
-                wheel.restart()
-            else:
-                reason = 'duplicate_stamp' if back == 0 else 'out_of_order'
-                wheel.counters[reason] += 1
-                self._log_once(reason, wheel_id, f'{wheel_id}: dropped a sample: {reason} '
-                               f'(t={seconds!r} after {wheel.last_time!r})')
-                return
-        wheel.last_time = seconds
+        gate = wheel.gate
+        gate.time_jump = self.params['time_jump']
+        last = gate.last
+        verdict = gate.check(seconds)
+        if verdict == streams.TIME_JUMP:
+            self._log_once(verdict, wheel_id, f'{wheel_id}: time jumped back '
+                           f'{last - seconds:.3f} s: detector restarted')
+            wheel.restart()
+            gate.check(seconds)
+        elif verdict != streams.ACCEPT:
+            self._log_once(verdict, wheel_id, f'{wheel_id}: dropped a sample: {verdict} '
+                           f'(t={seconds!r} after {last!r})')
+            return
         wheel.samples += 1
-        found = wheel.detector.update(seconds, speed, friction)
+        try:
+            found = wheel.detector.update(seconds, speed, friction)
+        except Exception as err:  # noqa: BLE001 - one wheel's failure never stops the node
+            self._detector_failed(wheel_id, wheel, err)
+            return
         if found:
             self._publish_events(wheel, found)
+
+    def _detector_failed(self, wheel_id: str, wheel: _Wheel, err: Exception) -> None:
+        """Count and log (once per wheel) a detector exception; restart that detector."""
+        wheel.failures += 1
+        self.input_counters['detector_failures'] += 1
+        wheel.last_failure = (self.diagnostics.now(), f'{type(err).__name__}: {err}')
+        if ('detector_failure', wheel_id) not in self._logged:
+            self._logged.add(('detector_failure', wheel_id))
+            self.get_logger().error(
+                f'{wheel_id}: detector failed: {type(err).__name__}: {err}; detector '
+                'restarted (further failures are only counted)')
+        wheel.restart()
+        wheel.detector = self._new_detector(wheel_id)
+
+    def _free_silent_wheels(self) -> None:
+        """Free the wheels silent for ``wheel_timeout`` s (timer on the steady clock)."""
+        self._silence.timeout = self.params['wheel_timeout']
+        for wheel_id in self._silence.silent(self.diagnostics.now()):
+            self._silence.forget(wheel_id)
+            if self.wheels.pop(wheel_id, None) is not None:
+                self.diagnostics.remove(wheel_id)
+                self.input_counters['wheels_freed'] += 1
+                self.get_logger().info(f'wheel {wheel_id!r} silent for more than '
+                                       f'{self._silence.timeout:g} s: freed')
 
     # --------------------------------------------------------------------- output
     def _publish_events(self, wheel: _Wheel, found: list[AnomalyEvent]) -> None:
@@ -237,6 +288,7 @@ class LLRDetectorNode(Node):
         wheel.events += len(found)
         wheel.last_event = found[-1]
         self.events.extend(found)
+        self.alarms.record(found)
 
     def _wheel_health(self, wheel: _Wheel) -> tuple[bytes, str, dict[str, Any]]:
         values: dict[str, Any] = {'samples': wheel.samples, 'events': wheel.events}
@@ -251,10 +303,15 @@ class LLRDetectorNode(Node):
             message = f'{event.kind} anomaly since t={event.time:.3f} s'
             values.update({keys.KIND: event.kind, keys.CHANGE_TIME: event.time,
                            keys.P_VALUE: event.p_value})
-        noise = getattr(wheel.detector, 'noise_std', None)
-        if noise is not None:
-            values[keys.NOISE_STD] = noise
-        return level, message, values
+        try:
+            values[keys.NOISE_STD] = float(wheel.detector.noise_std)
+        except Exception:  # noqa: BLE001 - a health value never stops the node
+            pass
+        values['detector_failures'] = wheel.failures
+        failure = wheel.last_failure
+        if failure is not None and self.diagnostics.now() - failure[0] < ERROR_HOLD_S:
+            level, message = ERROR, f'detector failed ({failure[1]}), restarted; {message}'
+        return self.alarms.merge(wheel.detector.component, level, message, values)
 
     def _input_health(self) -> tuple[bytes, str, dict[str, Any]]:
         rejected = sum(v for k, v in self.input_counters.items() if k != 'messages')
@@ -265,7 +322,8 @@ class LLRDetectorNode(Node):
 
 def main(args: Sequence[str] | None = None) -> int:
     """Run the LLR detector node (console script ``rwa-monitor-llr``)."""
-    return run_node(lambda: LLRDetectorNode(), args)
+    return run_node(lambda: LLRDetectorNode(), args, help_text=lambda: node_help(
+        'rwa-monitor-llr', __doc__, PARAMETERS))
 
 
 if __name__ == '__main__':

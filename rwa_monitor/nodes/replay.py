@@ -1,9 +1,10 @@
-"""Node ``telemetry_replay``: publish a telemetry file (CSV or MCAP) as ROS topics.
+"""Node ``telemetry_replay``: publish a telemetry file or recording as ROS topics.
 
 Topics (DESIGN.md): ``telemetry/wheels`` (JointState), ``telemetry/gyro`` (Imu),
 ``telemetry/star_tracker`` (QuaternionStamped), ``telemetry/reference_rate``
 (Vector3Stamped) for the channels the file has, every message stamped with the telemetry
-time; ``/clock`` (the telemetry time) for the sim-time detectors; progress on
+time; a recording's streams keep their own stamps and rates (parameter ``topics`` names
+the recording's topics); ``/clock`` (the telemetry time) for the sim-time detectors; progress on
 ``/diagnostics``. Pacing uses the steady clock, never the sim time it publishes.
 
 ``rate`` is the time factor (1.0 real time). ``rate`` 0 publishes as fast as the
@@ -60,7 +61,7 @@ class TelemetryReplay(Node):
                 raise ConfigError('parameter file: a telemetry file is required '
                                   '(-p file:=PATH)')
             try:
-                telemetry = read_telemetry(self.params['file'])
+                telemetry = read_telemetry(self.params['file'], self.params['topics'])
             except RwaMonitorError as err:
                 raise ConfigError(f'parameter file: {err}') from None
         if len(telemetry) == 0:
@@ -184,14 +185,15 @@ class TelemetryReplay(Node):
         """Return (publisher, serialised message) of every channel of row ``i``."""
         t = float(self._time[i])
         rows = self._rows
+        has = rows.has
         out = []
-        if self._wheels_pub is not None:
+        if self._wheels_pub is not None and has('wheels', i):
             out.append((self._wheels_pub, rows.wheels(i, t)))
-        if self._gyro_pub is not None:
+        if self._gyro_pub is not None and has('gyro', i):
             out.append((self._gyro_pub, self._imu.encode(t, rows.gyro[i].tolist())))
-        if self._star_pub is not None:
+        if self._star_pub is not None and has('star_tracker', i):
             out.append((self._star_pub, self._quaternion.encode(t, rows.attitude[i].tolist())))
-        if self._ref_pub is not None:
+        if self._ref_pub is not None and has('reference_rate', i):
             out.append((self._ref_pub, self._vector3.encode(t, rows.reference[i].tolist())))
         return out
 
@@ -275,9 +277,13 @@ class TelemetryReplay(Node):
 
 
 class _Rows:
-    """Row access to the telemetry arrays (each row converted when it is published)."""
+    """Row access to the telemetry arrays (each row converted when it is published).
+
+    A multi-rate recording has rows where a stream has no sample: :meth:`has` says which.
+    """
 
     def __init__(self, tele: Telemetry) -> None:
+        self._present = {k: m.tolist() for k, m in tele.present.items()}
         self.names = list(tele.wheels)
         nan = np.full(len(tele), np.nan)
         self.speed = np.column_stack([w.speed for w in tele.wheels.values()]) \
@@ -289,6 +295,11 @@ class _Rows:
         self.attitude = tele.attitude
         self.reference = tele.reference_rate
         self._codec = messages.JointStateCodec(self.names)
+
+    def has(self, stream: str, i: int) -> bool:
+        """Return True if ``stream`` has a sample on row ``i``."""
+        mask = self._present.get(stream)
+        return mask is None or mask[i]
 
     def wheels(self, i: int, t: float) -> bytes:
         """Return row ``i`` as a serialised JointState (``publish`` takes the bytes)."""

@@ -4,9 +4,12 @@ Subscribes ``telemetry/gyro`` (sensor_msgs/Imu, angular_velocity), ``telemetry/s
 (geometry_msgs/QuaternionStamped) and ``telemetry/reference_rate`` (Vector3Stamped; when
 it has sent nothing for ``reference_timeout`` s of data time, the ``reference_rate``
 parameter is used). Gyro and star-tracker samples are paired by stamp (within
-``pair_tolerance`` s) and fed in stamp order to :class:`rwa_monitor.core.vsadc.VsadcDetector`
-with the keywords of :func:`rwa_monitor.core.schema.vsadc_kwargs` (one
-implementation and one parameter meaning for node, ``detect`` and benchmarks).
+``pair_tolerance`` s) and fed in stamp order to the detector of
+:func:`rwa_monitor.core.gyro_diagnosis.make_gyro_detector` (``feature`` residual: the
+gyro-minus-star-tracker diagnosis with the ``calibration_file`` thresholds; paper: VSADC
+as in Algorithm 1); one implementation and one parameter meaning for node, ``detect`` and
+benchmarks. A gyro rate at or above ``saturation_rad_s`` is held and the axis reported
+WARN "saturated", never diagnosed.
 
 Publishes an event on ``anomalies`` at every state change of an axis (kind ``drift``,
 ``bias``, or ``healthy`` for a recovery) and each axis's health on ``/diagnostics``:
@@ -15,13 +18,20 @@ error); STALE when paired input stops. A gyro sample with no star-tracker match 
 tracker is past its stamp, or ``max_lag`` gyro samples wait) is fed without a quaternion:
 the detector holds the labels and counts it, so a star tracker that stops makes the
 axes STALE, never "drift" (docs/vsadc.md). A stamp more than ``time_jump`` s back restarts
-the detector (replay loop).
+the detector (replay loop). The pairing is :class:`rwa_monitor.core.streams.StampPairer`
+(bounded buffers, shared with the other nodes).
+
+Reliability (docs/nodes.md): anomalies (drift, bias) are latched
+(:mod:`rwa_monitor.nodes.latched`: ``events_file``, ``~/acknowledge``, re-published at
+start; a recovery clears a record, the acknowledgement ends it); an exception in the
+detector is caught, logged once, counted, shown as ERROR and the detector restarts; an
+axis that has not been examined (learning, or no usable sample for ``stale_timeout``
+s) is STALE, never OK. Events kept in memory are bounded (``MAX_KEPT``).
 """
 
 from __future__ import annotations
 
 from collections import deque
-import math
 from typing import Any, Sequence
 
 from diagnostic_msgs.msg import DiagnosticArray
@@ -29,22 +39,34 @@ from geometry_msgs.msg import QuaternionStamped, Vector3Stamped
 from rclpy.node import Node
 from sensor_msgs.msg import Imu
 
-from rwa_monitor.core import keys
+from rwa_monitor.core import keys, streams
 from rwa_monitor.core.events import AnomalyEvent
-from rwa_monitor.core.schema import VSADC, vsadc_kwargs
-from rwa_monitor.core.vsadc import STATE_NAMES, VsadcDetector
+from rwa_monitor.core.gyro_diagnosis import make_gyro_detector
+from rwa_monitor.core.schema import VSADC
+from rwa_monitor.core.vsadc import STATE_NAMES
+from rwa_monitor.exceptions import ConfigError
 from rwa_monitor.nodes import common, messages
 from rwa_monitor.nodes.common import (declare_parameters, DiagnosticsPublisher, ERROR,
-                                      EVENTS_QOS, OK, qos_event_callbacks, run_node,
-                                      telemetry_qos, WARN)
+                                      EVENTS_QOS, node_help, OK, qos_event_callbacks,
+                                      run_node, STALE, telemetry_qos, WARN)
+from rwa_monitor.nodes.latched import LatchedAlarms
+from rwa_monitor.telemetry.calibration_file import load_gyro_calibration
 
 NODE_NAME = 'vsadc_detector'
 INPUT_ID = 'gyro_star_tracker'
 HEALTH_LEVEL = {0: OK, 1: ERROR, 2: WARN}
+MAX_KEPT = 10_000  # events kept in memory for in-process users (demo, tests)
+ERROR_HOLD_S = 60.0  # the input status shows ERROR this long after a detector failure
+
 
 # Parameters: core/schema.py VSADC (the detector's, reference_rate and node-only ones).
 DETECTOR_PARAMETERS = tuple(n for n in VSADC.names(('all',)) if n != 'reference_rate')
 PARAMETERS = VSADC.for_node()
+
+
+def kind_level(kind: str) -> bytes:
+    """Return the /diagnostics level of a VSADC event kind (drift ERROR, bias WARN)."""
+    return HEALTH_LEVEL.get(STATE_NAMES.index(kind), WARN) if kind in STATE_NAMES else WARN
 
 
 class VsadcDetectorNode(Node):
@@ -60,14 +82,18 @@ class VsadcDetectorNode(Node):
         self.counters = {'gyro_messages': 0, 'star_tracker_messages': 0,
                          'reference_messages': 0, 'unpaired_gyro': 0,
                          'unpaired_star_tracker': 0, 'reference_from_parameter': 0,
-                         'time_jump_reset': 0}
-        self.events: list[AnomalyEvent] = []
+                         'time_jump_reset': 0, 'detector_failures': 0}
+        self.events: deque[AnomalyEvent] = deque(maxlen=MAX_KEPT)
+        self._last_event: dict[str, AnomalyEvent] = {}
         self.samples = 0
-        self._gyro: deque = deque()
-        self._star: deque = deque()
+        self._pairer = streams.StampPairer(self.params['pair_tolerance'],
+                                           self.params['max_lag'], self.params['time_jump'])
         self._refs: deque = deque(maxlen=64)
-        self._last_fed = -math.inf
-        self.detector = VsadcDetector(**vsadc_kwargs(self._detector_config()))
+        self._failure: tuple[float, str] | None = None
+        try:
+            self.detector = self._make_detector(self._detector_config())
+        except ValueError as err:
+            raise ConfigError(f'parameter {err}') from None
         self.diagnostics = DiagnosticsPublisher(
             self, period=self.params['diagnostic_period'],
             stale_timeout=self.params['stale_timeout'])
@@ -76,6 +102,8 @@ class VsadcDetectorNode(Node):
         self._anomaly_pub = self.create_publisher(
             DiagnosticArray, 'anomalies', EVENTS_QOS,
             event_callbacks=qos_event_callbacks(self, 'anomalies', True))
+        self.alarms = LatchedAlarms(self, self._anomaly_pub, self.diagnostics,
+                                    self.params['events_file'], kind_level)
         subs = [self.create_subscription(msg_type, topic, callback, telemetry_qos(),
                                          event_callbacks=qos_event_callbacks(self, topic))
                 for msg_type, topic, callback in (
@@ -89,14 +117,23 @@ class VsadcDetectorNode(Node):
         values = self.params if values is None else values
         return {name: values[name] for name in DETECTOR_PARAMETERS}
 
+    @staticmethod
+    def _make_detector(config: dict[str, Any]) -> Any:
+        calibration = (load_gyro_calibration(config['calibration_file'])
+                       if config['calibration_file'] else None)
+        return make_gyro_detector(config, calibration)
+
     def _check_detector(self, values: dict[str, Any]) -> None:
-        VsadcDetector(**vsadc_kwargs(self._detector_config(values)))
+        self._make_detector(self._detector_config(values))
 
     def _on_parameter(self, name: str, value: Any) -> None:
+        if name in ('pair_tolerance', 'time_jump'):
+            self._pairer.tolerance = self.params['pair_tolerance']
+            self._pairer.time_jump = self.params['time_jump']
         if name == 'reference_rate':
             self.reference = list(value)
         elif name in DETECTOR_PARAMETERS:
-            self.detector = VsadcDetector(**vsadc_kwargs(self._detector_config()))
+            self.detector = self._make_detector(self._detector_config())
             self._axis_checks()
             self.get_logger().info(f'{name} = {value}: detector restarted')
 
@@ -114,25 +151,18 @@ class VsadcDetectorNode(Node):
         self.counters['gyro_messages'] += 1
         v = msg.angular_velocity
         t = messages.to_seconds(msg.header.stamp)
-        if t < self._last_fed - self.params['time_jump']:
+        if self._pairer.push_gyro(t, (v.x, v.y, v.z)):
             self.counters['time_jump_reset'] += 1
             self.get_logger().warning(f'gyro time jumped back to t={t:.3f} s: restart')
             self.detector.reset()
-            self._gyro.clear()
-            self._star.clear()
             self._refs.clear()
-            self._last_fed = -math.inf
-        self._gyro.append((t, (v.x, v.y, v.z)))
         self._drain()
 
     def on_star_tracker(self, msg: QuaternionStamped) -> None:
         """Queue one star-tracker quaternion and feed what can be paired now."""
         self.counters['star_tracker_messages'] += 1
         q = msg.quaternion
-        self._star.append((messages.to_seconds(msg.header.stamp), (q.x, q.y, q.z, q.w)))
-        if len(self._star) > 4 * self.params['max_lag']:
-            self._star.popleft()
-            self.counters['unpaired_star_tracker'] += 1
+        self._pairer.push_star(messages.to_seconds(msg.header.stamp), (q.x, q.y, q.z, q.w))
         self._drain()
 
     def on_reference(self, msg: Vector3Stamped) -> None:
@@ -144,24 +174,11 @@ class VsadcDetectorNode(Node):
 
     def _drain(self) -> None:
         """Feed the queued gyro samples whose star-tracker partner is known (or lost)."""
-        tol = self.params['pair_tolerance']
-        while self._gyro:
-            t, rate = self._gyro[0]
-            while self._star and self._star[0][0] < t - tol:
-                self._star.popleft()                     # a quaternion no gyro matches
-                self.counters['unpaired_star_tracker'] += 1
-            lagging = len(self._gyro) > self.params['max_lag']
-            paired = bool(self._star) and abs(self._star[0][0] - t) <= tol
-            if not (paired or self._star or lagging):
-                return                                   # wait for the star tracker
-            ref = self._reference_for(t, lagging)
-            if ref is None:
-                return                                   # wait for the reference
-            q = self._star.popleft()[1] if paired else None
-            self._gyro.popleft()
-            if q is None:
-                self.counters['unpaired_gyro'] += 1
+        for t, rate, q, ref in self._pairer.drain(self._reference_for):
             self._feed(t, rate, q, ref)
+        self.counters['unpaired_gyro'] = self._pairer.counters['unpaired_gyro']
+        self.counters['unpaired_star_tracker'] = \
+            self._pairer.counters['unpaired_star_tracker']
 
     def _reference_for(self, t: float, lagging: bool) -> Sequence[float] | None:
         tol, timeout = self.params['pair_tolerance'], self.params['reference_timeout']
@@ -181,16 +198,32 @@ class VsadcDetectorNode(Node):
 
     def _feed(self, t: float, rate: Sequence[float], q: Sequence[float] | None,
               ref: Sequence[float]) -> None:
-        self._last_fed = max(self._last_fed, t)
-        before = self.detector.accepted
-        found = self.detector.update(t, rate, q, ref, self.samples)
-        self.samples += 1
-        self.diagnostics.mark_input(INPUT_ID, 'input')
-        if self.detector.accepted > before:
-            for axis in self.detector.axes:
-                self.diagnostics.mark_input(f'gyro_{axis}', f'gyro_{axis} health')
+        detector = self.detector
+        before = [ch.samples for ch in detector.channels]
+        try:
+            found = detector.update(t, rate, q, ref, self.samples)
+        except Exception as err:  # noqa: BLE001 - a detector failure never stops the node
+            self._detector_failed(err)
+            return
+        finally:
+            self.samples += 1
+        now = self.diagnostics.now()
+        self.diagnostics.mark_input(INPUT_ID, 'input', now)
+        for axis, ch, n in zip(detector.axes, detector.channels, before):
+            if ch.samples > n:
+                self.diagnostics.mark_input(f'gyro_{axis}', f'gyro_{axis} health', now)
         if found:
             self._publish_events(found)
+
+    def _detector_failed(self, err: Exception) -> None:
+        """Count and log (once) a detector exception; restart the detector."""
+        self.counters['detector_failures'] += 1
+        self._failure = (self.diagnostics.now(), f'{type(err).__name__}: {err}')
+        if self.counters['detector_failures'] == 1:
+            self.get_logger().error(f'detector failed: {self._failure[1]}; detector '
+                                    'restarted (further failures are only counted)')
+        self.detector = self._make_detector(self._detector_config())
+        self._axis_checks()
 
     # --------------------------------------------------------------------- output
     def _publish_events(self, found: list[AnomalyEvent]) -> None:
@@ -209,6 +242,9 @@ class VsadcDetectorNode(Node):
         out.status = statuses
         self._anomaly_pub.publish(out)
         self.events.extend(found)
+        for event in found:
+            self._last_event[event.component] = event
+        self.alarms.record(found)
 
     def _axis_health(self, i: int) -> tuple[bytes, str, dict[str, Any]]:
         channel = self.detector.channels[i]
@@ -219,19 +255,30 @@ class VsadcDetectorNode(Node):
             keys.DISTANCE_SIGMA: channel.sigma, keys.SIGMA_LIM1: channel.sigma_lim1,
             keys.SIGMA_LIM2: channel.sigma_lim2}
         component = f'gyro_{self.detector.axes[i]}'
-        last = next((e for e in reversed(self.events) if e.component == component), None)
+        last = self._last_event.get(component)
         if last is not None:
             values[keys.CHANGE_TIME] = last.time
+        if getattr(self.detector, 'saturated_now', {}).get(self.detector.axes[i]):
+            return WARN, 'gyro saturated: samples held, not diagnosed', values
         if not channel.ready:
-            return OK, 'learning the nominal class', values
-        message = STATE_NAMES[state] if last is None else \
-            f'{STATE_NAMES[state]} since t={last.time:.3f} s'
-        return HEALTH_LEVEL[state], message, values
+            level, message = STALE, (f'unknown: not examined yet, learning the nominal '
+                                     f'class ({channel.samples} samples)')
+        else:
+            level = HEALTH_LEVEL[state]
+            message = STATE_NAMES[state] if last is None else \
+                f'{STATE_NAMES[state]} since t={last.time:.3f} s'
+        return self.alarms.merge(component, level, message, values)
 
     def _input_health(self) -> tuple[bytes, str, dict[str, Any]]:
         values = dict(self.counters)
         values.update(self.detector.counters)
-        return OK, f'{self.samples} gyro samples, {self.detector.held} held', values
+        gyro, star = self._pairer.waiting
+        values.update(waiting_gyro=gyro, waiting_star_tracker=star)
+        message = f'{self.samples} gyro samples, {self.detector.held} held'
+        if self._failure is not None and self.diagnostics.now() - self._failure[0] < \
+                ERROR_HOLD_S:
+            return ERROR, f'detector failed ({self._failure[1]}), restarted; {message}', values
+        return OK, message, values
 
 
 NODE_CLASS = VsadcDetectorNode
@@ -239,4 +286,5 @@ NODE_CLASS = VsadcDetectorNode
 
 def main(args: Sequence[str] | None = None) -> int:
     """Run the VSADC gyro node (console script ``rwa-monitor-vsadc``)."""
-    return run_node(lambda: VsadcDetectorNode(), args)
+    return run_node(lambda: VsadcDetectorNode(), args, help_text=lambda: node_help(
+        'rwa-monitor-vsadc', __doc__, PARAMETERS))

@@ -73,9 +73,10 @@ def run_with_summary(tele: Telemetry, config: Mapping[str, Any]) -> Detection:
     The summary per wheel holds the number of events, samples, the detector's counters
     of rejected samples and its run time.
     """
-    from rwa_monitor.core.llr_batch import detect_batch_with_counters
+    from rwa_monitor.core.llr import detect_batch_with_counters
     values = LLR.validate(config)
     kwargs = llr_kwargs(values)
+    tele = tele.only('wheels')  # a multi-rate record: the wheel stream's own samples
     refined = friction_model(values[MODEL_KEY], tele)
     events: list[AnomalyEvent] = []
     summary: dict[str, Any] = {}

@@ -1,8 +1,11 @@
 """VSADC on a file: gyro drift/bias events per axis from gyro_*, q_* and ref_* columns.
 
 Parameters are the ``vsadc_detector`` block of core/schema.py (VSADC), the node's names;
-node-only ones are accepted and ignored, unknown ones refused. A file without ``ref_*``
-columns uses the ``reference_rate`` parameter (rad/s, 3 values).
+node-only ones are accepted and ignored, unknown ones refused. ``feature`` chooses the
+detector (:func:`rwa_monitor.core.gyro_diagnosis.make_gyro_detector`): ``residual``
+(default) the gyro-minus-star-tracker diagnosis, which needs no guidance reference, with
+the thresholds of the ``calibration_file`` gyro block; ``paper`` the two residuals of the
+paper; a file without ``ref_*`` columns then uses the ``reference_rate`` parameter.
 """
 
 from __future__ import annotations
@@ -13,13 +16,17 @@ from typing import Any, Mapping, NamedTuple
 import numpy as np
 
 from rwa_monitor.core.events import AnomalyEvent
+from rwa_monitor.core.gyro_diagnosis import make_gyro_detector
 from rwa_monitor.core.schema import VSADC, vsadc_kwargs
-from rwa_monitor.core.vsadc import STATE_NAMES, VsadcDetector
+from rwa_monitor.core.vsadc import STATE_NAMES
 from rwa_monitor.pipelines import Detection
 from rwa_monitor.telemetry import Telemetry
+from rwa_monitor.telemetry.calibration_file import load_gyro_calibration
+from rwa_monitor.telemetry.streams import paired_gyro
 
 SCHEMA = VSADC
 NODE = VSADC.name
+UNKNOWN = 'unknown'
 DEFAULTS: dict[str, Any] = {name: VSADC[name].default for name in VSADC.names(('all',))}
 
 
@@ -28,7 +35,7 @@ class LabelSeries(NamedTuple):
 
     labels: np.ndarray
     events: list[AnomalyEvent]
-    detector: VsadcDetector
+    detector: Any
 
 
 def applies(tele: Telemetry) -> bool:
@@ -41,50 +48,78 @@ def detector_kwargs(config: Mapping[str, Any]) -> dict[str, Any]:
     return vsadc_kwargs(VSADC.validate(config))
 
 
+def make_detector(config: Mapping[str, Any],
+                  calibration: Mapping[str, Any] | None = None) -> Any:
+    """Return the configured gyro detector (``feature``: residual or paper).
+
+    ``calibration`` (axis -> dict of calibrate_gyro) wins over the ``calibration_file``
+    parameter; both apply to the residual feature only.
+    """
+    values = VSADC.validate(config)
+    if calibration is None and values['calibration_file']:
+        calibration = load_gyro_calibration(values['calibration_file'])
+    return make_gyro_detector(values, calibration)
+
+
 def reference_of(config: Mapping[str, Any]) -> np.ndarray:
     """Return the constant reference rate parameter as a checked (3,) array (rad/s)."""
     return np.array(VSADC.validate(config)['reference_rate'], dtype=float)
 
 
-def label_series(tele: Telemetry, config: Mapping[str, Any]) -> LabelSeries:
+def label_series(tele: Telemetry, config: Mapping[str, Any],
+                 calibration: Mapping[str, Any] | None = None) -> LabelSeries:
     """Run the streaming detector over the rows; return labels, events and the detector.
 
-    Labels are the state after each row (held on rows the detector could not use).
+    Labels are the state after each row (held on rows the detector could not use, and on
+    rows without a gyro sample in a multi-rate record). Event indices count gyro samples.
     """
-    det = VsadcDetector(**detector_kwargs(config))
-    ref = tele.reference_rate
-    if ref is None:
-        ref = np.broadcast_to(reference_of(config), (len(tele), 3))
-    time, gyro, quat = tele.time.tolist(), tele.gyro.tolist(), tele.attitude.tolist()
-    ref_rows = ref.tolist()
+    det = make_detector(config, calibration)
+    tolerance = VSADC['pair_tolerance'].default  # the node's pairing rule (multi-rate)
+    rows, quat, ref_rows = paired_gyro(tele, reference_of(config),
+                                       float(config.get('pair_tolerance', tolerance)))
+    time, gyro = tele.time.tolist(), tele.gyro.tolist()
     labels = np.zeros((len(tele), len(det.axes)), dtype=np.int8)
     events: list[AnomalyEvent] = []
     state = [0] * len(det.axes)
-    for k in range(len(time)):
-        found = det.update(time[k], gyro[k], quat[k], ref_rows[k], k)
+    last = 0
+    for index, (k, q, ref) in enumerate(zip(rows, quat, ref_rows)):
+        labels[last:k] = state
+        found = det.update(time[k], gyro[k], q, ref, index)
         if found:
             events.extend(found)
             state = [ch.state for ch in det.channels]
         labels[k] = state
+        last = k + 1
+    labels[last:] = state
     return LabelSeries(labels, events, det)
 
 
-def run_with_summary(tele: Telemetry, config: Mapping[str, Any]) -> Detection:
-    """Run VSADC on the three axes; return the events and a per-axis summary."""
+def run_with_summary(tele: Telemetry, config: Mapping[str, Any],
+                     calibration: Mapping[str, Any] | None = None) -> Detection:
+    """Run the gyro diagnosis on the three axes; return the events and a per-axis summary.
+
+    A bad value of one gyro axis is rejected on that axis only (``bad_axis_<a>``
+    counters); ``final_state`` is ``unknown`` for an axis that never became ready.
+    """
     start = _time.perf_counter()
-    labels, events, det = label_series(tele, config)
+    labels, events, det = label_series(tele, config, calibration)
     summary: dict[str, Any] = {}
     runtime = _time.perf_counter() - start
     for i, axis in enumerate(det.axes):
+        ready = det.channels[i].ready
+        # An axis that never became ready was not examined: its state is unknown, never
+        # "healthy" (issue 17).
+        state = STATE_NAMES[int(labels[-1, i])] if ready and len(tele) else UNKNOWN
         summary[f'gyro_{axis}'] = {
             'events': sum(e.component == f'gyro_{axis}' for e in events),
-            'final_state': STATE_NAMES[int(labels[-1, i])] if len(tele) else STATE_NAMES[0],
-            'ready': det.channels[i].ready}
+            'final_state': state, 'ready': ready,
+            'samples_used': det.channels[i].samples}
     summary['counters'] = det.counters
     summary['runtime_s'] = runtime
     return Detection(events, summary)
 
 
-def run(tele: Telemetry, config: Mapping[str, Any]) -> list[AnomalyEvent]:
-    """Run VSADC on the three axes; return the events (DESIGN.md events contract)."""
-    return run_with_summary(tele, config).events
+def run(tele: Telemetry, config: Mapping[str, Any],
+        calibration: Mapping[str, Any] | None = None) -> list[AnomalyEvent]:
+    """Run the gyro diagnosis on the three axes; return the events (DESIGN.md contract)."""
+    return run_with_summary(tele, config, calibration).events

@@ -98,16 +98,31 @@ class Guidance:
     domega_RN_N (the inertial derivative equals the R-frame one for omega_RN).
     """
 
-    def __init__(self, amplitude: tuple[float, ...], period: tuple[float, ...]) -> None:
+    def __init__(self, amplitude: tuple[float, ...], period: tuple[float, ...],
+                 slew: tuple[float, float, float, float] = (0.0, 1.0, 1.0, 0.5)) -> None:
         self.amplitude = [float(a) for a in amplitude]
         self.omega = [2.0 * math.pi / float(p) for p in period]
+        self.slew_rate, self.slew_period, self.slew_duration, self.slew_ramp = slew
         self.q = (1.0, 0.0, 0.0, 0.0)
         self.t = 0.0
 
     def rate(self, t: float) -> tuple[list[float], list[float]]:
         """Return the reference body rate, R frame, and its derivative at ``t`` seconds."""
-        return ([a * math.sin(w * t) for a, w in zip(self.amplitude, self.omega)],
-                [a * w * math.cos(w * t) for a, w in zip(self.amplitude, self.omega)])
+        rate = [a * math.sin(w * t) for a, w in zip(self.amplitude, self.omega)]
+        accel = [a * w * math.cos(w * t) for a, w in zip(self.amplitude, self.omega)]
+        if self.slew_rate > 0.0:    # rest-to-rest slews about x, y, z in turn, signs alternate
+            cycle, tau = divmod(t, self.slew_period)
+            axis, sign = int(cycle) % 3, (1.0 if int(cycle // 3) % 2 == 0 else -1.0)
+            top, ramp, end = self.slew_rate * sign, self.slew_ramp, self.slew_duration
+            if tau < ramp:
+                rate[axis] += top * tau / ramp
+                accel[axis] += top / ramp
+            elif tau < end - ramp:
+                rate[axis] += top
+            elif tau < end:
+                rate[axis] += top * (end - tau) / ramp
+                accel[axis] -= top / ramp
+        return rate, accel
 
     def advance(self, t: float) -> None:
         """Propagate the reference attitude to time ``t``."""
@@ -203,7 +218,9 @@ class BasiliskBus:
         tracker.RNGSeed = st_seed
         sim.AddModelToTask('dynamics', tracker, None, 96)
 
-        self._guidance = Guidance(cfg.ref_amplitude, cfg.ref_period)
+        self._guidance = Guidance(cfg.ref_amplitude, cfg.ref_period,
+                                  (cfg.slew_rate, cfg.slew_period, cfg.slew_duration,
+                                   cfg.slew_ramp))
         self._ref = messaging.AttRefMsgPayload()
         self._guidance.write(self._ref, 0.0)
         self._ref_msg = messaging.AttRefMsg().write(self._ref)
@@ -346,7 +363,9 @@ class BasiliskBus:
         for i in range(3):
             w = self._walk[i] + walk_step * float(self._walk_rng.standard_normal())
             self._walk[i] = min(bound, max(-bound, w))
-        nominal = [self._bias0[i] + self._walk[i] for i in range(3)]
+        phase = 2.0 * math.pi * t / cfg.gyro_thermal_period
+        nominal = [self._bias0[i] + self._walk[i] + cfg.gyro_thermal_amplitude
+                   * math.sin(phase + 2.0 * math.pi * i / 3.0) for i in range(3)]
         self._imu.senRotBias = [[nominal[i] + gyro_error[i]] for i in range(3)]
         self._guidance.advance(t)
         self._guidance.write(self._ref, t)

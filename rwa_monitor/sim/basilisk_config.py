@@ -61,19 +61,28 @@ class BusConfig:
     gyro_rate_walk: float = 2.0e-8       # rad/s/sqrt(s), nominal bias drift (random walk)
     gyro_walk_bound: float = 5.0e-5      # rad/s, bound of that nominal drift
     st_noise_arcsec: float = 5.0         # 1-sigma per axis, white, clipped at 3 sigma
+    slew_rate: float = 0.0               # rad/s, rest-to-rest slews added to guidance (0: none)
+    slew_period: float = 1200.0          # s between slew starts (about x, y, z in turn)
+    slew_duration: float = 120.0         # s per slew, its acceleration ramps included
+    slew_ramp: float = 20.0              # s of each acceleration / deceleration ramp
+    gyro_thermal_amplitude: float = 0.0  # rad/s, orbital thermal wander of the gyro bias
+    gyro_thermal_period: float = 5400.0  # s (one orbit); axis phases 0, 120, 240 deg
 
     def validated(self) -> 'BusConfig':
         """Return self after checking every value; ValueError names the bad one."""
         positive = ('rate_hz', 'inertia', 'kp', 'kd', 'wheel_inertia', 'torque_max',
-                    'omega_limit_cycle', 'stribeck_speed')
+                    'omega_limit_cycle', 'stribeck_speed', 'slew_period', 'slew_ramp',
+                    'gyro_thermal_period')
         non_negative = ('coulomb', 'viscous', 'null_speed', 'null_gain',
                         'friction_noise_std', 'gyro_noise_std', 'gyro_bias_std',
-                        'gyro_rate_walk', 'gyro_walk_bound', 'st_noise_arcsec')
+                        'gyro_rate_walk', 'gyro_walk_bound', 'st_noise_arcsec',
+                        'slew_rate', 'gyro_thermal_amplitude')
         for name in positive:
             check_real(name, getattr(self, name), 0.0, low_open=True)
         for name in non_negative:
             check_real(name, getattr(self, name), 0.0)
         check_real('static', self.static, self.coulomb)
+        check_real('slew_duration', self.slew_duration, 2.0 * self.slew_ramp, self.slew_period)
         check_real('elevation_deg', self.elevation_deg, 0.0, 90.0, True, True)
         for name in ('ref_amplitude', 'ref_period'):
             values = getattr(self, name)

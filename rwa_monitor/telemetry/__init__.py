@@ -1,34 +1,43 @@
-"""Telemetry files: CSV (the schema of DESIGN.md) and MCAP, by file extension."""
+"""Telemetry files: CSV (the schema of DESIGN.md) and rosbag2 recordings, by path.
+
+A rosbag2 folder (``metadata.yaml`` with ``.mcap`` or ``.db3`` storage) or a bare ``.mcap``
+or ``.db3`` file is a recording (rosbag_io); anything else is read as CSV. Writing: a
+``.mcap`` or ``.db3`` path writes a bare file, a path without a suffix (or an existing
+recording folder) a rosbag2 folder, any other path CSV.
+"""
 
 from __future__ import annotations
 
-import importlib
 import os
+import pathlib
+from typing import Mapping
 
 from rwa_monitor.exceptions import TelemetrySchemaError
 from rwa_monitor.telemetry.csv_io import read_csv, write_csv
-from rwa_monitor.telemetry.schema import Telemetry, Wheel
+from rwa_monitor.telemetry.schema import STREAMS, Telemetry, Wheel
 
-__all__ = ['Telemetry', 'Wheel', 'read_telemetry', 'write_telemetry']
-
-# Extension -> module with read(path) -> Telemetry and write(path, Telemetry).
-_FORMATS = {'.mcap': 'rwa_monitor.telemetry.mcap_io'}
+__all__ = ['STREAMS', 'Telemetry', 'Wheel', 'read_telemetry', 'write_telemetry']
 
 
-def read_telemetry(path: str | os.PathLike) -> Telemetry:
-    """Read a telemetry file, choosing the format by its extension (default CSV)."""
-    ext = os.path.splitext(os.fspath(path))[1].lower()
-    if ext in _FORMATS:
-        return importlib.import_module(_FORMATS[ext]).read(path)
+def read_telemetry(path: str | os.PathLike,
+                   topics: str | Mapping[str, str] | None = None) -> Telemetry:
+    """Read a telemetry file or recording; ``topics``: stream -> topic of a recording."""
+    from rwa_monitor.telemetry import rosbag_io
+    if rosbag_io.is_recording(path):
+        return rosbag_io.read(path, topics)
     if not os.path.exists(path):
         raise TelemetrySchemaError(os.fspath(path), 'no such file')
+    if os.path.isdir(path):
+        raise TelemetrySchemaError(os.fspath(path), 'a folder without metadata.yaml is not '
+                                   'a rosbag2 recording')
     return read_csv(path)
 
 
 def write_telemetry(path: str | os.PathLike, telemetry: Telemetry) -> None:
-    """Write a telemetry file, choosing the format by its extension (default CSV)."""
-    ext = os.path.splitext(os.fspath(path))[1].lower()
-    if ext in _FORMATS:
-        importlib.import_module(_FORMATS[ext]).write(path, telemetry)
+    """Write a telemetry file or recording, the format chosen by the path (module doc)."""
+    from rwa_monitor.telemetry import rosbag_io
+    target = pathlib.Path(path)
+    if rosbag_io.is_recording(target) or not target.suffix:
+        rosbag_io.write(target, telemetry)
     else:
-        write_csv(path, telemetry)
+        write_csv(target, telemetry)

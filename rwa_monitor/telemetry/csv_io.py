@@ -2,7 +2,8 @@
 
 Empty cells, ``nan`` and ``inf`` are read as such (the detectors skip and count them);
 anything else that is not a number is an error naming the file, the line and the column.
-``time`` must be finite and strictly increasing.
+``time`` must be finite and strictly increasing. A UTF-8 byte-order mark and CRLF line
+ends are accepted; bytes that are not UTF-8 text are an error naming the file.
 """
 
 from __future__ import annotations
@@ -14,14 +15,27 @@ import warnings
 import numpy as np
 
 from rwa_monitor.exceptions import TelemetrySchemaError
+from rwa_monitor.telemetry.atomic import atomic_write
 from rwa_monitor.telemetry.schema import Telemetry, TIME
+
+
+_ENCODING = 'utf-8-sig'  # UTF-8, with or without a byte-order mark
 
 
 def read_csv(path: str | os.PathLike) -> Telemetry:
     """Read a telemetry CSV file; raise TelemetrySchemaError naming file, line and column."""
     path = os.fspath(path)
     try:
-        with open(path, newline='') as handle:
+        return _read(path)
+    except UnicodeDecodeError as err:
+        raise TelemetrySchemaError(
+            path, f'not a CSV text file (byte {err.start} is not UTF-8); expected a CSV '
+            'file, a rosbag2 folder, or a .mcap or .db3 file') from None
+
+
+def _read(path: str) -> Telemetry:
+    try:
+        with open(path, newline='', encoding=_ENCODING) as handle:
             header = next(csv.reader(handle), None)
     except OSError as err:
         raise TelemetrySchemaError(path, f'cannot read: {err.strerror}') from None
@@ -49,7 +63,8 @@ def _parse_rows(path: str, header: list[str]) -> np.ndarray:
     with warnings.catch_warnings():
         warnings.simplefilter('ignore', UserWarning)  # a header-only file is valid
         try:
-            data = np.loadtxt(path, delimiter=',', skiprows=1, ndmin=2, dtype=float)
+            data = np.loadtxt(path, delimiter=',', skiprows=1, ndmin=2, dtype=float,
+                              encoding=_ENCODING)
         except ValueError:
             data = None
     if data is not None and data.shape[0] == 0:
@@ -62,7 +77,7 @@ def _parse_rows(path: str, header: list[str]) -> np.ndarray:
 def _parse_slowly(path: str, header: list[str]) -> np.ndarray:
     """Parse cell by cell: empty cells become NaN, anything else unreadable is an error."""
     rows = []
-    with open(path, newline='') as handle:
+    with open(path, newline='', encoding=_ENCODING) as handle:
         reader = csv.reader(handle)
         next(reader)
         for line, row in enumerate(reader, start=2):
@@ -100,5 +115,6 @@ def write_csv(path: str | os.PathLike, telemetry: Telemetry, fmt: str = '%.10g')
     if len(set(lengths.values())) > 1:
         raise ValueError(f'columns of different lengths: {lengths}')
     table = np.column_stack([np.asarray(v, dtype=float) for v in columns.values()])
-    np.savetxt(os.fspath(path), table, delimiter=',', fmt=fmt,
-               header=','.join(columns), comments='')
+    with atomic_write(path, 'w', newline='') as handle:
+        np.savetxt(handle, table, delimiter=',', fmt=fmt, header=','.join(columns),
+                   comments='')

@@ -5,6 +5,10 @@ Columns (DESIGN.md contract):
 (N m); optional ``gyro_x/y/z`` (rad/s, body frame); optional ``q_x/y/z/w`` (body attitude,
 scalar last); optional ``ref_x/y/z`` (rad/s); optional ``truth_*`` (ground truth, ignored by
 detectors); any other numeric column is an auxiliary channel.
+
+Multi-rate recordings (docs/contracts.md): ``time`` is the union of every stream's stamps;
+``present[stream]`` marks the rows where that stream has a sample (its other rows hold
+NaN). A stream without an entry in ``present`` has a sample on every row (a CSV file).
 """
 
 from __future__ import annotations
@@ -21,6 +25,8 @@ GYRO = ('gyro_x', 'gyro_y', 'gyro_z')
 ATTITUDE = ('q_x', 'q_y', 'q_z', 'q_w')
 REFERENCE = ('ref_x', 'ref_y', 'ref_z')
 VECTOR_GROUPS = {'gyro': GYRO, 'attitude': ATTITUDE, 'reference_rate': REFERENCE}
+# The streams of a recording, each with its own stamps (``columns``: aux and truth).
+STREAMS = ('wheels', 'gyro', 'star_tracker', 'reference_rate', 'columns')
 
 
 @dataclass
@@ -43,9 +49,39 @@ class Telemetry:
     aux: dict[str, np.ndarray] = field(default_factory=dict)
     truth: dict[str, np.ndarray] = field(default_factory=dict)
     source: str | None = None
+    present: dict[str, np.ndarray] = field(default_factory=dict)
 
     def __len__(self) -> int:
         return len(self.time)
+
+    def rows(self, stream: str) -> np.ndarray:
+        """Return the indices of the rows where ``stream`` (one of STREAMS) has a sample."""
+        mask = self.present.get(stream)
+        return np.arange(len(self.time)) if mask is None else np.flatnonzero(mask)
+
+    def only(self, stream: str) -> 'Telemetry':
+        """Return the record restricted to the rows where ``stream`` has a sample.
+
+        Every channel keeps its values on those rows (NaN where another stream has no
+        sample at that stamp); a single-rate record is returned as it is.
+        """
+        mask = self.present.get(stream)
+        if mask is None:
+            return self
+        rows = np.flatnonzero(mask)
+
+        def take(values: np.ndarray | None) -> np.ndarray | None:
+            return None if values is None else np.asarray(values)[rows]
+
+        return Telemetry(
+            time=self.time[rows],
+            wheels={k: Wheel(take(w.speed), take(w.friction)) for k, w in self.wheels.items()},
+            gyro=take(self.gyro), attitude=take(self.attitude),
+            reference_rate=take(self.reference_rate),
+            aux={k: take(v) for k, v in self.aux.items()},
+            truth={k: take(v) for k, v in self.truth.items()}, source=self.source,
+            present={k: m[rows] for k, m in self.present.items()
+                     if k != stream and not m[rows].all()})
 
     def columns(self) -> dict[str, np.ndarray]:
         """Return every channel as column name -> array, in the canonical column order."""

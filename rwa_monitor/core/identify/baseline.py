@@ -34,6 +34,7 @@ from rwa_monitor.exceptions import NotIdentifiableError
 RIDGE = 1e-9
 PEAKS = 3
 LOW_SPEED_QUANTILE = 0.1
+MAX_ABS_SPEED = 1e6  # rad/s: the LLR detector's max_abs_speed default
 FLEX_ROWS = 10000  # the flexible background is fitted on at most about this many rows
 
 
@@ -46,6 +47,11 @@ def baseline_columns(speed: np.ndarray) -> np.ndarray:
 def check_identifiable(speed: np.ndarray) -> None:
     """Raise NotIdentifiableError naming the parameters the speeds cannot determine."""
     speed = np.asarray(speed, dtype=float)
+    top = float(np.max(np.abs(speed))) if speed.size else 0.0
+    if not top < MAX_ABS_SPEED:
+        raise NotIdentifiableError(
+            f'speeds up to {top:g} rad/s are not physical (plausibility limit '
+            f'{MAX_ABS_SPEED:g} rad/s): check the speed column and its unit')
     if np.all(speed == 0):
         raise NotIdentifiableError(
             'the wheel never spins (speed always 0): neither dry nor viscous friction is '

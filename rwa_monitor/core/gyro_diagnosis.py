@@ -1,0 +1,407 @@
+"""Gyro drift/bias diagnosis on the gyro-minus-star-tracker residual (docs/vsadc.md).
+
+Algorithm 1 of the vsadc-gyro-drift paper on a feature that cancels the true body rate:
+per axis the residual ``e = (g_{k-1} + g_k)/2 - w_st,k``
+(:mod:`rwa_monitor.core.gyro_calibration`) is averaged over blocks of ``block`` steps.
+
+- Nominal class (Alg. 1 lines 9-13): the mean of the first ``nominal_blocks`` blocks; then,
+  beyond the paper, a running mean over ``tracking_blocks`` fed by the block ``guard_blocks``
+  back, only while the axis is healthy and the last ``guard_blocks + 1`` blocks lie within
+  ``freeze_fraction`` of the threshold (a slow thermal wander is nominal, a fault freezes
+  the nominal before it is declared).
+- Evolving class and distance (lines 15-20, eq. (8)): the signed distance of the newest
+  block mean to the nominal centre, ``d``; a fault when ``|d|`` exceeds the level threshold
+  on ``confirm_blocks`` successive blocks (line 26).
+- Drift or bias (lines 27-34): instead of the spread of ``d`` against self-adapted sigma
+  limits, a likelihood comparison on the last ``decide_blocks`` distances of a step
+  (bias) and a ramp (drift), each with its onset fitted: the kind is declared when one
+  model explains the data better by ``decide_chi2`` (in block variances), or after
+  ``max_wait_blocks`` by the better one. The fitted onset is the event's change time.
+- While faulty: drift becomes bias when the least-squares slope over the last
+  ``fit_blocks`` blocks falls below half the slope threshold, bias becomes drift above it
+  (both confirmed on ``confirm_blocks`` blocks, and not before the fault has lasted
+  ``fit_blocks`` blocks: the step itself is a slope); recovery when ``|d|`` stays below
+  ``recovery_fraction`` of the threshold for ``confirm_blocks`` blocks.
+
+Thresholds come from :func:`rwa_monitor.core.gyro_calibration.calibrate_gyro` (the
+``gyro:`` block of calibration.yaml) or, without one, from ``DEFAULT_BLOCK_STD``.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+import math
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+
+from rwa_monitor.core import gyro_calibration as gc
+from rwa_monitor.core.attitude import StarTrackerRate
+from rwa_monitor.core.events import AnomalyEvent
+from rwa_monitor.core.params import check_int, check_real
+from rwa_monitor.core.schema import RESIDUAL_PARAMETERS, VSADC, vsadc_kwargs
+from rwa_monitor.core.vsadc import AXES, BIAS, DRIFT, HEALTHY, make_event, Transition, \
+    VsadcDetector
+
+#: Block-mean spread without a calibration (rad/s): the largest of the three axes measured
+#: by calibrate_gyro on the bus development seeds 1-3 (docs/vsadc.md), rounded up.
+DEFAULT_BLOCK_STD = 4.0e-6
+#: |gyro| at or above this (rad/s) is a saturated sample: held and counted, never a fault.
+DEFAULT_SATURATION_RAD_S = VSADC['saturation_rad_s'].default
+#: Axis keywords and defaults: the ``residual_*`` parameters of the VSADC schema.
+AXIS_DEFAULTS: dict[str, Any] = {
+    name[len('residual_'):]: VSADC[name].default
+    for name in RESIDUAL_PARAMETERS if name.startswith('residual_')}
+
+
+def axis_thresholds(calibration: Mapping[str, Any] | None, block: int,
+                    fit_blocks: int, sample_s: float = 0.25) -> dict[str, float]:
+    """Return the level, quiet and slope thresholds and block std of one axis.
+
+    From its calibration dict (keys of :func:`calibrate_gyro`) or, when None, from
+    ``DEFAULT_BLOCK_STD`` with the calibration's own factors.
+    """
+    if calibration:
+        try:
+            return {'block_std': check_real('block_std_rad_s',
+                                            calibration['block_std_rad_s'], 0.0, low_open=True),
+                    'level': check_real('level_threshold_rad_s',
+                                        calibration['level_threshold_rad_s'], 0.0,
+                                        low_open=True),
+                    'quiet': check_real('quiet_level_rad_s', calibration['quiet_level_rad_s'],
+                                        0.0, low_open=True),
+                    'slope': check_real('slope_threshold_rad_s2',
+                                        calibration['slope_threshold_rad_s2'], 0.0,
+                                        low_open=True)}
+        except KeyError as exc:
+            raise ValueError(f'gyro calibration lacks {exc.args[0]}') from None
+    std = DEFAULT_BLOCK_STD
+    return {'block_std': std, 'level': gc.DEFAULT_LEVEL_K * std + gc.DEFAULT_WANDER_RAD_S,
+            'quiet': 3.0 * std,
+            'slope': gc.DEFAULT_SLOPE_K * gc.slope_std(std, fit_blocks, block * sample_s)}
+
+
+class ResidualAxis:
+    """One axis: ``update(e, time, stamp)`` per residual; a Transition when the label changes.
+
+    ``stamp`` is any object returned in transitions (e.g. ``(time, row)``).
+    """
+
+    def __init__(self, calibration: Mapping[str, Any] | None = None, **params: Any) -> None:
+        bad = sorted(set(params) - set(AXIS_DEFAULTS))
+        if bad:
+            raise ValueError(f'unknown gyro diagnosis parameter(s): {", ".join(bad)}')
+        p = {**AXIS_DEFAULTS, **params}
+        self.block = check_int('block', p['block'], 2, 100_000)
+        self.nominal_blocks = check_int('nominal_blocks', p['nominal_blocks'], 1, 100_000)
+        self.tracking_blocks = check_int('tracking_blocks', p['tracking_blocks'], 0, 1_000_000)
+        self.guard_blocks = check_int('guard_blocks', p['guard_blocks'], 0, 1000)
+        self.fit_blocks = check_int('fit_blocks', p['fit_blocks'], 3, 10_000)
+        self.decide_blocks = check_int('decide_blocks', p['decide_blocks'], 3, 10_000)
+        self.confirm_blocks = check_int('confirm_blocks', p['confirm_blocks'], 1, 1000)
+        self.max_wait_blocks = check_int('max_wait_blocks', p['max_wait_blocks'], 0, 1000)
+        self.decide_chi2 = check_real('decide_chi2', p['decide_chi2'], 0.0)
+        self.freeze_fraction = check_real('freeze_fraction', p['freeze_fraction'], 0.0, 1.0)
+        self.recovery_fraction = check_real('recovery_fraction', p['recovery_fraction'],
+                                            0.0, 1.0, low_open=True)
+        th = axis_thresholds(calibration, self.block, self.fit_blocks)
+        self.block_std, self.level_threshold = th['block_std'], th['level']
+        self.quiet_level, self.slope_threshold = th['quiet'], th['slope']
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget everything: the next residual starts a new nominal batch."""
+        self._sum = 0.0
+        self._times: list[float] = []
+        self._stamps: list[Any] = []
+        keep = max(self.decide_blocks, self.fit_blocks, self.guard_blocks + 1)
+        self._blocks: deque = deque(maxlen=keep)       # (mean, times, stamps)
+        self._nb = 0
+        self._nominal_sum = 0.0
+        self.nominal = math.nan
+        self._state = HEALTHY
+        self._over = self._waited = self._pending_run = self._fault_blocks = 0
+        self._pending = HEALTHY
+        self._n = 0
+        self.distance = self.slope = math.nan
+
+    # Names the node's health report reads (shared with VsadcAxis).
+    @property
+    def sigma(self) -> float:
+        """Return the last fitted slope (rad/s per s), shown as the spread statistic."""
+        return self.slope
+
+    @property
+    def sigma_lim1(self) -> float:
+        """Return the level threshold (rad/s)."""
+        return self.level_threshold
+
+    @property
+    def sigma_lim2(self) -> float:
+        """Return the slope threshold (rad/s per s)."""
+        return self.slope_threshold
+
+    @property
+    def state(self) -> int:
+        """Return the current label (0 healthy, 1 drift, 2 bias)."""
+        return self._state
+
+    @property
+    def samples(self) -> int:
+        """Return the residuals taken since the last reset."""
+        return self._n
+
+    @property
+    def ready(self) -> bool:
+        """Return True once the nominal level is learnt."""
+        return self._nb >= self.nominal_blocks
+
+    def update(self, e: float, time: float, stamp: Any = None) -> Transition | None:
+        """Take one residual (rad/s) at ``time`` (s); return a Transition on a label change."""
+        self._n += 1
+        self._sum += e
+        self._times.append(time)
+        self._stamps.append(stamp)
+        if len(self._times) < self.block:
+            return None
+        mean = self._sum / self.block
+        block = (mean, np.array(self._times), self._stamps)
+        self._sum, self._times, self._stamps = 0.0, [], []
+        return self._on_block(block)
+
+    def _on_block(self, block: tuple) -> Transition | None:
+        self._blocks.append(block)
+        self._nb += 1
+        mean = block[0]
+        if self._nb <= self.nominal_blocks:                 # Alg. 1 lines 9-13
+            self._nominal_sum += mean
+            if self._nb == self.nominal_blocks:
+                self.nominal = self._nominal_sum / self.nominal_blocks
+            return None
+        d = mean - self.nominal                             # eq. (8), one dimension
+        self.distance = d
+        stamp = block[2][-1]
+        if self._state == HEALTHY:
+            self._track_nominal()
+            self._over = self._over + 1 if abs(d) > self.level_threshold else 0
+            if self._over < self.confirm_blocks:
+                self._waited = 0
+                return None
+            kind, onset = self._decide(force=self._waited >= self.max_wait_blocks)
+            self._waited += 1
+            if kind is None:
+                return None
+            return self._change(kind, onset, stamp, d)
+        self._fault_blocks += 1
+        if abs(d) < self.recovery_fraction * self.level_threshold:
+            return self._confirm(HEALTHY, stamp, d)
+        if self._fault_blocks < self.fit_blocks:
+            self._pending_run = 0
+            return None
+        self.slope = self._slope()
+        if self._state == DRIFT and abs(self.slope) < 0.5 * self.slope_threshold:
+            return self._confirm(BIAS, stamp, d)
+        if self._state == BIAS and abs(self.slope) > self.slope_threshold:
+            return self._confirm(DRIFT, stamp, d)
+        self._pending_run = 0
+        return None
+
+    def _confirm(self, new: int, stamp: Any, d: float) -> Transition | None:
+        if new != self._pending:
+            self._pending, self._pending_run = new, 0
+        self._pending_run += 1
+        if self._pending_run < self.confirm_blocks:
+            return None
+        return self._change(new, stamp, stamp, d)
+
+    def _change(self, new: int, onset: Any, stamp: Any, d: float) -> Transition:
+        previous, self._state = self._state, new
+        self._pending, self._pending_run = new, 0
+        self._over = self._waited = self._fault_blocks = 0
+        return Transition(previous, new, onset, stamp, abs(d), self.slope)
+
+    def _track_nominal(self) -> None:
+        """Move the nominal towards the block ``guard_blocks`` back (beyond the paper)."""
+        g = self.guard_blocks
+        if not self.tracking_blocks or len(self._blocks) < g + 1:
+            return
+        recent = list(self._blocks)[-(g + 1):]
+        limit = self.freeze_fraction * self.level_threshold
+        if all(abs(b[0] - self.nominal) < limit for b in recent):
+            self.nominal += (recent[0][0] - self.nominal) / self.tracking_blocks
+
+    def _slope(self) -> float:
+        """Return the least-squares slope (rad/s per s) of the last ``fit_blocks`` means."""
+        blocks = list(self._blocks)[-self.fit_blocks:]
+        t = np.array([b[1].mean() for b in blocks])
+        y = np.array([b[0] for b in blocks])
+        t = t - t.mean()
+        return float(np.dot(t, y - y.mean()) / np.dot(t, t))
+
+    def _decide(self, force: bool) -> tuple[int | None, Any]:
+        """Step or ramp: the better fit of the recent distances, and its onset stamp.
+
+        Per onset candidate (every quarter block), the regressor of a step is the share of
+        each block's samples after the onset, that of a ramp the block mean of
+        ``max(0, t - onset)``; the explained sum of squares ``(x.d)^2 / x.x`` of the best
+        onset of each model is compared in units of the block variance.
+        """
+        blocks = list(self._blocks)[-self.decide_blocks:]
+        d = np.array([b[0] for b in blocks]) - self.nominal
+        times = np.stack([b[1] for b in blocks])            # (K, block)
+        flat = times.ravel()
+        candidates = flat[::max(self.block // 4, 1)]
+        after = times[None, :, :] >= candidates[:, None, None]
+        x_step = after.mean(axis=2)
+        x_ramp = np.maximum(times[None, :, :] - candidates[:, None, None], 0.0).mean(axis=2)
+
+        def best(x: np.ndarray) -> tuple[float, int]:
+            xx = np.einsum('ck,ck->c', x, x)
+            xd = x @ d
+            with np.errstate(invalid='ignore', divide='ignore'):
+                explained = np.where(xx > 0, xd * xd / np.where(xx > 0, xx, 1.0), 0.0)
+            i = int(np.argmax(explained))
+            return float(explained[i]), i
+
+        step, i_step = best(x_step)
+        ramp, i_ramp = best(x_ramp)
+        margin = (ramp - step) / self.block_std ** 2
+        if margin > self.decide_chi2 or (force and margin > 0):
+            kind, i = DRIFT, i_ramp
+        elif margin < -self.decide_chi2 or force:
+            kind, i = BIAS, i_step
+        else:
+            return None, None
+        first = i * max(self.block // 4, 1)
+        stamps = [s for b in blocks for s in b[2]]
+        return kind, stamps[first]
+
+
+class GyroDiagnosis:
+    """Drift/bias diagnosis of the three gyro axes from gyro rates and star-tracker q.
+
+    ``update(time, gyro, q, ref=None, index=None)`` per row returns AnomalyEvents
+    (detector ``vsadc``, components ``gyro_x/y/z``). ``calibration`` maps axis -> the dict
+    of :func:`calibrate_gyro` (None: defaults). Bad input never reaches an axis: stamps
+    not after the last one, rows without a star-tracker rate (invalid or missing q, first
+    quaternion after a gap) and, per axis, a non-finite gyro value or one at or above
+    ``saturation_rad_s`` (counted as ``saturated``) leave that axis's label unchanged.
+    ``ref`` is accepted and ignored (the residual needs no guidance reference).
+    """
+
+    def __init__(self, *, calibration: Mapping[str, Mapping[str, Any]] | None = None,
+                 saturation_rad_s: float = DEFAULT_SATURATION_RAD_S, max_gap: float = 1.0,
+                 norm_tolerance: float = 0.1, axes: Sequence[str] = AXES,
+                 **axis_parameters: Any) -> None:
+        bad = [a for a in axes if a not in AXES]
+        if bad or not axes:
+            raise ValueError(f'axes must be a non-empty subset of x, y, z; got {axes!r}')
+        self.axes = tuple(axes)
+        self._index = [AXES.index(a) for a in self.axes]
+        self.saturation_rad_s = check_real('saturation_rad_s', saturation_rad_s, 0.0,
+                                           low_open=True)
+        calibration = calibration or {}
+        self.channels = [ResidualAxis(calibration.get(a), **axis_parameters)
+                         for a in self.axes]
+        self.star_tracker = StarTrackerRate(max_gap=max_gap, norm_tolerance=norm_tolerance)
+        self.reset()
+
+    def reset(self) -> None:
+        """Reset every axis, the star-tracker differencer and the counters."""
+        for ch in self.channels:
+            ch.reset()
+        self.star_tracker.reset()
+        self.rows = self.accepted = self.held = self.bad_gyro = self.out_of_order = 0
+        self.saturated = {a: 0 for a in self.axes}
+        self.saturated_now = {a: False for a in self.axes}
+        self._last_time = -math.inf
+        self._prev_gyro: tuple[float, float, float] | None = None
+        self._prev_time = -math.inf
+        self._last_event: AnomalyEvent | None = None
+
+    @property
+    def states(self) -> dict[str, int]:
+        """Return axis -> current label."""
+        return {a: ch.state for a, ch in zip(self.axes, self.channels)}
+
+    @property
+    def params(self) -> dict[str, Any]:
+        """Return the axis parameters (the first axis's; all axes share them)."""
+        ch = self.channels[0]
+        return {k: getattr(ch, k) for k in AXIS_DEFAULTS}
+
+    @property
+    def last_event(self) -> AnomalyEvent | None:
+        """Return the last event returned by :meth:`update` (None before any)."""
+        return self._last_event
+
+    @property
+    def counters(self) -> dict[str, int]:
+        """Return the bad-input counters: rows seen, accepted, held and rejected by cause."""
+        st = self.star_tracker
+        out = {'rows': self.rows, 'accepted': self.accepted, 'held': self.held,
+               'bad_gyro': self.bad_gyro, 'out_of_order': self.out_of_order,
+               'invalid_quaternions': st.invalid, 'star_tracker_gaps': st.gaps}
+        out.update({f'saturated_{a}': n for a, n in self.saturated.items()})
+        return out
+
+    def update(self, time: float, gyro: Sequence[float], q: Sequence[float] | None,
+               ref: Sequence[float] | None = None,
+               index: int | None = None) -> list[AnomalyEvent]:
+        """Take one row; return the events of every axis whose label changed."""
+        index = self.rows if index is None else index
+        self.rows += 1
+        if not math.isfinite(time) or time <= self._last_time:
+            self.out_of_order += 1
+            return []
+        if len(gyro) != 3:
+            self.bad_gyro += 1
+            return []
+        self._last_time = time
+        g = tuple(float(v) for v in gyro)
+        st_prev = self.star_tracker.last_time
+        rate = None if q is None else self.star_tracker.update(time, q)
+        prev, prev_time = self._prev_gyro, self._prev_time
+        self._prev_gyro, self._prev_time = g, time
+        if not all(math.isfinite(v) for v in g):
+            self.bad_gyro += 1
+        if rate is None:
+            self.held += 1
+            return []
+        self.accepted += 1
+        trapezoid = prev is not None and prev_time == st_prev
+        stamp = (time, index)
+        events = []
+        for axis, i, ch in zip(self.axes, self._index, self.channels):
+            now = g[i]
+            before = prev[i] if trapezoid else now
+            if not (math.isfinite(now) and math.isfinite(before)):
+                continue
+            sat = max(abs(now), abs(before)) >= self.saturation_rad_s
+            self.saturated_now[axis] = sat
+            if sat:
+                self.saturated[axis] += 1
+                continue
+            tr = ch.update(0.5 * (now + before) - rate[i], time, stamp)
+            if tr is not None:
+                events.append(make_event(axis, tr))
+        if events:
+            self._last_event = events[-1]
+        return events
+
+
+def make_gyro_detector(values: Mapping[str, Any],
+                       calibration: Mapping[str, Mapping[str, Any]] | None = None
+                       ) -> GyroDiagnosis | VsadcDetector:
+    """Return the detector of checked VSADC schema values (``feature`` residual or paper).
+
+    ``calibration`` (axis -> dict of calibrate_gyro) applies to the residual feature; the
+    paper's VsadcDetector is built either way, so that every value of the block is checked.
+    """
+    paper = VsadcDetector(**vsadc_kwargs(values))
+    if values['feature'] == 'paper':
+        return paper
+    return GyroDiagnosis(
+        calibration=calibration, saturation_rad_s=values['saturation_rad_s'],
+        max_gap=values['max_gap'], norm_tolerance=values['norm_tolerance'], axes=paper.axes,
+        **{k: values[f'residual_{k}'] for k in AXIS_DEFAULTS})

@@ -1,0 +1,339 @@
+"""What the streaming and the batch LLR detector share (llr-realtime paper, Algorithm 1).
+
+Parameters and their validation, the per-test statistic (vectorised) and p_k, the
+declaration (change time, categorisation, restart point), events, and the noise model
+(autoregressive prewhitening fitted on the first reference segment, docs/llr.md "Noise
+beyond white"). :mod:`rwa_monitor.core.llr` (streaming) and
+:mod:`rwa_monitor.core.llr_batch` (whole arrays) both import this module and not each
+other.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any, Mapping, NamedTuple
+
+import numpy as np
+
+from rwa_monitor.core import keys, llr_stats
+from rwa_monitor.core.events import AnomalyEvent
+from rwa_monitor.core.friction import coulomb_viscous, RegressorSet
+from rwa_monitor.core.gchi2 import log_lower_bound, log_lower_bound_array, log_sf2, log_sf2_t
+from rwa_monitor.core.params import AUTO, check_int, check_real
+
+COUNTER_NAMES = ('nonfinite', 'out_of_range', 'non_increasing_time', 'missing_aux',
+                 'ill_conditioned')
+_LN10 = math.log(10.0)
+_PI_4 = math.pi / 4.0
+# Largest autoregressive order of the noise model (docs/llr.md, "Noise beyond white").
+AR_ORDER_LIMIT = 10
+DEFAULT_AR_ORDER = 3
+
+
+def validate_parameters(component: str = 'rw1', *, window: int = 500,
+                        k_verif: int | str | None = AUTO, false_alarm_rate: float = 1e-5,
+                        noise_std: float | str | None = AUTO,
+                        regressors: RegressorSet | None = None,
+                        min_excitation: float = 1e-6, category_level: float = 1e-3,
+                        category_revisions: int = 3, refine_change: bool = True,
+                        max_abs_speed: float = 1e6, max_abs_friction: float = 1e6,
+                        noise_ar_max_order: int | str | None = AUTO,
+                        noise_fit_samples: int | str | None = AUTO,
+                        reference_max: int | None = 0) -> dict[str, Any]:
+    """Check the detector's keyword parameters; return them normalised (ValueError if bad).
+
+    :data:`AUTO` (core/schema.py) or None: ``k_verif`` becomes ``window // 2``,
+    ``noise_std`` None (estimated), ``noise_ar_max_order`` 3 (0 with a given
+    ``noise_std``), ``noise_fit_samples`` ``2 window + 1``; ``reference_max`` 0 or None
+    becomes None (growing reference).
+    """
+    if not isinstance(component, str) or not component:
+        raise ValueError(f'component must be a non-empty string, got {component!r}')
+    if regressors is None:
+        regressors = coulomb_viscous()
+    if not isinstance(regressors, RegressorSet):
+        raise ValueError(f'regressors must be a RegressorSet or None, got {regressors!r}')
+    p = regressors.p
+    window = check_int('window', window, max(10, p + 2))
+    if k_verif is None or k_verif == AUTO:
+        k_verif = window // 2
+    k_verif = check_int('k_verif', k_verif, 0, window - 1)
+    r = check_real('false_alarm_rate', false_alarm_rate, 0.0, 1.0, True, True)
+    if noise_std == AUTO:
+        noise_std = None
+    if noise_std is not None:
+        noise_std = check_real('noise_std', noise_std, 0.0, math.inf, True, True)
+    min_excitation = check_real('min_excitation', min_excitation, 0.0, 1.0, False, True)
+    if category_level is None:
+        category_level = r
+    category_level = check_real('category_level', category_level, 0.0, 1.0, True, True)
+    category_revisions = check_int('category_revisions', category_revisions, 0, 60)
+    if not isinstance(refine_change, bool):
+        raise ValueError(f'refine_change must be True or False, got {refine_change!r}')
+    max_abs_speed = check_real('max_abs_speed', max_abs_speed, 0.0, math.inf, True, True)
+    max_abs_friction = check_real('max_abs_friction', max_abs_friction, 0.0, math.inf, True,
+                                  True)
+    if noise_ar_max_order is None or noise_ar_max_order == AUTO:
+        noise_ar_max_order = DEFAULT_AR_ORDER if noise_std is None else 0
+    noise_ar_max_order = check_int('noise_ar_max_order', noise_ar_max_order, 0, AR_ORDER_LIMIT)
+    if noise_std is not None and noise_ar_max_order > 0:
+        raise ValueError('noise_ar_max_order must be 0 when noise_std is given (a known noise '
+                         f'level means white noise), got {noise_ar_max_order}')
+    if noise_fit_samples is None or noise_fit_samples == AUTO:
+        noise_fit_samples = 2 * window + 1
+    noise_fit_samples = check_int('noise_fit_samples', noise_fit_samples,
+                                  max(p + 2 * noise_ar_max_order + 10, 20), 10**7)
+    if reference_max == 0:
+        reference_max = None
+    if reference_max is not None:
+        reference_max = check_int('reference_max', reference_max, window + 1, 10**7)
+    return dict(component=component, window=window, k_verif=k_verif,
+                false_alarm_rate=r, noise_std=noise_std, regressors=regressors,
+                min_excitation=min_excitation, category_level=category_level,
+                category_revisions=category_revisions, refine_change=refine_change,
+                max_abs_speed=max_abs_speed, max_abs_friction=max_abs_friction,
+                noise_ar_max_order=noise_ar_max_order, noise_fit_samples=noise_fit_samples,
+                reference_max=reference_max)
+
+
+def make_event(component: str, category: llr_stats.Category, rows: tuple[int, int, int],
+               times: tuple[float, float], log_p: float, revision: int) -> AnomalyEvent:
+    """Build the AnomalyEvent of a declaration or revision.
+
+    ``rows = (change row, argmin row, declaration row)``, ``times = (change time,
+    declaration time)``; ``category.confirmed``: the data tell the kind apart (docs/llr.md).
+    """
+    dx, z = category.dx, category.z
+    details = {keys.DELTA_DRY: float(dx[0]), keys.DELTA_VISCOUS: float(dx[1]),
+               keys.NOISE_STD: math.sqrt(category.noise_var), keys.Z_DRY: z[0],
+               keys.Z_VISCOUS: z[1], keys.KIND_CONFIRMED: bool(category.confirmed),
+               keys.ARGMIN_INDEX: rows[1], keys.LOG10_P_VALUE: log_p / _LN10,
+               keys.KIND_GUESS: category.guess,
+               keys.DETECTABLE_DRY: category.detectable[0],
+               keys.DETECTABLE_VISCOUS: category.detectable[1]}
+    return AnomalyEvent(detector='llr', component=component, kind=category.kind,
+                        time=times[0], index=rows[0], declared_time=times[1],
+                        declared_index=rows[2], p_value=math.exp(log_p), revision=revision,
+                        details=details)
+
+
+class Declaration(NamedTuple):
+    """Outcome of a declaration: change position, restart position and categorisation."""
+
+    change: int
+    restart: int
+    category: llr_stats.Category
+
+
+def declaration(prefix: np.ndarray, first: int, c: int, k_min: int, n: int,
+                cfg: Mapping[str, Any], z_thr: float) -> Declaration:
+    """Return the change position, restart position and category at a declaration.
+
+    ``prefix[i]`` is the prefix-sum row (reference start ``c``) at position ``first + i``,
+    covering ``[max(c, k_min - window), n + 1]``. Change position ``tau``: the ML refinement
+    (:func:`llr_stats.refine_change`) over ``k_min +- window`` if enabled, else ``k_min``
+    (the argmin of p_k, Algorithm 1 line 15). Categorisation: before = ``[c, tau)``, after
+    = ``[tau, n]`` (:func:`llr_stats.categorise`). The new reference starts at
+    ``max(tau, k_min)``, the later of the two change estimates, so that an estimate that
+    falls before the true change does not put pre-change samples in it (they would be
+    declared as the same change again). With a sliding reference (``reference_max``) the
+    caller passes ``c`` = the start of the reference window and rows relative to it.
+    """
+    p = cfg['regressors'].p
+    noise_var = None if cfg['noise_std'] is None else cfg['noise_std'] ** 2
+    tau = k_min
+    if cfg['refine_change']:
+        w = cfg['window']
+        tau = llr_stats.refine_change(prefix, first, c, n, k_min - w, k_min + w, p,
+                                      noise_var, z_thr, k_min)
+    before = prefix[tau - first]
+    after = prefix[n + 1 - first] - before
+    category = llr_stats.categorise(before, tau - c, after, p, noise_var, z_thr)
+    return Declaration(tau, max(tau, k_min), category)
+
+
+def reference_base(c: int, first: int, reference_max: int | None) -> int:
+    """Return the first position of the before-segment used at a declaration.
+
+    The whole reference ``c`` without ``reference_max``; otherwise at most
+    ``reference_max`` samples before ``first`` (the earliest candidate change position),
+    as the tests saw it.
+    """
+    return c if reference_max is None else max(c, first - reference_max)
+
+
+def checkpoints(start: int, n: int, count: int, window: int) -> list[int]:
+    """Return the positions where the kind of a change declared at ``n`` is re-checked.
+
+    The after-segment ``[start, n]`` holds ``n - start + 1`` samples at declaration; with
+    ``L0 = max(n - start + 1, window)`` the kind is re-evaluated when it holds ``2 L0, 4 L0,
+    ...`` samples (``count`` checks).
+    """
+    length = max(n - start + 1, window)
+    return [start + length * 2 ** i - 1 for i in range(1, count + 1)]
+
+
+def candidate_log_p2(y: float, tr: float, dm: float, log_p_min: float,
+                     dof: float | None = None) -> float | None:
+    """Return log p_k (eq. (7), Algorithm 2) if it may be below ``log_p_min``, else None.
+
+    ``y = LLR_k / sigma^2``; ``tr`` and ``dm`` are the trace and determinant of ``Pi_T^-1
+    Pi_W`` (``Pi_W = Pi_T - Pi_P``), whose eigenvalues are those of Lemma 1's ``I -
+    Pi_P^1/2 Pi_T^-1 Pi_P^1/2`` (similar matrices). ``dof``: residual degrees of freedom
+    of the estimated noise variance (studentised tail, :func:`log_sf2_t`), None when the
+    noise level is given (Lemma 1's tail, :func:`log_sf2`). With ``b = y / (2 l1)``, ``rho =
+    l2 / l1`` and ``a = b (1 - rho)``, ``p_k >= exp(-b rho) erfc(sqrt(a))`` (drop ``rho
+    sin^2`` in the integral of :mod:`rwa_monitor.core.gchi2`), and the studentised
+    analogue below; when the bound already exceeds ``p_min`` the sample cannot be a new
+    minimum and the exact tail is not computed. Shared by the streaming and the batch path
+    (same floats, same decision).
+    """
+    half = 0.5 * tr
+    disc = half * half - dm
+    lam1 = half + math.sqrt(disc) if disc > 0.0 else half
+    lam2 = dm / lam1
+    # Clamp to 0 <= l2 <= l1: with two nearly equal eigenvalues rounding gives disc < 0
+    # and l2 > l1 (a correlation rho above 1, hence a < 0 and a square root of a negative
+    # number in the tail bound); the exact eigenvalues satisfy it.
+    if lam2 < 0.0:
+        lam2 = 0.0
+    elif lam2 > lam1:
+        lam2 = lam1
+    b = y / (2.0 * lam1)
+    rho = lam2 / lam1
+    a = b * (1.0 - rho)
+    if dof is None:
+        lower = -b * rho + log_lower_bound(a)
+    else:
+        # Studentised: h <= tan^2 and (1 + u)^-m >= exp(-m u) give p_k >= (1 + 2 b /
+        # dof)^(-dof/2) exp(A) erfc(sqrt(A)), A = dof a / (dof + 2 b) (tighter than the
+        # Gaussian bound, which also holds).
+        big_a = dof * a / (dof + 2.0 * b)
+        lower = -0.5 * dof * math.log1p(2.0 * b / dof) + big_a + log_lower_bound(big_a)
+    if lower > log_p_min + 1e-9 * (1.0 - log_p_min):
+        return None
+    if dof is None:
+        return log_sf2(y, lam1, lam2)
+    return log_sf2_t(y, lam1, lam2, dof)
+
+
+def window_statistics(pp: np.ndarray, pt: np.ndarray, n_p: np.ndarray, cfg: Mapping[str, Any]):
+    """Vectorised statistic of the streaming path (same operations, same order).
+
+    ``pp``, ``pt``: prefix rows at ``k`` and ``k + w``, shape ``(6, n)``.
+    """
+    A, B, C, U, V, E = pp[0], pp[1], pp[2], pp[3], pp[4], pp[5]
+    At, Bt, Ct, Ut, Vt = pt[0], pt[1], pt[2], pt[3], pt[4]
+    ac = A * C
+    det = ac - B * B
+    dett = At * Ct - Bt * Bt
+    ok = (det > cfg['min_excitation'] * ac) & (dett > 0.0)
+    with np.errstate(all='ignore'):
+        x1 = (C * U - B * V) / det
+        x2 = (A * V - B * U) / det
+        if cfg['noise_std'] is None:
+            s2 = (E - (x1 * U + x2 * V)) / (n_p - 2.0)
+            floor = llr_stats.NOISE_FLOOR_REL * E / n_p + llr_stats.NOISE_FLOOR_ABS
+            s2 = np.fmax(s2, floor)
+        else:
+            s2 = cfg['noise_std'] ** 2
+        Aw = At - A
+        Bw = Bt - B
+        Cw = Ct - C
+        g1 = (Ut - U) - (Aw * x1 + Bw * x2)
+        g2 = (Vt - V) - (Bw * x1 + Cw * x2)
+        d1 = (Ct * g1 - Bt * g2) / dett
+        d2 = (At * g2 - Bt * g1) / dett
+        y = (A * d1 * d1 + 2.0 * B * d1 * d2 + C * d2 * d2) / s2
+        tr = (Ct * Aw - 2.0 * Bt * Bw + At * Cw) / dett
+        dm = (Aw * Cw - Bw * Bw) / dett
+        half = 0.5 * tr
+        lam1 = half + np.sqrt(np.maximum(half * half - dm, 0.0))
+        testable = ok & (tr > 0.0) & (y > 0.0)
+        b = y / (2.0 * lam1)
+        rho = np.maximum(dm / lam1, 0.0) / lam1
+        a = np.maximum(b - b * rho, 0.0)
+        # Bounds of log p_k: candidate_log_p2 (lower); upper: J <= i0e(a/2) (gchi2) and
+        # i0e(z) = (1/pi) int_0^pi exp(-2 z sin^2(t/2)) dt <= int_0^1 exp(-2 z u^2) du
+        # <= sqrt(pi / (8 z)) (sin s >= 2 s / pi), i.e. log J <= log(pi / (4 a)) / 2.
+        if cfg['noise_std'] is None:
+            # Studentised tail (log_sf2_t): at most its value at psi = 0.
+            dof = n_p - 2.0
+            upper = np.where(testable, -0.5 * dof * np.log1p(2.0 * b / dof), 0.0)
+        else:
+            upper = np.where(testable, np.minimum(0.5 * np.log(_PI_4 / a), 0.0) - b, 0.0)
+        lower = log_lower_bound_array(a) - b * rho
+    return ok, testable, y, tr, dm, upper, lower
+
+
+# -- noise beyond white: autoregressive prewhitening (docs/llr.md) ------------------------
+class NoiseModel(NamedTuple):
+    """Autoregressive model of the friction residual fitted on the first reference.
+
+    ``e_l = sum_i ar[i] e_(l-1-i) + u_l``; ``innovation_std`` = std of ``u``,
+    ``residual_std`` = std of ``e``, ``long_run_ratio`` = long-run variance of ``e`` over
+    its variance (``sigma_u^2 / (1 - sum ar)^2 / sigma_e^2``; 1 for white noise): the factor
+    by which the plain statistic would be too large for slowly varying regressors.
+    """
+
+    ar: tuple[float, ...]
+    innovation_std: float
+    residual_std: float
+    long_run_ratio: float
+
+
+def fit_noise_model(h: np.ndarray, f: np.ndarray, max_order: int) -> NoiseModel:
+    """Fit the friction model and an AR model of its residual; order by BIC.
+
+    Not in the paper (whose Lemma 1 assumes white noise). ``h``: regressor rows ``(n,
+    p)``, ``f``: friction ``(n,)``. Least squares ``x`` (eq. (2)), residual ``e = f - h
+    x``, then for each order ``q <= max_order`` the conditional least-squares AR fit of
+    ``e[Q:]`` on its ``q`` lags (common targets, ``Q = max_order``) and
+    ``BIC_q = (n - Q) log(RSS_q / (n - Q)) + q log(n - Q)``; the order with the smallest
+    BIC whose characteristic roots lie inside the unit circle is kept (0: white noise,
+    the paper's case). Deterministic for given arrays, so the streaming and the batch
+    path fit the same model.
+    """
+    h = np.asarray(h, dtype=float)
+    f = np.asarray(f, dtype=float)
+    pi = h.T @ h
+    x = llr_stats.solve_scaled(pi, h.T @ f)
+    e = f - h @ x
+    n = e.size
+    top = int(min(max_order, max((n - 10) // 10, 0)))
+    target = e[top:]
+    m = target.size
+    best: tuple[float, tuple[float, ...], float] = (math.inf, (), 0.0)
+    for q in range(top + 1):
+        if q == 0:
+            coef = np.zeros(0)
+            rss = float(target @ target)
+        else:
+            lags = np.column_stack([e[top - i - 1:n - i - 1] for i in range(q)])
+            coef = np.linalg.lstsq(lags, target, rcond=None)[0]
+            resid = target - lags @ coef
+            rss = float(resid @ resid)
+            roots = np.roots(np.concatenate([[1.0], -coef]))
+            if not np.all(np.abs(roots) < 0.999):
+                continue
+        s2 = max(rss / m, 1e-300)
+        bic = m * math.log(s2) + q * math.log(m)
+        if bic < best[0]:
+            best = (bic, tuple(float(a) for a in coef), s2)
+    _, ar, s2u = best
+    s2e = max(float(e @ e) / max(n - h.shape[1], 1), 1e-300)
+    ratio = s2u / (1.0 - sum(ar)) ** 2 / s2e
+    return NoiseModel(ar, math.sqrt(s2u), math.sqrt(s2e), ratio)
+
+
+def whiten(values: np.ndarray, ar: tuple[float, ...]) -> np.ndarray:
+    """Return ``v_l - sum_i ar[i] v_(l-1-i)`` along axis 0 (missing lags omitted).
+
+    The operations and their order are those of the streaming detector's per-sample
+    filter (subtract lag 1, then lag 2, ...), so both paths whiten to the same floats.
+    """
+    values = np.asarray(values, dtype=float)
+    out = values.copy()
+    for i, a in enumerate(ar):
+        out[i + 1:] -= a * values[:values.shape[0] - i - 1]
+    return out

@@ -1,0 +1,126 @@
+"""Every console script answers --help without starting a node; nodes stop cleanly."""
+
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+
+from diagnostic_msgs.msg import DiagnosticArray
+import pytest
+from rclpy.node import Node
+from ros_harness import Collector, RosWorld
+
+from rwa_monitor.nodes import messages
+from rwa_monitor.nodes.common import EVENTS_QOS
+from rwa_monitor.sim.friction import Anomaly, simulate_friction_with_truth
+from rwa_monitor.telemetry import write_telemetry
+
+NODES = ('rwa-monitor-llr', 'rwa-monitor-vsadc', 'rwa-monitor-fss', 'rwa-monitor-replay',
+         'rwa-monitor-bus')
+
+
+def _script(name):
+    path = shutil.which(name, path=os.path.dirname(sys.executable))
+    if path is None:
+        pytest.fail(f'console script {name} is not installed next to {sys.executable}')
+    return path
+
+
+@pytest.mark.parametrize('name', NODES + ('rwa-monitor',))
+def test_help_lists_parameters_and_exits_0(name):
+    result = subprocess.run([_script(name), '--help'], capture_output=True, text=True,
+                            timeout=60)
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.startswith('usage:')
+    if name != 'rwa-monitor':
+        assert 'parameters' in result.stdout and 'Traceback' not in result.stderr
+
+
+def _wait_for_text(proc_log, text, timeout):
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if text in proc_log.read_text(errors='replace'):
+            return True
+        time.sleep(0.2)
+    return False
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+@pytest.mark.parametrize('sig', [signal.SIGINT, signal.SIGTERM])
+def test_nodes_and_replay_stop_cleanly_on_signals(tmp_path, sig):
+    tele, _ = simulate_friction_with_truth(wheels=['rw1'], n_samples=20000, rate_hz=10.0,
+                                           seed=5, anomalies=[Anomaly('rw1', 'dry', 50.0,
+                                                                      delta_dry=3e-4)])
+    path = tmp_path / 'long.csv'
+    write_telemetry(path, tele)
+    with RosWorld() as world:
+        env = world.env()
+        procs = {}
+        for name, args in (('rwa-monitor-llr', ['-p', 'window:=100']),
+                           ('rwa-monitor-vsadc', []), ('rwa-monitor-fss', []),
+                           ('rwa-monitor-replay', ['-p', f'file:={path}', '-p', 'rate:=50.0',
+                                                   '-p', 'min_subscribers:=2'])):
+            log = tmp_path / f'{name}.log'
+            procs[name] = (subprocess.Popen([_script(name), '--ros-args', *args], env=env,
+                                            stdout=log.open('w'), stderr=subprocess.STDOUT),
+                           log)
+        assert _wait_for_text(procs['rwa-monitor-replay'][1], 'replay 10%', 60.0)
+        for proc, _ in procs.values():
+            proc.send_signal(sig)
+        for name, (proc, log) in procs.items():
+            try:
+                code = proc.wait(timeout=20)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                pytest.fail(f'{name} did not stop on {sig.name}')
+            text = log.read_text(errors='replace')
+            assert 'Traceback' not in text and 'RCLError' not in text, text
+            assert code == 0, (name, code, text)
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+def test_killed_detector_restarted_shows_the_anomaly_to_a_late_subscriber(tmp_path):
+    tele, _ = simulate_friction_with_truth(
+        wheels=['rw1', 'rw2'], n_samples=3000, rate_hz=10.0, seed=11,
+        anomalies=[Anomaly('rw2', 'dry', 150.0, delta_dry=3e-4)])
+    path = tmp_path / 'seeded.csv'
+    write_telemetry(path, tele)
+    journal = tmp_path / 'events.jsonl'
+    detector_cmd = [_script('rwa-monitor-llr'), '--ros-args', '-p', 'window:=200',
+                    '-p', f'events_file:={journal}']
+    with RosWorld() as world:
+        env = world.env()
+        log = (tmp_path / 'llr.log').open('w')
+        detector = subprocess.Popen(detector_cmd, env=env, stdout=log,
+                                    stderr=subprocess.STDOUT)
+        replay = subprocess.Popen([_script('rwa-monitor-replay'), '--ros-args', '-p',
+                                   f'file:={path}', '-p', 'rate:=0.0', '-p', 'burst:=20'],
+                                  env=env, stdout=subprocess.DEVNULL,
+                                  stderr=subprocess.DEVNULL)
+        try:
+            deadline = time.monotonic() + 90.0
+            while time.monotonic() < deadline and not (
+                    journal.exists() and journal.read_text().strip()):
+                time.sleep(0.2)
+            assert journal.read_text().strip(), 'no declaration was journalled'
+            detector.kill()                                   # kill -9
+            detector.wait(timeout=10)
+        finally:
+            replay.kill()
+            replay.wait(timeout=10)
+        restarted = subprocess.Popen(detector_cmd, env=env, stdout=log,
+                                     stderr=subprocess.STDOUT)
+        try:
+            time.sleep(3.0)                                   # the subscriber joins later
+            late = world.node(Node, 'late_dashboard')
+            anomalies = Collector(late, DiagnosticArray, 'anomalies', EVENTS_QOS)
+            world.wait_until(lambda: anomalies.messages, 30.0, 'the re-published anomaly')
+            events = [messages.status_event(s) for m in anomalies.messages for s in m.status]
+            assert {e.component for e in events} == {'rw2'}
+        finally:
+            restarted.send_signal(signal.SIGTERM)
+            restarted.wait(timeout=20)
