@@ -20,7 +20,7 @@ import argparse
 import json
 import pathlib
 
-<<<<<<< HEAD
+from rwa_monitor.cli.options import add_topics, INPUT_HELP
 from rwa_monitor.exceptions import RwaMonitorError
 from rwa_monitor.pipelines.identify_report import identify_wheel, side_by_side
 from rwa_monitor.pipelines.identify_report import wheels_markdown, write_outputs
@@ -28,22 +28,6 @@ from rwa_monitor.telemetry import read_telemetry
 from rwa_monitor.telemetry.atomic import write_text_atomic
 from rwa_monitor.telemetry.coastdown import coastdown_folder, coastdown_runs
 from rwa_monitor.telemetry.coastdown import pendulum_inertia, read_coastdown
-=======
-import numpy as np
-
-from rwa_monitor.cli.options import add_topics, INPUT_HELP
-from rwa_monitor.core.identify import report as rep
-from rwa_monitor.core.identify.data import prepare
-from rwa_monitor.core.identify.model import snippet
-from rwa_monitor.core.identify.select import identify, Selection
-from rwa_monitor.exceptions import RwaMonitorError, TelemetrySchemaError
-from rwa_monitor.telemetry import read_telemetry, Telemetry, Wheel
-
-GRAVITY = 9.81
-# Body -> (wheelInfo.csv name, pendulum file) of the coast-down folder.
-PENDULUM = {'drum': ('Drum', 'inertia/Drum_I1.csv'),
-            'wheel': ('Vittoria Corsa Open', 'inertia/Vittoria_Corsa_Open_I1.csv')}
->>>>>>> main
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -90,8 +74,7 @@ def run(args: argparse.Namespace) -> int:
             coastdown_folder(args.file), body)
         wheels = [body]
     else:
-<<<<<<< HEAD
-        tele = read_telemetry(args.file)
+        tele = read_telemetry(args.file, args.topics).only('wheels')
         inertia = args.inertia
         wheels = list(tele.wheels) if args.wheel == 'all' else [args.wheel]
         if args.wheel == 'all' and not wheels:
@@ -122,24 +105,6 @@ def run(args: argparse.Namespace) -> int:
         write_text_atomic(args.out / 'wheels.json', json.dumps(summary, indent=2) + '\n')
         write_text_atomic(args.out / 'wheels.md', wheels_markdown(summary))
         print(wheels_markdown(summary))
-=======
-        tele = read_telemetry(args.file, args.topics).only('wheels')
-        inertia, wheel = args.inertia, args.wheel
-    try:
-        data = prepare(tele, wheel, inertia, args.torque_constant, args.half_width)
-        selection = identify(data, alpha=args.alpha, jumps=not args.no_jumps)
-    except ValueError as err:
-        if isinstance(err, RwaMonitorError):
-            raise
-        raise RwaMonitorError(str(err)) from None
-    result = write_outputs(selection, args.out, title=str(args.file) + (
-        f' [{args.run}]' if args.run else ''))
-    print(f'{data.wheel}: RMSE held out {result["rmse_before"]["held_out"]:.4g} -> '
-          f'{result["rmse_after"]["held_out"]:.4g} N m (noise floor '
-          f'{result["noise_floor"]:.4g}); effects: '
-          f'{", ".join(e["name"] for e in result["effects"]) or "none"}; '
-          f'report in {args.out}')
->>>>>>> main
     return 0
 
 
