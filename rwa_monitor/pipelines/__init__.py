@@ -29,10 +29,14 @@ class Detection(NamedTuple):
 
 
 def available() -> dict[str, ModuleType]:
-    """Return pipeline name -> module, for every module of this package with ``applies``."""
+    """Return pipeline name -> module, for every detector module of this package.
+
+    A detector module has ``applies`` and ``run``; helper modules (identify_report) are
+    not detectors.
+    """
     modules = {m.name: importlib.import_module(f'{__name__}.{m.name}')
                for m in pkgutil.iter_modules(__path__)}
-    return {name: mod for name, mod in modules.items() if hasattr(mod, 'applies')}
+    return {k: v for k, v in modules.items() if hasattr(v, 'applies') and hasattr(v, 'run')}
 
 
 def detect(tele: Telemetry, config: dict[str, Any], where: Any = 'parameters'

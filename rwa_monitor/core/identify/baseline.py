@@ -35,7 +35,7 @@ RIDGE = 1e-9
 PEAKS = 3
 LOW_SPEED_QUANTILE = 0.1
 MAX_ABS_SPEED = 1e5  # rad/s: the LLR detector's max_abs_speed default
-FLEX_ROWS = 20000  # the flexible background is fitted on at most about this many rows
+FLEX_ROWS = 10000  # the flexible background is fitted on at most about this many rows
 
 
 def baseline_columns(speed: np.ndarray) -> np.ndarray:
@@ -99,10 +99,13 @@ def flexible_residual(data: IdentData, spacing: int,
     fallback effect's columns, free to jump at w = 0) plus dry, viscous and offset terms
     that are piecewise linear in time (knots every ``spacing`` rows): without the time
     terms a slow effect would bend the fitted function of speed and leave a residual that
-    is not smooth in time. ``extra`` columns (effects already identified) join the fit.
-    Then sinusoids at the residual's three largest spectral peaks are added and the fit
-    repeated, so that a periodic torque does not pass for a string of jumps (a step has
-    a broad spectrum that three sinusoids hardly absorb). The coefficients are fitted on
+    is not smooth in time. When the speed passes through zero, a second piecewise-linear
+    function of speed on the branch that left zero (history.py ``left_zero``) joins, so
+    that friction with hysteresis cannot pass for a string of jumps. ``extra`` columns
+    (effects already identified) join the fit. Then sinusoids at the residual's three
+    largest spectral peaks are added and the fit repeated, so that a periodic torque does
+    not pass for a string of jumps (a step has a broad spectrum that three sinusoids
+    hardly absorb). The coefficients are fitted on
     at most about FLEX_ROWS evenly spaced rows; the residual is evaluated on all rows.
     """
     w = data.speed
@@ -127,12 +130,17 @@ def flexible_residual(data: IdentData, spacing: int,
                                  for j in range(len(tknots))])
         h = baseline_columns(wr)
         cols = [h, np.column_stack(hats), h[:, :1] * thats, h[:, 1:] * thats, thats]
+        if branch is not None:
+            cols.append(np.column_stack(hats) * branch[rows, None])
         if extra is not None:
             cols.append(extra.reshape(n, -1)[rows])
         cols += [f(2 * np.pi * fr * t[rows])[:, None] for fr in freqs
                  for f in (np.cos, np.sin)]
         return np.hstack(cols)
 
+    past = data.past
+    branch = past.left_zero.astype(float) if past is not None and past.passages and \
+        past.left_zero.any() else None
     fit_rows = np.arange(0, n, max(1, n // FLEX_ROWS))
     resid = _residual(design, fit_rows, data, [])
     freqs, _ = spectral_peaks(data.time, resid, PEAKS, refine=False)
@@ -172,7 +180,9 @@ def step_gains(data: IdentData, resid: np.ndarray, ks: np.ndarray, window: int,
     the low-speed region (abs(w) below its LOW_SPEED_QUANTILE quantile) are left out:
     friction there may depend on more than the sampled speed (pre-sliding, breakaway,
     the crossing's direction), which would pass for a jump at every zero crossing; a
-    real jump shows at every other speed.
+    real jump shows at every other speed. When friction was differentiated from speed its
+    noise is correlated over ``data.stride`` samples, so only every stride-th sample
+    enters the test (as the whiteness test does); the chi^2 then holds.
     """
     low_speed = float(np.quantile(np.abs(data.speed), LOW_SPEED_QUANTILE))
     n2 = 2 * window
@@ -188,7 +198,7 @@ def step_gains(data: IdentData, resid: np.ndarray, ks: np.ndarray, window: int,
         h = np.stack([-np.sign(w), -w], axis=-1)
         smooth = np.concatenate([h[..., :1] * poly, h[..., 1:] * poly,
                                  np.broadcast_to(poly, h.shape[:2] + (3,))], axis=-1)
-        keep = (np.abs(w) >= low_speed) / s
+        keep = (np.abs(w) >= low_speed) * (idx % data.stride == 0) / s
         X = np.concatenate([smooth, h * after[None, :, None]], axis=-1) * keep[..., None]
         y = resid[idx] * keep
         gram = np.einsum('kij,kil->kjl', X, X)
@@ -211,6 +221,7 @@ def find_jumps(data: IdentData, window: int | None = None, alpha: float = 1e-3,
     n = len(data)
     if window is None:
         window = int(np.clip(n // 40, 30, 500))
+        window = max(window, 6 * data.stride)
     segments = Segments()
     if n < 4 * window:
         return segments

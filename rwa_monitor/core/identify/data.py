@@ -6,13 +6,16 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from rwa_monitor.core.identify.differentiate import choose_half_width, HALF_WIDTHS
 from rwa_monitor.core.identify.differentiate import local_noise_std
 from rwa_monitor.core.identify.differentiate import local_polynomial_derivative
+from rwa_monitor.core.identify.history import History, history
 from rwa_monitor.core.params import check_int, check_real
 from rwa_monitor.exceptions import NotIdentifiableError
 from rwa_monitor.telemetry.schema import Telemetry
 
 MIN_SAMPLES = 50
+DEFAULT_HALF_WIDTH = 5
 NOISE_BLOCK = 200
 GAP_FACTOR = 5.0
 
@@ -40,6 +43,15 @@ class IdentData:
     stride: int = 1
     counts: dict[str, int] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
+    signals: dict[str, np.ndarray] = field(default_factory=dict)
+    past: History | None = None
+    runs: list[int] = field(default_factory=lambda: [0])
+    half_width: int = 0
+    differentiator: dict = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if self.past is None:
+            self.past = speed_history(self.time, self.speed)
 
     def __len__(self) -> int:
         return len(self.time)
@@ -74,22 +86,33 @@ def _chunks(time: np.ndarray, ok: np.ndarray) -> list[np.ndarray]:
 
 
 def prepare(tele: Telemetry, wheel: str | None = None, inertia: float | None = None,
-            torque_constant: float | None = None, half_width: int = 5) -> IdentData:
+            torque_constant: float | None = None, half_width: int | str = 'auto'
+            ) -> IdentData:
     """Return the samples of one wheel, with friction measured or estimated (eq. 1b).
 
     Rows with a non-finite time, speed or friction are dropped and counted. Without a
     friction column the friction is J dw/dt - K_T I from a local-polynomial derivative on
     each run of valid samples (runs split at NaN rows and at time gaps longer than five
-    typical steps; runs shorter than the window are dropped and counted).
+    typical steps; runs shorter than two windows are dropped and counted). The first and
+    last h samples of each run are dropped (counted): their windows are all the same
+    window shifted inward, an extrapolation whose errors are shared, not independent.
+    ``half_width='auto'`` chooses the differentiator's width from the data
+    (differentiate.choose_half_width, on the longest run) when friction is derived from
+    speed, and uses DEFAULT_HALF_WIDTH otherwise.
     """
-    half_width = check_int('half_width', half_width, 1, 1000)
+    differentiator: dict = {}
     wheel = choose_wheel(tele, wheel)
     channels = tele.wheels[wheel]
+    measured = channels.friction is not None and np.any(np.isfinite(channels.friction))
+    if half_width == 'auto':
+        half_width, differentiator = (DEFAULT_HALF_WIDTH, {}) if measured else \
+            _auto_half_width(tele, wheel)
+    half_width = check_int('half_width', half_width, 1, 1000)
     time = np.asarray(tele.time, dtype=float)
     speed = np.asarray(channels.speed, dtype=float)
     counts = {'rows': len(time)}
     notes: list[str] = []
-    if channels.friction is not None and np.any(np.isfinite(channels.friction)):
+    if measured:
         ok = np.isfinite(time) & np.isfinite(speed) & np.isfinite(channels.friction)
         counts['non_finite_rows'] = int(np.sum(~ok))
         keep = np.flatnonzero(ok)
@@ -98,15 +121,82 @@ def prepare(tele: Telemetry, wheel: str | None = None, inertia: float | None = N
         noise = local_noise_std(time[keep], friction, half_width, 2, _block(len(keep)),
                                 exclude=_near_sign_change(speed[keep], half_width))
         derived, stride = False, 1
+        run_starts = _run_starts(time[keep])
     else:
-        keep, friction, noise = _from_speed(tele, wheel, inertia, torque_constant,
-                                            half_width, counts, notes)
+        keep, friction, noise, run_starts = _from_speed(
+            tele, wheel, inertia, torque_constant, half_width, counts, notes)
         derived, stride = True, 2 * half_width + 1
     others = tuple(f'{w}_' for w in tele.wheels if w != wheel)
     aux = _aux_channels(tele, keep, notes, counts, others)
+    signals = _other_signals(tele, keep, wheel, others)
     return IdentData(wheel=wheel, time=time[keep], speed=speed[keep], friction=friction,
                      noise_std=noise, aux=aux, derived=derived, stride=stride,
-                     counts=counts, notes=notes)
+                     counts=counts, notes=notes, signals=signals,
+                     past=speed_history(time[keep], speed[keep], half_width),
+                     runs=run_starts, half_width=half_width,
+                     differentiator=differentiator)
+
+
+def _auto_half_width(tele: Telemetry, wheel: str) -> tuple[int, dict]:
+    """Return the differentiator half width chosen on the longest valid run, and why."""
+    time = np.asarray(tele.time, dtype=float)
+    speed = np.asarray(tele.wheels[wheel].speed, dtype=float)
+    runs = _chunks(time, np.isfinite(time) & np.isfinite(speed))
+    if not runs or len(max(runs, key=len)) < 2 * HALF_WIDTHS[0] + 1:
+        return DEFAULT_HALF_WIDTH, {}
+    run = max(runs, key=len)
+    best, table = choose_half_width(time[run], speed[run])
+    return best, {'half_width': best, 'chosen_from': 'data (noise against bias)',
+                  'rows_used': len(run), 'candidates': {str(k): v for k, v in table.items()}}
+
+
+def _run_starts(time: np.ndarray) -> list[int]:
+    """Return the first row of every run without a long time gap."""
+    return [int(c[0]) for c in _chunks(time, np.ones(len(time), dtype=bool))] or [0]
+
+
+def speed_history(time: np.ndarray, speed: np.ndarray, half_width: int = 2) -> History:
+    """Return the history features of the speed (history.py), run by run.
+
+    dw/dt is the local-quadratic slope over 2h+1 samples on each run without long gaps;
+    its noise (speed noise times the differentiator's gain) sets the dead band of the
+    rising/falling decision.
+    """
+    time = np.asarray(time, dtype=float)
+    speed = np.asarray(speed, dtype=float)
+    rate = np.zeros(len(time))
+    noise = np.zeros(len(time))
+    for run in _chunks(time, np.ones(len(time), dtype=bool)):
+        h = min(half_width, (len(run) - 1) // 2)
+        if h < 1:
+            continue
+        slope, gain = local_polynomial_derivative(time[run], speed[run], h)
+        speed_noise = local_noise_std(time[run], speed[run], h, 2, NOISE_BLOCK) \
+            if len(run) > 2 * h + 2 else 0.0
+        rate[run] = slope
+        noise[run] = gain * speed_noise
+    return history(time, speed, rate, noise)
+
+
+def _other_signals(tele: Telemetry, keep: np.ndarray, wheel: str, others: tuple[str, ...]
+                   ) -> dict[str, np.ndarray]:
+    """Return every other finite signal of the file on the kept rows (diagnostics only).
+
+    Other wheels' speeds, frictions and channels: not candidate effects (aux above), but
+    the residual is tested against them so that nothing in the file goes unlooked at.
+    """
+    out = {}
+    for other, ch in tele.wheels.items():
+        if other == wheel:
+            continue
+        for kind in ('speed', 'friction'):
+            values = getattr(ch, kind, None)
+            if values is not None:
+                out[f'{other}_{kind}'] = np.asarray(values, dtype=float)[keep]
+    for name, values in tele.aux.items():
+        if others and name.startswith(others):
+            out[name] = np.asarray(values, dtype=float)[keep]
+    return {k: v for k, v in out.items() if np.all(np.isfinite(v))}
 
 
 def _near_sign_change(speed: np.ndarray, half_width: int) -> np.ndarray:
@@ -127,7 +217,7 @@ def _need(n: int) -> None:
 
 def _from_speed(tele: Telemetry, wheel: str, inertia: float | None,
                 torque_constant: float | None, half_width: int, counts: dict[str, int],
-                notes: list[str]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                notes: list[str]) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[int]]:
     current_name = f'{wheel}_current'
     current = tele.aux.get(current_name)
     if inertia is None:
@@ -154,9 +244,9 @@ def _from_speed(tele: Telemetry, wheel: str, inertia: float | None,
     if current is not None:
         ok &= np.isfinite(current)
     counts['non_finite_rows'] = int(np.sum(~ok))
-    pieces, dropped = [], 0
+    pieces, dropped, edges = [], 0, 0
     for run in _chunks(time, ok):
-        if len(run) < max(2 * half_width + 1, 3 * half_width):
+        if len(run) < 4 * half_width + 1:
             dropped += len(run)
             continue
         slope, gain = local_polynomial_derivative(time[run], speed[run], half_width)
@@ -168,8 +258,11 @@ def _from_speed(tele: Telemetry, wheel: str, inertia: float | None,
             current_noise = local_noise_std(time[run], current[run], half_width, 2,
                                             NOISE_BLOCK)
             variance = variance + (torque_constant * current_noise) ** 2
-        pieces.append((run, friction, np.sqrt(variance)))
+        inner = slice(half_width, len(run) - half_width)
+        edges += 2 * half_width
+        pieces.append((run[inner], friction[inner], np.sqrt(variance[inner])))
     counts['dropped_short_run_rows'] = dropped
+    counts['dropped_run_edge_rows'] = edges
     if not pieces:
         _need(0)
     keep = np.concatenate([p[0] for p in pieces])
@@ -177,8 +270,9 @@ def _from_speed(tele: Telemetry, wheel: str, inertia: float | None,
     notes.append(f'friction estimated from speed: f = J dw/dt'
                  f'{" - K_T I" if current is not None else ""} with J = {inertia:g} kg m^2, '
                  f'local quadratic over {2 * half_width + 1} samples')
+    starts = np.cumsum([0] + [len(p[0]) for p in pieces[:-1]])
     return (keep, np.concatenate([p[1] for p in pieces]),
-            np.concatenate([p[2] for p in pieces]))
+            np.concatenate([p[2] for p in pieces]), [int(s) for s in starts])
 
 
 def _aux_channels(tele: Telemetry, keep: np.ndarray, notes: list[str],

@@ -12,6 +12,25 @@ Effects (names are the DESIGN.md vocabulary):
   metal-on-metal; friction rises from the Coulomb level to the static (breakaway) level
   as |w| -> 0. Column -sign(w) exp(-(|w|/w_s)^d); the weight is the static excess
   torque, w_s the Stribeck speed, d = 2 (Gaussian) or 1 (exponential).
+- ``stribeck_hysteresis``: friction with a memory of the direction of approach. Leaving
+  zero speed the contact breaks away: friction follows the Stribeck curve (static peak,
+  then down to Coulomb as the lubricant film builds); approaching zero the film still
+  carries the load and friction stays at the Coulomb level: the friction-speed curve is
+  a loop, not a function (the hysteresis measured on lubricated contacts under
+  oscillating speed, lower friction on the decelerating branch). Column
+  -sign(w) S(abs(w)) L, L = 1 while the wheel has moved away from zero speed ever since
+  its last zero passage (history.py ``left_zero``), else 0; S the Stribeck shape:
+  ``peak`` sqrt(e) x exp(-x^2/2) (zero at rest, maximum at x = 1: the excess of a
+  friction that is regularised through zero, as a bearing's is inside its pre-sliding
+  band), or exp(-x^2), exp(-x); x = abs(w)/w_s. The weight is the static excess (peak
+  minus Coulomb), w_s the Stribeck speed (the speed of the peak for ``peak``).
+- ``presliding``: near zero speed the contact does not slide: its asperities (or the
+  rolling elements' contact patches) deform elastically first, so friction passes
+  through zero continuously instead of jumping by twice the Coulomb level (Dahl's
+  pre-sliding regime; the regularised Coulomb friction of simulators, whose band keeps
+  an integrator from chattering at zero speed). Column -(r(w/w_b) - sign(w)), r = a
+  linear ramp clipped at +-1 or tanh; the weight is the Coulomb level the ramp replaces,
+  w_b the width of the band.
 - ``asymmetric_coulomb``: dry friction that differs with the spin direction (preload or
   seal lay, a bias in the torque or current measurement). Column -1 for w != 0, so that
   dry_positive = dry + offset, dry_negative = dry - offset. Needs both directions.
@@ -40,14 +59,22 @@ from typing import Callable
 
 import numpy as np
 
-from rwa_monitor.core.identify.data import IdentData
+from rwa_monitor.core.identify.data import IdentData, speed_history
 
 Column = Callable[..., np.ndarray]
-NAMED = ('stribeck', 'asymmetric_coulomb', 'drag', 'aux', 'drift', 'periodic')
+NAMED = ('stribeck', 'stribeck_hysteresis', 'presliding', 'asymmetric_coulomb', 'drag',
+         'aux', 'drift', 'periodic')
 FALLBACK = 'smooth_speed'
 DRAG_EXPONENTS = (2.0, 1.25, 1.5, 1.75, 2.5, 3.0, 4.0)
 STRIBECK_QUANTILES = (0.01, 0.02, 0.05, 0.1, 0.2, 0.35)
 PERIODIC_PEAKS = 3
+HYSTERESIS_SHAPES = ('peak', 2.0, 1.0)
+HYSTERESIS_GRID = 16           # Stribeck speeds, geometric between the quantiles below
+HYSTERESIS_RANGE = (0.005, 0.35)
+PRESLIDING_SHAPES = ('linear', 'tanh')
+PRESLIDING_GRID = 10
+PRESLIDING_RANGE = (0.001, 0.05)   # quantiles of abs(w) spanned by the band widths
+LEFT_ZERO = 'history:left_zero'   # the history channel the hysteresis column reads
 SMOOTH_KNOTS = 12
 NEAR_ZERO = (0.005, 0.01, 0.02, 0.04, 0.08)  # quantiles of abs(w): extra knots
 
@@ -56,6 +83,24 @@ def _get(aux, name):
     if aux is None or name not in aux:
         raise KeyError(f'the friction model needs the auxiliary channel {name!r}')
     return np.asarray(aux[name], dtype=float)
+
+
+def stribeck_shape(speed: np.ndarray, velocity: float, shape) -> np.ndarray:
+    """Return S(abs(w)) of the Stribeck excess: ``peak``, or exp(-x^shape)."""
+    x = np.abs(np.asarray(speed, dtype=float)) / velocity
+    if shape == 'peak':
+        return np.sqrt(np.e) * x * np.exp(-0.5 * x * x)
+    return np.exp(-x ** float(shape))
+
+
+def _left_zero(w, t, a) -> np.ndarray:
+    """Return the history channel ``left_zero``: from aux, or computed from a batch."""
+    if a is not None and LEFT_ZERO in a:
+        return np.asarray(a[LEFT_ZERO], dtype=float)
+    w = np.atleast_1d(np.asarray(w, dtype=float))
+    if len(w) < 5 or t is None:
+        raise KeyError(LEFT_ZERO)
+    return speed_history(np.atleast_1d(np.asarray(t, dtype=float)), w).left_zero.astype(float)
 
 
 def regressor_columns(kind: str, params: dict) -> list[tuple[str, Column]]:
@@ -68,6 +113,15 @@ def regressor_columns(kind: str, params: dict) -> list[tuple[str, Column]]:
     if kind == 'stribeck':
         ws, shape = float(params['velocity_rad_s']), float(params.get('shape', 2.0))
         return [('stribeck', lambda w, t, a: -np.sign(w) * np.exp(-(np.abs(w) / ws) ** shape))]
+    if kind == 'stribeck_hysteresis':
+        ws, shape = float(params['velocity_rad_s']), params.get('shape', 'peak')
+        shape = shape if shape == 'peak' else float(shape)
+        return [('stribeck_hysteresis', lambda w, t, a: -np.sign(w) * stribeck_shape(
+            w, ws, shape) * _left_zero(w, t, a))]
+    if kind == 'presliding':
+        wb, shape = float(params['band_rad_s']), params.get('shape', 'linear')
+        ramp = (lambda x: np.clip(x, -1.0, 1.0)) if shape == 'linear' else np.tanh
+        return [('presliding', lambda w, t, a: -(ramp(np.asarray(w) / wb) - np.sign(w)))]
     if kind == 'asymmetric_coulomb':
         return [('offset', lambda w, t, a: -(np.asarray(w) != 0).astype(float))]
     if kind == 'drag':
@@ -109,7 +163,10 @@ def _hat(knots: np.ndarray, j: int, side: float) -> Column:
 
 def evaluate(kind: str, params: dict, data: IdentData) -> np.ndarray:
     """Return the effect's columns on the data as an (n, k) array."""
-    return np.column_stack([col(data.speed, data.time, data.aux)
+    aux = data.aux
+    if kind == 'stribeck_hysteresis' and data.past is not None:
+        aux = {**data.aux, LEFT_ZERO: data.past.left_zero.astype(float)}
+    return np.column_stack([col(data.speed, data.time, aux)
                             for _, col in regressor_columns(kind, params)])
 
 
@@ -137,6 +194,8 @@ def named_candidates(data: IdentData, residual: np.ndarray) -> list[Candidate]:
     scales = sorted({float(np.quantile(aw, q)) for q in STRIBECK_QUANTILES} - {0.0})
     out.append(Candidate('stribeck', 'stribeck',
                          [{'velocity_rad_s': s, 'shape': d} for s in scales for d in (2.0, 1.0)]))
+    out.append(hysteresis_candidate(data))
+    out.append(presliding_candidate(data))
     share = min(np.mean(w > 0), np.mean(w < 0))
     out.append(Candidate('asymmetric_coulomb', 'asymmetric_coulomb', [{}],
                          skipped=None if share >= 0.02 else
@@ -160,6 +219,48 @@ def named_candidates(data: IdentData, residual: np.ndarray) -> list[Candidate]:
                          tests=max(tested, 1),
                          skipped=None if freqs else 'not testable: too few samples'))
     return out
+
+
+def hysteresis_candidate(data: IdentData) -> Candidate:
+    """Return the hysteresis candidate, or its skip reason when the run cannot show it.
+
+    The effect lives on the samples that left zero speed; a run whose speed never passes
+    through zero (never reverses, never comes to rest) has none, and friction's
+    dependence on the direction of approach cannot be identified from it.
+    """
+    past = data.past
+    left = past.left_zero if past is not None else np.zeros(len(data), dtype=bool)
+    approach = past.approaching if past is not None else left
+    aw = np.abs(data.speed)
+    if past is None or past.passages == 0 or np.sum(left) < 10 or np.sum(approach) < 10:
+        what = 'never reverses or approaches zero' if past is None or past.passages == 0 \
+            else 'leaves zero speed on too few samples'
+        return Candidate('stribeck_hysteresis', 'stribeck_hysteresis', [], tests=1,
+                         skipped=f'not testable: the speed {what}, so friction that '
+                                 f'depends on the direction of approach (hysteresis) '
+                                 f'cannot be identified from this run')
+    lo, hi = (float(np.quantile(aw[aw > 0], q)) for q in HYSTERESIS_RANGE)
+    lo = max(lo, 1e-6)
+    scales = np.geomspace(lo, max(hi, 1.01 * lo), HYSTERESIS_GRID)
+    grid = [{'velocity_rad_s': float(v), 'shape': s} for s in HYSTERESIS_SHAPES
+            for v in scales]
+    return Candidate('stribeck_hysteresis', 'stribeck_hysteresis', grid,
+                     tests=3 * len(grid), extra={'refine': 'velocity_rad_s',
+                                                 'ratio': float(scales[1] / scales[0])})
+
+
+def presliding_candidate(data: IdentData) -> Candidate:
+    """Return the pre-sliding band candidate (needs samples near zero speed)."""
+    aw = np.abs(data.speed)
+    lo, hi = (float(np.quantile(aw, q)) for q in PRESLIDING_RANGE)
+    if hi <= 0 or np.sum(aw < hi) < 10 or data.past is None or data.past.passages == 0:
+        return Candidate('presliding', 'presliding', [], tests=1,
+                         skipped='not testable: the speed never comes near zero')
+    lo = max(lo, hi / 100.0)
+    scales = np.geomspace(lo, hi, PRESLIDING_GRID)
+    grid = [{'band_rad_s': float(v), 'shape': s} for s in PRESLIDING_SHAPES for v in scales]
+    return Candidate('presliding', 'presliding', grid, tests=3 * len(grid),
+                     extra={'refine': 'band_rad_s', 'ratio': float(scales[1] / scales[0])})
 
 
 def fallback_candidate(data: IdentData) -> Candidate:

@@ -46,7 +46,9 @@ class Design:
     """The columns of the current model; scores candidate columns without refitting all.
 
     The Gram matrix of the current columns on the training rows is kept, so a candidate
-    of k columns costs O(n p k) rather than O(n (p + k)^2).
+    of k columns costs O(n p k) rather than O(n (p + k)^2). The thin products are einsum
+    loops, not threaded BLAS calls: on a loaded machine a threaded product of an (n, 1)
+    column cost 30-90 ms (measured), the loop well under one.
     """
 
     def __init__(self, y: np.ndarray, columns: np.ndarray, held_out: np.ndarray) -> None:
@@ -55,6 +57,8 @@ class Design:
         self.train = ~self.held_out
         self.X = np.empty((len(self.y), 0))
         self._xt = np.empty((int(np.sum(self.train)), 0))
+        self._xh = np.empty((int(np.sum(self.held_out)), 0))
+        self._yh = self.y[self.held_out]
         self._yt = self.y[self.train]
         self._yy = float(self._yt @ self._yt)
         self._gram = np.empty((0, 0))
@@ -66,29 +70,30 @@ class Design:
         columns = np.asarray(columns, dtype=float).reshape(len(self.y), -1)
         self._gram, self._xy = self._extended(columns)
         self.X = np.hstack([self.X, columns])
-        self._xt = self.X[self.train]
+        self._xt = np.ascontiguousarray(self.X[self.train])
+        self._xh = np.ascontiguousarray(self.X[self.held_out])
 
     def _extended(self, columns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         ct = columns[self.train]
-        xc = self._xt.T @ ct
-        gram = np.block([[self._gram, xc], [xc.T, ct.T @ ct]])
-        return gram, np.concatenate([self._xy, ct.T @ self._yt])
+        xc = np.einsum('ij,ik->jk', self._xt, ct)
+        gram = np.block([[self._gram, xc], [xc.T, np.einsum('ij,ik->jk', ct, ct)]])
+        return gram, np.concatenate([self._xy, np.einsum('ij,i->j', ct, self._yt)])
 
     def fit(self, columns: np.ndarray | None = None) -> Fit:
         """Return the fit of the current columns, plus ``columns`` if given."""
         if columns is None:
-            gram, xy, X = self._gram, self._xy, self.X
+            gram, xy, xh = self._gram, self._xy, self._xh
         else:
             columns = np.asarray(columns, dtype=float).reshape(len(self.y), -1)
             gram, xy = self._extended(columns)
-            X = np.hstack([self.X, columns])
+            xh = np.hstack([self._xh, columns[self.held_out]])
         diag = np.sqrt(np.maximum(np.diag(gram), 0.0))
         scale = np.where(diag > 0, 1.0 / np.where(diag > 0, diag, 1.0), 0.0)
         z, _, rank, _ = np.linalg.lstsq(gram * scale[:, None] * scale[None, :], xy * scale,
                                         rcond=RCOND)
         coef = z * scale
         rss_train = max(self._yy - 2.0 * coef @ xy + coef @ gram @ coef, 0.0)
-        resid_ho = self.y[self.held_out] - X[self.held_out] @ coef
+        resid_ho = self._yh - np.einsum('ij,j->i', xh, coef)
         return Fit(coef=coef, rank=int(rank), rss_train=float(rss_train),
                    rss_held_out=float(resid_ho @ resid_ho), n_train=int(np.sum(self.train)),
                    n_held_out=int(np.sum(self.held_out)))

@@ -25,8 +25,8 @@ import numpy as np
 from rwa_monitor.core.identify.effects import regressor_columns
 from rwa_monitor.exceptions import ConfigError
 
-KINDS = ('stribeck', 'asymmetric_coulomb', 'drag', 'aux', 'drift', 'periodic',
-         'smooth_speed')
+KINDS = ('stribeck', 'stribeck_hysteresis', 'presliding', 'asymmetric_coulomb', 'drag',
+         'aux', 'drift', 'periodic', 'smooth_speed')
 
 
 def _plain(value: Any) -> Any:

@@ -5,13 +5,13 @@ report.json has exactly the keys of DESIGN.md: ``baseline`` (model and parameter
 ``held_out``, N m) and ``effects`` (in the order added: ``name``, ``parameters``,
 ``evidence``). Everything else (the steps of the selection with every candidate's
 evidence, the residual tests before and after, the jumps) goes to selection.json.
-This module builds the dictionaries and draws the figures; the CLI writes the files.
+This module builds the dictionaries and the markdown text (no I/O, no plots);
+pipelines/identify_report.py draws the figures and writes the files.
 """
 
 from __future__ import annotations
 
 import math
-import pathlib
 from typing import Any
 
 import numpy as np
@@ -29,8 +29,10 @@ def effect_parameters(eff, coef: np.ndarray) -> dict:
     """Return an effect's parameters: its nonlinear ones and its named weights."""
     params = dict(_plain(eff.params))
     weights = coef[eff.columns]
-    if eff.kind == 'stribeck':
+    if eff.kind in ('stribeck', 'stribeck_hysteresis'):
         params['static_excess_nm'] = float(weights[0])
+    elif eff.kind == 'presliding':
+        params['coulomb_replaced_nm'] = float(weights[0])
     elif eff.kind == 'asymmetric_coulomb':
         params['offset_nm'] = float(weights[0])
     elif eff.kind == 'drag':
@@ -73,6 +75,19 @@ def _tests(diag: dict) -> dict:
             for k, v in diag['tests'].items()}
 
 
+def identifiability(selection) -> dict:
+    """Return which named effects this run can and cannot show, with the reasons.
+
+    A run whose speed never reverses or never comes to rest cannot show hysteresis; one
+    that spins one way cannot show an asymmetric Coulomb level; constant channels
+    cannot show their effect.
+    """
+    from rwa_monitor.core.identify.effects import named_candidates
+    cands = named_candidates(selection.data, selection.residual_after())
+    return {'testable': sorted({c.name for c in cands if c.skipped is None}),
+            'not_identifiable': {c.name: c.skipped for c in cands if c.skipped is not None}}
+
+
 def details(selection) -> dict:
     """Return selection.json's content: steps, tests before/after, jumps, data counts."""
     data = selection.data
@@ -81,6 +96,10 @@ def details(selection) -> dict:
                    'jumps': selection.segments.evidence,
                    'first_pass_jumps': selection.first_pass_jumps,
                    'stop_reason': selection.stop_reason,
+                   'identifiability': identifiability(selection),
+                   'history': {'zero_passages': selection.data.past.passages,
+                               'left_zero_samples':
+                                   int(selection.data.past.left_zero.sum())},
                    'tests_before': _tests(selection.diagnostics_before),
                    'failing_before': selection.diagnostics_before['failing'],
                    'tests_after': _tests(selection.diagnostics_after),
@@ -112,80 +131,16 @@ def markdown(selection, rep: dict, title: str) -> str:
                          f'RMSE {ev["rmse_held_out"]:.4g}')
     else:
         lines += ['', 'No effect added: the baseline model explains the data.']
+    ident = identifiability(selection)
+    for name, reason in ident['not_identifiable'].items():
+        lines += ['', f'`{name}` {reason}.']
+    if ident['not_identifiable']:
+        lines += ['', f'Identifiable from this run: {", ".join(ident["testable"])}.']
+    if any(e['name'] == 'smooth_speed' for e in rep['effects']):
+        lines += ['', 'The smooth_speed fallback was used: no named effect explains the '
+                  'structure it captures (not physics: a shape to look at).']
     lines += ['', f'Stopped: {selection.stop_reason}.',
               f'Residual tests failing before: {selection.diagnostics_before["failing"]}; '
               f'after: {selection.diagnostics_after["failing"]}.', '',
               '![before](residuals_before.png) ![after](residuals_after.png)', '']
     return '\n'.join(lines)
-
-
-def plot_residuals(selection, path: pathlib.Path, which: str) -> None:
-    """Draw the residual diagnostics (``which`` = 'before' or 'after') to a PNG."""
-    import matplotlib
-    matplotlib.use('Agg')
-    import matplotlib.pyplot as plt
-    data = selection.data
-    diag = selection.diagnostics_before if which == 'before' else selection.diagnostics_after
-    resid = selection.residual_before() if which == 'before' else selection.residual_after()
-    aux_keys = [k for k in diag['binned'] if k.startswith('aux:')]
-    panels = ['speed', 'time', 'direction', 'acf', 'std', 'spectrum'] + aux_keys
-    cols = 3
-    rows = math.ceil(len(panels) / cols)
-    fig, axes = plt.subplots(rows, cols, figsize=(13, 3.3 * rows), squeeze=False)
-    for ax, name in zip(axes.flat, panels):
-        if name in diag['binned']:
-            b = diag['binned'][name]
-            x = data.speed if name == 'speed' else data.time if name == 'time' else \
-                data.aux[name[4:]]
-            step = max(1, len(x) // 4000)
-            ax.plot(x[::step], resid[::step], '.', ms=1, color='0.75')
-            ax.errorbar(b['centre'], b['mean'], yerr=b['band'], fmt='o-', ms=3, color='C3',
-                        label='bin mean, 95 %')
-            ax.axhline(0, color='k', lw=0.5)
-            span = max(4 * data.noise_floor, 1.5 * np.max(np.abs(b['mean']) + b['band']))
-            ax.set_ylim(-span, span)
-            ax.set_xlabel({'speed': 'speed (rad/s)', 'time': 'time (s)'}.get(name, name[4:]))
-            ax.set_ylabel('residual (N m)')
-            test = diag['tests'][name]
-            ax.set_title(f'vs {name}: p = {test["p_value"]:.2g}', fontsize=9)
-        elif name == 'direction':
-            pos, neg = resid[data.speed > 0], resid[data.speed < 0]
-            for part, label in ((pos, 'w > 0'), (neg, 'w < 0')):
-                if len(part) > 1:
-                    ax.hist(part, bins=40, label=label, density=True, alpha=0.6)
-            ax.set_xlabel('residual (N m)')
-            ax.legend(fontsize=7)
-            test = diag['tests'].get('direction')
-            extra = f': p = {test["p_value"]:.2g}' if test else ''
-            ax.set_title('by spin direction' + extra, fontsize=9)
-        elif name == 'acf':
-            acf = diag['acf']
-            n = len(resid[::diag['acf_stride']])
-            ax.bar(np.arange(1, len(acf) + 1), acf, color='C0')
-            ax.axhline(1.96 / np.sqrt(n), color='C3', ls='--')
-            ax.axhline(-1.96 / np.sqrt(n), color='C3', ls='--')
-            ax.set_xlabel(f'lag (x{diag["acf_stride"]} samples)')
-            ax.set_title(f'autocorrelation: Ljung-Box p = '
-                         f'{diag["tests"]["whiteness"]["p_value"]:.2g}', fontsize=9)
-        elif name == 'std':
-            v = diag['binned_std']
-            ax.plot(v['centre'], v['std'], 'o-')
-            ax.axhline(data.noise_floor, color='k', ls='--', label='noise floor')
-            ax.set_xlabel('speed (rad/s)')
-            ax.set_ylabel('residual std (N m)')
-            ax.legend(fontsize=7)
-            ax.set_title('variance vs speed', fontsize=9)
-        elif name == 'spectrum':
-            s = diag['spectrum']
-            ax.semilogy(s['frequency_hz'][1:], s['power'][1:] + 1e-300, lw=0.6)
-            ax.set_xlabel('frequency (Hz)')
-            ax.set_title(f'spectrum: Fisher g p = '
-                         f'{diag["tests"]["spectrum"]["p_value"]:.2g}', fontsize=9)
-    for ax in list(axes.flat)[len(panels):]:
-        ax.axis('off')
-    model = 'baseline' if which == 'before' else 'refined'
-    rmse = np.sqrt(np.mean(resid ** 2))
-    fig.suptitle(f'{data.wheel}: residuals {which} ({model} model), RMSE {rmse:.3g} N m')
-    fig.tight_layout()
-    fig.savefig(path, dpi=90)
-    plt.close(fig)

@@ -8,6 +8,15 @@ zero-mean noise, independent of everything":
   squares is chi^2 with one degree of freedom per bin (conservative: fitting the model
   removes a few of them).
 - ``direction``: mean residual with w > 0 against w < 0 (Welch t, squared, chi^2(1)).
+- ``approach``: the direction of the speed's change (history.py): in each abs(w) bin,
+  the mean residual while abs(w) rises minus the mean while it falls, over its standard
+  error; the sum of squares is chi^2 (one per bin with both). A friction that depends
+  on the direction of approach (hysteresis, lag) shows here and nowhere else.
+- ``since_zero``: the residual binned by the time since the last zero passage (a memory
+  of the last reversal: breakaway, warm-up of the lubricant film).
+- ``signal:<column>``: the residual binned by every other signal of the file (other
+  wheels' channels); reported, not used to stop (through the attitude loop they
+  correlate with this wheel's own history).
 - ``whiteness``: Ljung-Box Q on the first L autocorrelations, chi^2(L).
 - ``spectrum``: Fisher's g test for the largest periodogram ordinate (upper bound
   p <= m (1 - g)^(m - 1)).
@@ -15,7 +24,8 @@ zero-mean noise, independent of everything":
   used to stop the selection (a change of variance does not change the mean model).
 
 When friction was differentiated from speed the noise is correlated over ``stride``
-samples, so the whiteness and spectrum tests use every stride-th residual.
+samples, so every test uses every stride-th residual (binned means of correlated
+residuals would have a standard error unlike sd / sqrt(count)).
 The residual passes when every mean-structure, whiteness and spectrum test has
 p > alpha / (number of those tests).
 """
@@ -29,6 +39,8 @@ from rwa_monitor.core.identify.data import IdentData
 from rwa_monitor.core.identify.effects import uniform_resample
 
 STOP_TESTS_EXCLUDED = ('variance_vs_speed',)
+REPORT_ONLY_PREFIX = 'signal:'
+MIN_PASSAGES = 2
 
 
 def _bins(values: np.ndarray, count: int) -> np.ndarray:
@@ -53,6 +65,30 @@ def binned(x: np.ndarray, residual: np.ndarray, count: int = 20) -> dict:
     chi2 = float(np.sum(z ** 2))
     dof = int(np.sum(ok))
     return {'centre': centre[ok], 'mean': mean[ok], 'band': 1.96 * se, 'count': size[ok],
+            'statistic': chi2, 'dof': dof,
+            'p_value': float(stats.chi2.sf(chi2, dof)) if dof else 1.0}
+
+
+def approach_test(speed: np.ndarray, receding: np.ndarray, approaching: np.ndarray,
+                  residual: np.ndarray, count: int = 20) -> dict:
+    """Return the rising-minus-falling residual per abs(w) bin and its chi^2 test."""
+    aw = np.abs(speed)
+    labels = _bins(aw, count)
+    centre, diff, band, z = [], [], [], []
+    for k in np.unique(labels):
+        a = residual[(labels == k) & receding]
+        b = residual[(labels == k) & approaching]
+        if len(a) < 3 or len(b) < 3:
+            continue
+        se = np.sqrt(np.var(a, ddof=1) / len(a) + np.var(b, ddof=1) / len(b))
+        d = float(np.mean(a) - np.mean(b))
+        centre.append(float(np.mean(aw[labels == k])))
+        diff.append(d)
+        band.append(1.96 * se)
+        z.append(d / se if se > 0 else 0.0)
+    chi2 = float(np.sum(np.square(z)))
+    dof = len(z)
+    return {'centre': np.array(centre), 'mean': np.array(diff), 'band': np.array(band),
             'statistic': chi2, 'dof': dof,
             'p_value': float(stats.chi2.sf(chi2, dof)) if dof else 1.0}
 
@@ -92,14 +128,33 @@ def fisher_g(time: np.ndarray, residual: np.ndarray) -> dict:
 def diagnose(data: IdentData, residual: np.ndarray, alpha: float = 1e-3,
              bins: int = 20) -> dict:
     """Return every residual diagnostic, the tests, and whether the residual passes."""
-    n = len(residual)
+    k = max(1, data.stride)
+    n = len(residual[::k])
     bins = int(max(2, min(bins, n // 30)))
     out: dict = {'binned': {}, 'tests': {}}
-    out['binned']['speed'] = binned(data.speed, residual, bins)
-    out['binned']['time'] = binned(data.time, residual, bins)
+
+    def by(values: np.ndarray, mask: np.ndarray | None = None) -> dict:
+        if mask is None:
+            return binned(values[::k], residual[::k], bins)
+        return binned(values[::k][mask[::k]], residual[::k][mask[::k]], bins)
+    out['binned']['speed'] = by(data.speed)
+    out['binned']['time'] = by(data.time)
     for column, values in data.aux.items():
         if np.std(values) > 1e-9 * (1.0 + abs(np.mean(values))):
-            out['binned'][f'aux:{column}'] = binned(values, residual, bins)
+            out['binned'][f'aux:{column}'] = by(values)
+    past = data.past
+    if past is not None:
+        out['approach'] = approach_test(data.speed[::k], past.receding[::k],
+                                        past.approaching[::k], residual[::k], bins)
+        if out['approach']['dof']:
+            out['tests']['approach'] = {k: out['approach'][k]
+                                        for k in ('statistic', 'dof', 'p_value')}
+        finite = np.isfinite(past.since_zero_s)
+        if past.passages >= MIN_PASSAGES and np.sum(finite[::k]) >= 2 * bins:
+            out['binned']['since_zero'] = by(past.since_zero_s, finite)
+    for column, values in data.signals.items():
+        if np.std(values) > 1e-9 * (1.0 + abs(np.mean(values))):
+            out['binned'][REPORT_ONLY_PREFIX + column] = by(values)
     for name, b in out['binned'].items():
         out['tests'][name] = {k: b[k] for k in ('statistic', 'dof', 'p_value')}
     pos, neg = residual[data.speed > 0], residual[data.speed < 0]
@@ -130,7 +185,8 @@ def diagnose(data: IdentData, residual: np.ndarray, alpha: float = 1e-3,
         out['tests']['variance_vs_speed'] = {'statistic': float(lev.statistic),
                                              'dof': len(groups) - 1,
                                              'p_value': float(lev.pvalue)}
-    stop = [k for k in out['tests'] if k not in STOP_TESTS_EXCLUDED]
+    stop = [k for k in out['tests'] if k not in STOP_TESTS_EXCLUDED
+            and not k.startswith(REPORT_ONLY_PREFIX)]
     level = alpha / max(len(stop), 1)
     out['level'] = level
     out['failing'] = [k for k in stop if out['tests'][k]['p_value'] <= level]

@@ -11,7 +11,10 @@ LR = n_train log(RSS_0 / RSS_1), chi^2 with k degrees of freedom (k = rank added
    that have none is at most alpha per step), and
 2. it also improves the held-out rows: n_held log(RSS_0,held / RSS_1,held) above the
    chi^2(k) critical value at level ``alpha_held`` (an effect that only fits the noise of
-   the training rows makes the held-out fit worse, not better).
+   the training rows makes the held-out fit worse, not better), and
+3. it pays for its parameters: the BIC gain LR - (k + q) ln(n_train) is positive, q the
+   number of nonlinear parameters searched on its grid (Schwarz's criterion; the many
+   weights of the fallback need a large gain).
 
 Among the significant named candidates the one with the smallest held-out RSS is added.
 The smooth-speed fallback is scored with the same test at every step; it is added when
@@ -27,7 +30,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy import stats
+from scipy import optimize, stats
 
 from rwa_monitor.core.identify import effects as fx
 from rwa_monitor.core.identify.baseline import check_identifiable, find_jumps, Segments
@@ -81,28 +84,63 @@ def _lr(n: int, rss0: float, rss1: float) -> float:
     return float(n * np.log(max(rss0, 1e-300) / max(rss1, 1e-300)))
 
 
+def _try(design: Design, cand: fx.Candidate, data: IdentData, params: dict):
+    cols = fx.evaluate(cand.kind, params, data)
+    if not np.all(np.isfinite(cols)):
+        return None
+    return params, design.fit(cols), cols
+
+
+def _refine(design: Design, cand: fx.Candidate, data: IdentData, best: tuple) -> tuple:
+    """Refine the candidate's continuous parameter between its grid neighbours.
+
+    The training RSS is minimised over log(parameter) within one grid ratio of the best
+    grid point (bounded scalar search); counted as three tests per grid point.
+    """
+    key, ratio = cand.extra['refine'], cand.extra['ratio']
+    centre = float(best[0][key])
+
+    def rss(log_value: float) -> float:
+        got = _try(design, cand, data, {**best[0], key: float(np.exp(log_value))})
+        return np.inf if got is None else got[1].rss_train
+    res = optimize.minimize_scalar(rss, bounds=(np.log(centre / ratio), np.log(centre * ratio)),
+                                   method='bounded', options={'xatol': 1e-3})
+    got = _try(design, cand, data, {**best[0], key: float(np.exp(res.x))})
+    return got if got is not None and got[1].rss_train < best[1].rss_train else best
+
+
+def _free_parameters(cand: fx.Candidate) -> int:
+    """Return the number of nonlinear parameters searched (those that vary on the grid)."""
+    if len(cand.grid) <= 1:
+        return 0
+    keys = set().union(*(g.keys() for g in cand.grid))
+    return sum(len({repr(g.get(k)) for g in cand.grid}) > 1 for k in keys)
+
+
 def _score(design: Design, current: Fit, cand: fx.Candidate, data: IdentData
            ) -> dict | None:
     """Return the best grid point of a candidate with its evidence, or None."""
     best = None
     for params in cand.grid:
-        cols = fx.evaluate(cand.kind, params, data)
-        if not np.all(np.isfinite(cols)):
-            continue
-        fit = design.fit(cols)
-        if best is None or fit.rss_train < best[1].rss_train:
-            best = (params, fit, cols)
+        got = _try(design, cand, data, params)
+        if got is not None and (best is None or got[1].rss_train < best[1].rss_train):
+            best = got
     if best is None:
         return None
+    if 'refine' in cand.extra:
+        best = _refine(design, cand, data, best)
     params, fit, cols = best
     dof = fit.rank - current.rank
     if dof <= 0:
         return None
     lr = _lr(fit.n_train, current.rss_train, fit.rss_train)
     lr_held = _lr(fit.n_held_out, current.rss_held_out, fit.rss_held_out)
+    free = int(dof) + _free_parameters(cand)
     return {'candidate': cand, 'params': params, 'fit': fit, 'columns': cols,
             'evidence': {'lr': lr, 'dof': int(dof), 'p_value': float(stats.chi2.sf(lr, dof)),
                          'lr_held_out': lr_held,
+                         'parameters': free,
+                         'bic_gain': lr - free * float(np.log(fit.n_train)),
                          'rmse_in_sample': fit.rmse_train,
                          'rmse_held_out': fit.rmse_held_out}}
 
@@ -125,8 +163,8 @@ def identify(data: IdentData, alpha: float = 1e-3, alpha_held: float = 1e-2,
         return _select(data, Segments(), alpha, alpha_held, max_effects)
     segments = find_jumps(data, jump_window, alpha)
     sel = _select(data, segments, alpha, alpha_held, max_effects)
-    if not sel.effects:
-        return sel
+    if not sel.effects or len(segments.starts) == 1:
+        return sel   # effects in the background only weaken the evidence for a jump
     extra = np.hstack([sel.design.X[:, e.columns] for e in sel.effects])
     again = find_jumps(data, jump_window, alpha, extra=extra)
     if again.starts == segments.starts:
@@ -227,4 +265,5 @@ def _significant(evidence: dict, level: float, alpha_held: float) -> bool:
     evidence['level'] = level
     evidence['held_out_threshold'] = float(stats.chi2.isf(alpha_held, evidence['dof']))
     return bool(evidence['p_value'] < level
-                and evidence['lr_held_out'] > evidence['held_out_threshold'])
+                and evidence['lr_held_out'] > evidence['held_out_threshold']
+                and evidence['bic_gain'] > 0)
