@@ -80,7 +80,7 @@ def test_nan_gyro_axis_does_not_blind_the_others(tmp_path):
 
 
 def test_axis_that_never_became_ready_is_unknown_and_detect_exits_3(tmp_path):
-    tele = simulate_aocs(120.0, seed=3)      # too short to learn the nominal class
+    tele = simulate_aocs(30.0, seed=3)      # too short to learn the nominal class
     _, summary = vsadc.run_with_summary(tele, {})
     assert {summary[f'gyro_{a}']['final_state'] for a in 'xyz'} == {'unknown'}
     path = tmp_path / 'short.csv'

@@ -313,6 +313,7 @@ class GyroDiagnosis:
         self.star_tracker.reset()
         self.rows = self.accepted = self.held = self.bad_gyro = self.out_of_order = 0
         self.saturated = {a: 0 for a in self.axes}
+        self.bad_axis = {a: 0 for a in self.axes}
         self.saturated_now = {a: False for a in self.axes}
         self._last_time = -math.inf
         self._prev_gyro: tuple[float, float, float] | None = None
@@ -343,6 +344,7 @@ class GyroDiagnosis:
                'bad_gyro': self.bad_gyro, 'out_of_order': self.out_of_order,
                'invalid_quaternions': st.invalid, 'star_tracker_gaps': st.gaps}
         out.update({f'saturated_{a}': n for a, n in self.saturated.items()})
+        out.update({f'bad_axis_{a}': n for a, n in self.bad_axis.items()})
         return out
 
     def update(self, time: float, gyro: Sequence[float], q: Sequence[float] | None,
@@ -363,8 +365,6 @@ class GyroDiagnosis:
         rate = None if q is None else self.star_tracker.update(time, q)
         prev, prev_time = self._prev_gyro, self._prev_time
         self._prev_gyro, self._prev_time = g, time
-        if not all(math.isfinite(v) for v in g):
-            self.bad_gyro += 1
         if rate is None:
             self.held += 1
             return []
@@ -375,7 +375,10 @@ class GyroDiagnosis:
         for axis, i, ch in zip(self.axes, self._index, self.channels):
             now = g[i]
             before = prev[i] if trapezoid else now
-            if not (math.isfinite(now) and math.isfinite(before)):
+            if not math.isfinite(now):
+                self.bad_axis[axis] += 1  # rejected on this axis only (issue 17)
+                continue
+            if not math.isfinite(before):
                 continue
             sat = max(abs(now), abs(before)) >= self.saturation_rad_s
             self.saturated_now[axis] = sat
