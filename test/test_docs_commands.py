@@ -38,7 +38,7 @@ EXCEPTIONS = {
     'make demo': 'the whole demo (minutes of replay); test_nodes_demo.py runs it on a '
                  'short file',
     'make test': 'the whole test suite, this test included',
-    'rwa-monitor identify FILE [--wheel ID] [--inertia J] [--torque-constant K_T] -o DIR '
+    'rwa-monitor identify FILE [--wheel ID|all] [--inertia J] [--torque-constant K_T] -o DIR '
     '[--format telemetry|coastdown] [--run NAME|list] [--half-width H] [--alpha A] '
     '[--no-jumps]': 'a synopsis with placeholders, not a command',
     'rwa-monitor fss train data/generated/fss -o model.json':
