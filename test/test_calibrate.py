@@ -8,6 +8,7 @@ import yaml
 
 from rwa_monitor.cli.main import main
 from rwa_monitor.core import calibrate as core
+from rwa_monitor.core.identify.model import plain
 from rwa_monitor.core.llr import detect_batch_with_counters
 from rwa_monitor.exceptions import ConfigError
 from rwa_monitor.pipelines import calibrated
@@ -100,7 +101,7 @@ def _document(block):
 
 def test_malformed_files_name_the_file_and_the_key(tmp_path, stribeck_block):
     block, _ = stribeck_block
-    good = calibrated._plain(_document(block))
+    good = plain(_document(block))
     path = tmp_path / 'calibration.yaml'
     path.write_text(yaml.safe_dump(good))
     assert set(calibrated.load(path)['wheels']) == {'rw1'}

@@ -17,6 +17,7 @@ import numpy as np
 
 from rwa_monitor.core import calibrate as core
 from rwa_monitor.core.events import AnomalyEvent
+from rwa_monitor.core.identify.model import plain
 from rwa_monitor.exceptions import ConfigError
 from rwa_monitor.telemetry import Telemetry
 from rwa_monitor.telemetry.atomic import atomic_write, write_text_atomic
@@ -71,23 +72,13 @@ def _stack(tele: Telemetry, prefix: str) -> np.ndarray | None:
     return None if value is None else np.asarray(value, dtype=float)
 
 
-def _plain(value: Any) -> Any:
-    if isinstance(value, Mapping):
-        return {str(k): _plain(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple, np.ndarray)):
-        return [_plain(v) for v in value]
-    if isinstance(value, np.generic):
-        return value.item()
-    return value
-
-
 def write(document: Mapping[str, Any], arrays: Mapping[str, dict], out_dir: pathlib.Path
           ) -> list[pathlib.Path]:
     """Write calibration.yaml, report.md and one PNG per wheel; return the paths."""
     import yaml
     out_dir.mkdir(parents=True, exist_ok=True)
     cal_path = out_dir / 'calibration.yaml'
-    write_text_atomic(cal_path, yaml.safe_dump(_plain(document), sort_keys=False))
+    write_text_atomic(cal_path, yaml.safe_dump(plain(document), sort_keys=False))
     written = [cal_path]
     cal = document['calibration']
     lines = ['# Commissioning calibration', '',

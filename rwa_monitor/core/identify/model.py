@@ -29,11 +29,12 @@ KINDS = ('stribeck', 'stribeck_hysteresis', 'presliding', 'asymmetric_coulomb', 
          'aux', 'drift', 'periodic', 'smooth_speed')
 
 
-def _plain(value: Any) -> Any:
-    if isinstance(value, dict):
-        return {str(k): _plain(v) for k, v in value.items()}
+def plain(value: Any) -> Any:
+    """Return ``value`` with numpy scalars and arrays as Python numbers and lists."""
+    if isinstance(value, Mapping):
+        return {str(k): plain(v) for k, v in value.items()}
     if isinstance(value, (list, tuple, np.ndarray)):
-        return [_plain(v) for v in value]
+        return [plain(v) for v in value]
     if isinstance(value, np.generic):
         return value.item()
     return value
@@ -55,7 +56,7 @@ def snippet(selection) -> dict:
     for eff in selection.effects:
         names = column_names(eff.name, eff.kind, eff.params)
         weights.update({n: float(c) for n, c in zip(names, fit.coef[eff.columns])})
-        effects.append({'name': eff.name, 'kind': eff.kind, 'params': _plain(eff.params)})
+        effects.append({'name': eff.name, 'kind': eff.kind, 'params': plain(eff.params)})
     return {'friction_model': {'wheel': selection.data.wheel,
                                'noise_std_nm': float(selection.data.noise_floor),
                                'effects': effects, 'weights': weights}}

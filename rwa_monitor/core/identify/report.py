@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from rwa_monitor.core.identify.model import _plain, column_names
+from rwa_monitor.core.identify.model import column_names, plain
 
 
 def _finite(value: Any) -> Any:
@@ -27,7 +27,7 @@ def _finite(value: Any) -> Any:
 
 def effect_parameters(eff, coef: np.ndarray) -> dict:
     """Return an effect's parameters: its nonlinear ones and its named weights."""
-    params = dict(_plain(eff.params))
+    params = dict(plain(eff.params))
     weights = coef[eff.columns]
     if eff.kind in ('stribeck', 'stribeck_hysteresis'):
         params['static_excess_nm'] = float(weights[0])
@@ -62,7 +62,7 @@ def report(selection) -> dict:
     for eff in selection.effects:
         effects.append({'name': eff.name,
                         'parameters': effect_parameters(eff, final.coef),
-                        'evidence': {k: _finite(v) for k, v in _plain(eff.evidence).items()}})
+                        'evidence': {k: _finite(v) for k, v in plain(eff.evidence).items()}})
     return {'baseline': {'model': 'coulomb+viscous', 'parameters': parameters},
             'noise_floor': float(selection.data.noise_floor),
             'rmse_before': {'in_sample': base.rmse_train, 'held_out': base.rmse_held_out},
@@ -71,7 +71,7 @@ def report(selection) -> dict:
 
 
 def _tests(diag: dict) -> dict:
-    return {k: {kk: _finite(vv) for kk, vv in _plain(v).items()}
+    return {k: {kk: _finite(vv) for kk, vv in plain(v).items()}
             for k, v in diag['tests'].items()}
 
 
@@ -91,20 +91,20 @@ def identifiability(selection) -> dict:
 def details(selection) -> dict:
     """Return selection.json's content: steps, tests before/after, jumps, data counts."""
     data = selection.data
-    return _plain({'wheel': data.wheel, 'samples': len(data), 'derived_friction': data.derived,
-                   'counts': data.counts, 'notes': data.notes,
-                   'jumps': selection.segments.evidence,
-                   'first_pass_jumps': selection.first_pass_jumps,
-                   'stop_reason': selection.stop_reason,
-                   'identifiability': identifiability(selection),
-                   'history': {'zero_passages': selection.data.past.passages,
-                               'left_zero_samples':
-                                   int(selection.data.past.left_zero.sum())},
-                   'tests_before': _tests(selection.diagnostics_before),
-                   'failing_before': selection.diagnostics_before['failing'],
-                   'tests_after': _tests(selection.diagnostics_after),
-                   'failing_after': selection.diagnostics_after['failing'],
-                   'steps': selection.steps})
+    return plain({'wheel': data.wheel, 'samples': len(data), 'derived_friction': data.derived,
+                  'counts': data.counts, 'notes': data.notes,
+                  'jumps': selection.segments.evidence,
+                  'first_pass_jumps': selection.first_pass_jumps,
+                  'stop_reason': selection.stop_reason,
+                  'identifiability': identifiability(selection),
+                  'history': {'zero_passages': selection.data.past.passages,
+                              'left_zero_samples':
+                              int(selection.data.past.left_zero.sum())},
+                  'tests_before': _tests(selection.diagnostics_before),
+                  'failing_before': selection.diagnostics_before['failing'],
+                  'tests_after': _tests(selection.diagnostics_after),
+                  'failing_after': selection.diagnostics_after['failing'],
+                  'steps': selection.steps})
 
 
 def markdown(selection, rep: dict, title: str) -> str:
