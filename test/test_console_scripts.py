@@ -69,6 +69,10 @@ def test_nodes_and_replay_stop_cleanly_on_signals(tmp_path, sig):
                            log)
         # Generous: start-up takes long on a loaded machine. Signals arrive mid-replay.
         assert _wait_for_text(procs['rwa-monitor-replay'][1], 'replaying', 180.0)
+        # The wheel detectors log their first wheel once running: a signal before that
+        # would land in the imports (the FSS node's are the slowest), not in the node.
+        for name in ('rwa-monitor-llr', 'rwa-monitor-fss'):
+            assert _wait_for_text(procs[name][1], 'monitoring wheel', 120.0), name
         time.sleep(3.0)
         for proc, _ in procs.values():
             proc.send_signal(sig)
