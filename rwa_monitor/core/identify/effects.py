@@ -191,9 +191,7 @@ def named_candidates(data: IdentData, residual: np.ndarray) -> list[Candidate]:
     w = data.speed
     aw = np.abs(w[w != 0])
     out = []
-    scales = sorted({float(np.quantile(aw, q)) for q in STRIBECK_QUANTILES} - {0.0})
-    out.append(Candidate('stribeck', 'stribeck',
-                         [{'velocity_rad_s': s, 'shape': d} for s in scales for d in (2.0, 1.0)]))
+    out.append(stribeck_candidate(aw))
     out.append(hysteresis_candidate(data))
     out.append(presliding_candidate(data))
     share = min(np.mean(w > 0), np.mean(w < 0))
@@ -219,6 +217,24 @@ def named_candidates(data: IdentData, residual: np.ndarray) -> list[Candidate]:
                          tests=max(tested, 1),
                          skipped=None if freqs else 'not testable: too few samples'))
     return out
+
+
+def stribeck_candidate(abs_speed: np.ndarray) -> Candidate:
+    """Return the Stribeck candidate: speeds at quantiles of abs(w), refined in between.
+
+    The Stribeck speed is refined between its grid neighbours as the hysteresis and
+    pre-sliding widths are (select._refine; three tests per grid point): on a grid
+    point alone the true curve fitted no better than a pre-sliding ramp, and the
+    effect chosen depended on where the quantiles fell.
+    """
+    scales = sorted({float(np.quantile(abs_speed, q)) for q in STRIBECK_QUANTILES}
+                    - {0.0}) if len(abs_speed) else []
+    grid = [{'velocity_rad_s': s, 'shape': d} for s in scales for d in (2.0, 1.0)]
+    if len(scales) < 2:
+        return Candidate('stribeck', 'stribeck', grid)
+    ratio = float(max(b / a for a, b in zip(scales[:-1], scales[1:])))
+    return Candidate('stribeck', 'stribeck', grid, tests=3 * len(grid),
+                     extra={'refine': 'velocity_rad_s', 'ratio': ratio})
 
 
 def hysteresis_candidate(data: IdentData) -> Candidate:
