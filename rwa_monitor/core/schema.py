@@ -443,11 +443,19 @@ VSADC = Schema('vsadc_detector', (
 # ----------------------------------------------------------------------- identification
 
 IDENTIFY = Schema('identify', (
-    Param('half_width', 5, 'Half window of the local-polynomial differentiator.', low=1,
-          high=1000, unit='samples', scope='file'),
+    Param('half_width', AUTO, 'Half window of the local-polynomial differentiator; auto = '
+          'chosen from the data (noise against bias) when friction is derived from speed, '
+          '5 otherwise.', low=1, high=1000, auto=True, kind=int, unit='samples',
+          scope='file'),
     Param('alpha', 1.0e-3, 'Family-wise level of the effect and jump tests.', low=0.0,
-          high=1.0, low_open=True, high_open=True, scope='file'),
+          high=0.5, low_open=True, scope='file'),
     Param('jumps', True, 'Segment friction jumps before fitting.', scope='file'),
+    Param('inertia', AUTO, 'Wheel inertia J: friction = J dw/dt - K_T I (eq. 1b) when the '
+          'file has no friction column; auto = none (the coast-down folder: its pendulum).',
+          low=0.0, low_open=True, auto=True, kind=float, unit='kg m^2', scope='file'),
+    Param('torque_constant', AUTO, 'Motor torque constant K_T of eq. 1b, needed with a '
+          '<id>_current column; auto = none.', low=0.0, low_open=True, auto=True,
+          kind=float, unit='N m/A', scope='file'),
 ), 'Identification of what the friction model misses (`rwa-monitor identify`); '
    'docs/identify.md.')
 
