@@ -215,3 +215,101 @@ def _assignment_check(seed: int, count: int, estimated: FssConfig) -> dict:
         out[name] = right / max(matched, 1)
     out['windows'] = count
     return out
+
+
+PAPER_WHEEL = {'base_dry': 1.0, 'viscous': 1.0, 'noise_std': 0.025}   # normalised
+PAPER_CASES = (('nominal', 'nominal', None), ('dry +50 %', 'dry', 1.5),
+               ('viscous +50 %', 'viscous', 1.5))
+
+
+def _si_window(status: str, key: tuple, seed: int, size: float | None
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    rng = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=key))
+    sig = fss.simulate_wheel(fss.WINDOW_SAMPLES, status, rng, wheel=PAPER_WHEEL, size=size)
+    speed, friction = fss.to_si(sig['speed'], sig['friction'])
+    return np.arange(speed.size) / fss.RATE_HZ, speed, friction
+
+
+def model1_block(time: np.ndarray, speed: np.ndarray, friction: np.ndarray) -> dict:
+    """Return a calibration block whose nominal friction model is model (1) alone.
+
+    The same contract as core/calibrate.py ``calibrate_wheel`` (friction_model, noise,
+    speed range, fss reference through its own ``noise_profile`` and ``fss_reference``),
+    with the nominal fitted by least squares on coulomb + viscous only.
+    """
+    from rwa_monitor.core import calibrate as cal
+    h = -np.column_stack([np.sign(speed), speed])
+    dry, viscous = np.linalg.lstsq(h, friction, rcond=None)[0]
+    model = {'weights': {'dry': float(dry), 'viscous': float(viscous)}, 'effects': []}
+    noise = cal.noise_profile(speed, friction - cal.nominal_prediction(model, speed))
+    return {'friction_model': model, 'noise': noise,
+            'speed_range_rad_s': [float(np.min(speed)), float(np.max(speed))],
+            'fss': cal.fss_reference(speed, friction, model, noise)}
+
+
+def paper_examples(model, quick: bool, seed: int = 1004) -> dict:
+    """Return the paper-Example windows judged against a calibration from another window.
+
+    A wheel of the FSS paper's Examples 1-2 with nominal base dry 1 and viscous 1
+    (normalised; SI through sim/fss.py's scales, the project's sign). Calibration: one
+    separate nominal window, by core/calibrate.py ``calibrate_wheel`` (what
+    ``rwa-monitor calibrate`` writes) and by a model-(1) nominal (:func:`model1_block`).
+    Then ``count`` windows of each case through core/calibrate.py ``diagnose_fss`` with
+    the given (shipped) model, and the same windows without calibration.
+    """
+    from rwa_monitor.core import calibrate as cal
+    from rwa_monitor.core.fss.pipeline import diagnose
+    count = 3 if quick else 10
+    t, w, f = _si_window('nominal', (0,), seed, None)
+    started = time.perf_counter()
+    identified, warnings = cal.calibrate_wheel('rw1', t, w, f)
+    blocks = {'calibrate': identified, 'model1': model1_block(t, w, f)}
+    out: dict = {'seed': seed, 'windows_per_case': count,
+                 'calibrate_seconds': time.perf_counter() - started,
+                 'calibrate_warnings': len(warnings),
+                 'calibrate_effects': [e['name'] for e in
+                                       identified['friction_model'].get('effects') or []],
+                 'references': {k: b['fss'] for k, b in blocks.items()}, 'cases': {}}
+    for c_idx, (label, status, size) in enumerate(PAPER_CASES, start=1):
+        rows = {name: [] for name in ('calibrate', 'model1', 'uncalibrated')}
+        for j in range(count):
+            t, w, f = _si_window(status, (c_idx, j), seed, size)
+            for name, block in blocks.items():
+                res = cal.diagnose_fss(block, t, w, f, model, FssConfig())
+                ref = block['fss']
+                rows[name].append({'status': res['status'], 'flags': res['anomalies'],
+                                   'base_dry': res['estimates']['base_dry_nm']
+                                   / ref['base_dry_nm'],
+                                   'viscous': res['estimates']['viscous_nms']
+                                   / ref['viscous_nms']})
+            res = diagnose(w, f, t, model, FssConfig())
+            rows['uncalibrated'].append({
+                'status': 'anomalous' if any(res['anomalies'].values()) else 'nominal',
+                'flags': res['anomalies'],
+                'base_dry': res['estimates']['base_dry_nm'] / fss.TORQUE_SCALE_NM,
+                'viscous': res['estimates']['viscous_nms'] * fss.SPEED_SCALE_RAD_S
+                / fss.TORQUE_SCALE_NM})
+        out['cases'][label] = {name: verdicts(status, r) for name, r in rows.items()}
+    return out
+
+
+def verdicts(expected: str, rows: list[dict]) -> dict:
+    """Return counts: named right, missed, wrong class, unknown; median estimates."""
+    right = missed = wrong = unknown = 0
+    for r in rows:
+        flagged = {k for k, v in r['flags'].items() if v}
+        if r['status'] == 'unknown':
+            unknown += 1
+        elif expected == 'nominal':
+            right += not flagged
+            wrong += bool(flagged)
+        elif flagged == {expected}:
+            right += 1
+        elif flagged - {expected}:
+            wrong += 1
+        else:
+            missed += 1
+    return {'windows': len(rows), 'right': right, 'missed': missed, 'wrong': wrong,
+            'unknown': unknown,
+            'base_dry_median': float(np.median([r['base_dry'] for r in rows])),
+            'viscous_median': float(np.median([r['viscous'] for r in rows]))}

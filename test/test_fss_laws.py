@@ -75,3 +75,28 @@ def test_relative_features_make_the_reference_one():
     assert relative_features(ref, ref)['base_dry'] == 1.0
     with pytest.raises(ValueError, match='positive'):
         relative_features(window, {**ref, 'viscous': 0.0})
+
+
+def test_size_table_helpers():
+    from bench.fss_sizes import _roc, smallest_found, verdicts
+    assert smallest_found({1.1: 0.5, 1.5: 0.95, 2.0: 0.9, 3.0: 1.0}) == 1.5
+    assert smallest_found({1.1: 0.95, 1.5: 0.8, 3.0: 1.0}) == 3.0
+    assert smallest_found({1.1: 0.1, 3.0: 0.5}) is None
+    separated = _roc(np.array([2.0, 3.0]), np.array([0.0, 1.0]))
+    assert separated['auc'] == 1.0 and separated['detection_at_5pct_false'] == 1.0
+    # Scores of one law for both classes: the AUC estimates P(X > Y) = 1/2; with 2000
+    # draws each its standard error is ~0.009 (bound 5 sd).
+    rng = np.random.default_rng(0)
+    same = _roc(rng.normal(size=2000), rng.normal(size=2000))
+    assert abs(same['auc'] - 0.5) < 0.045
+    rows = [{'status': 'anomalous', 'flags': {'dry': True, 'viscous': False},
+             'base_dry': 1.5, 'viscous': 1.0},
+            {'status': 'anomalous', 'flags': {'dry': True, 'viscous': True},
+             'base_dry': 1.4, 'viscous': 1.1},
+            {'status': 'nominal', 'flags': {'dry': False, 'viscous': False},
+             'base_dry': 1.0, 'viscous': 1.0},
+            {'status': 'unknown', 'flags': {'dry': False, 'viscous': False},
+             'base_dry': 2.0, 'viscous': 1.0}]
+    v = verdicts('dry', rows)
+    assert (v['right'], v['wrong'], v['missed'], v['unknown']) == (1, 1, 1, 1)
+    assert verdicts('nominal', rows)['right'] == 1
