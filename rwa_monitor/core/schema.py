@@ -362,7 +362,8 @@ RESIDUAL_PARAMETERS = ('feature', 'calibration_file', 'saturation_rad_s', 'resid
                        'residual_guard_blocks', 'residual_fit_blocks',
                        'residual_decide_blocks', 'residual_confirm_blocks',
                        'residual_max_wait_blocks', 'residual_decide_chi2',
-                       'residual_freeze_fraction', 'residual_recovery_fraction')
+                       'residual_freeze_fraction', 'residual_recovery_fraction',
+                       'residual_cusum_threshold', 'residual_cusum_allowance')
 
 VSADC = Schema('vsadc_detector', (
     Param('feature', 'residual', 'residual: gyro minus star-tracker rate, the true rate '
@@ -386,14 +387,18 @@ VSADC = Schema('vsadc_detector', (
           high=10_000),
     Param('residual_confirm_blocks', 2, 'Successive blocks that confirm a change.', low=1,
           high=1000),
-    Param('residual_max_wait_blocks', 6, 'Blocks after which an undecided kind is the '
+    Param('residual_max_wait_blocks', 2, 'Blocks after which an undecided kind is the '
           'better fit.', low=0, high=1000),
-    Param('residual_decide_chi2', 9.0, 'Margin (block variances) by which step or ramp '
+    Param('residual_decide_chi2', 6.0, 'Margin (block variances) by which step or ramp '
           'must fit better.', low=0.0),
     Param('residual_freeze_fraction', 0.5, 'The nominal stops learning beyond this '
           'fraction of the level threshold.', low=0.0, high=1.0),
     Param('residual_recovery_fraction', 0.5, 'A fault ends below this fraction of the '
           'level threshold.', low=0.0, high=1.0, low_open=True),
+    Param('residual_cusum_threshold', 6.0, 'CUSUM of the block distances (block standard '
+          'deviations) that starts the kind decision; 0 = level test only.', low=0.0),
+    Param('residual_cusum_allowance', 1.5, 'CUSUM reference value (block standard '
+          'deviations): the lag of the tracked nominal under a slow wander.', low=0.0),
     Param('window', 200, 'SW: samples of the nominal batch and of the evolving window '
           '(vsadc paper, Algorithm 1).', low=2, high=100_000, unit='samples'),
     Param('sigma_window', 200, 'Distances in the sigma of line 22; auto = window (the '
