@@ -24,10 +24,10 @@ from typing import Any
 import numpy as np
 
 from bench.report import table, update_section, write_json
-from rwa_monitor.core.identify.data import prepare
 from rwa_monitor.core.identify.model import regressors_from_config, snippet
 from rwa_monitor.core.identify.select import identify
-from rwa_monitor.pipelines.identify_report import identify_wheel, plot_residuals
+from rwa_monitor.pipelines.identify import identify_wheel, prepare
+from rwa_monitor.pipelines.identify_report import plot_residuals
 from rwa_monitor.pipelines.identify_report import side_by_side, write_outputs
 from rwa_monitor.sim.undeclared import EFFECTS, simulate_undeclared
 from rwa_monitor.telemetry import read_telemetry

@@ -8,11 +8,11 @@ import pytest
 import yaml
 
 from rwa_monitor.cli.main import main
-from rwa_monitor.core.identify.data import prepare
 from rwa_monitor.core.identify.differentiate import local_polynomial_derivative
 from rwa_monitor.core.identify.model import regressors_from_config, snippet
 from rwa_monitor.core.identify.select import identify
 from rwa_monitor.exceptions import NotIdentifiableError
+from rwa_monitor.pipelines.identify import prepare
 from rwa_monitor.sim.undeclared import simulate_undeclared
 from rwa_monitor.telemetry import Telemetry, Wheel, write_telemetry
 
