@@ -290,13 +290,89 @@ def summarise(tele, events: list[dict[str, Any]], tolerance_s: float = 1800.0) -
     return lines
 
 
+def summarise_gyro(tele, events: list[dict[str, Any]], tolerance_s: float = 1800.0
+                   ) -> list[str]:
+    """Return lines counting the VSADC declarations against the gyro truth labels.
+
+    A declaration is an event of kind ``drift`` or ``bias`` (the returns to ``healthy``
+    are counted apart). It detects a true fault when it is on the fault's axis, declared
+    at or after its start and within ``tolerance_s``; its kind is right when it names the
+    fault's kind; any other declaration is a false alarm.
+    """
+    from rwa_monitor.cli.cmd_demo import gyro_faults
+    faults = gyro_faults(tele)
+    mine = [e for e in events if e.get('detector') == 'vsadc']
+    lines = []
+    for axis in ('gyro_x', 'gyro_y', 'gyro_z'):
+        true = [(kind, start) for a, kind, start in faults if a == axis and kind != 'healthy']
+        declared = [e for e in mine if e['component'] == axis
+                    and e['kind'] in ('drift', 'bias')]
+        returns = sum(e['kind'] == 'healthy' for e in mine if e['component'] == axis)
+
+        def hit(e: dict[str, Any]) -> bool:
+            return any(0.0 <= e['declared_time'] - s <= tolerance_s for _, s in true)
+        hits = [e for e in declared if hit(e)]
+        found = sum(any(0.0 <= e['declared_time'] - s <= tolerance_s for e in declared)
+                    for _, s in true)
+        text = (f'{axis}: {len(true)} true fault(s) '
+                f'{", ".join(f"{k} at {s:.0f} s" for k, s in true) or "-"}; detected '
+                f'{found}; false alarms {len(declared) - len(hits)}; returns to healthy '
+                f'{returns}')
+        for e in hits[:1]:
+            start = min(s for _, s in true)
+            right = e['kind'] in [k for k, _ in true]
+            text += (f'; declared {e["kind"]} ({"right" if right else "wrong"} kind) at '
+                     f'{e["declared_time"]:.1f} s (delay {e["declared_time"] - start:.0f} s)')
+        lines.append(text)
+    return lines
+
+
+LIVE_NODES = ('rwa_monitor.nodes.llr_detector', 'rwa_monitor.nodes.vsadc_detector')
+
+
+def live(path: pathlib.Path, calibration: pathlib.Path, timeout_s: float = 3600.0
+         ) -> list[str]:
+    """Replay a bus file live through the detector nodes with a calibration; summarise.
+
+    The replay node feeds llr_detector and vsadc_detector (``calibration_file`` set on
+    both, config/rwa_monitor.yaml otherwise) in one process (``rwa-monitor demo``'s
+    runner, no live view); the events the nodes publish on ``anomalies`` are counted
+    against the file's truth columns, wheels and gyro axes.
+    """
+    from rwa_monitor.cli.cmd_demo import run_demo
+    from rwa_monitor.telemetry import read_telemetry
+    result = run_demo(pathlib.Path(path), live=False, modules=LIVE_NODES,
+                      overrides={'calibration_file': str(calibration)}, timeout_s=timeout_s)
+    tele = read_telemetry(path)
+    wheel_events = [e.to_json() for e in result.events]
+    gyro_events = [{**e['fields'], 'component': e['fields'].get('component'),
+                    'declared_time': e['fields'].get('declaration_time_s')}
+                   for e in result.other_events]
+    same = ([(e.component, e.kind, e.index, e.declared_index) for e in result.events]
+            == [(e.component, e.kind, e.index, e.declared_index)
+                for e in result.pipeline_events])
+    lines = [f'live: {result.rows} rows through replay -> llr_detector + vsadc_detector '
+             f'(calibration_file {calibration}) in {result.wall_s:.0f} s '
+             f'({result.executor} executor)',
+             f'llr_detector events identical to `rwa-monitor detect --calibration` on the '
+             f'file: {"yes" if same else "NO"} ({len(result.events)} incl. revisions)']
+    lines += ['wheels (llr_detector):'] + ['  ' + x for x in summarise(tele, wheel_events)]
+    lines += ['gyro axes (vsadc_detector):'] + ['  ' + x
+                                                for x in summarise_gyro(tele, gyro_events)]
+    lines += [f'note: {n}' for n in result.notes]
+    return lines
+
+
 def main(argv: list[str] | None = None) -> int:
-    """``python -m bench.bus_acceptance FILE EVENTS.json``: the demo's summary."""
+    """``python -m bench.bus_acceptance FILE EVENTS.json`` or ``live FILE CALIBRATION``."""
     import json
     import sys
 
     from rwa_monitor.telemetry import read_telemetry
     args = sys.argv[1:] if argv is None else argv
+    if args and args[0] == 'live':
+        print('\n'.join(live(pathlib.Path(args[1]), pathlib.Path(args[2]))), flush=True)
+        return 0
     tele = read_telemetry(args[0])
     events = json.loads(pathlib.Path(args[1]).read_text())['events']
     print('\n'.join(summarise(tele, events)))

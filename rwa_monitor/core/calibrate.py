@@ -43,6 +43,8 @@ MAX_BAND_RAD_S = 8.0
 MIN_EXCESS = 1.1
 # Effects of the speed alone: the ones a nominal model keeps (see _keep_speed_effects).
 SPEED_KINDS = ('stribeck', 'asymmetric_coulomb', 'drag', 'smooth_speed')
+# Relative singular-value cut-off of the refit outside the low-speed band.
+REFIT_RCOND = 1.0e-9
 # Speeds above this fraction of the largest |speed| seen form the reference region.
 REFERENCE_FRACTION = 0.3
 
@@ -127,7 +129,8 @@ def calibrate_wheel(wheel: str, time: np.ndarray, speed: np.ndarray, friction: n
     calibrated LLR detector (docs/llr.md, "Calibrated") runs on the calibration data
     against the model just fitted, at ``false_alarm_rate``. The low-speed band starts
     where the noise profile puts it (``noise_band_rad_s``) and is widened, edge by edge
-    up to MAX_BAND_RAD_S, until that self-check is silent: the residual of a static
+    up to MAX_BAND_RAD_S, until that self-check is silent; at each width the weights are
+    refitted on the samples outside the band (:func:`refit_outside_band`): the residual of a static
     nominal model stays structured a little beyond where its excess noise is visible (on
     the bus: the Stribeck hysteresis, a few 1e-6 N m at 3-6 rad/s), and the band must
     hold what the detector would take for changes. Each change still declared at the
@@ -153,7 +156,8 @@ def calibrate_wheel(wheel: str, time: np.ndarray, speed: np.ndarray, friction: n
                      counts={'rows': int(len(time)), 'non_finite_rows': int(np.sum(~ok))})
     model = snippet(identify(data, jumps=False))['friction_model']
     dropped = _keep_speed_effects(model, data)
-    noise_model = noise_profile(w, f - nominal_prediction(model, w))
+    fitted_everywhere = f - nominal_prediction(model, w)
+    noise_model = noise_profile(w, fitted_everywhere)
     model['noise_std_nm'] = noise_model['std_nm']
     block = {
         'friction_model': model,
@@ -168,6 +172,7 @@ def calibrate_wheel(wheel: str, time: np.ndarray, speed: np.ndarray, friction: n
         e for e in BAND_EDGES if band['speed_abs_below_rad_s'] < e <= MAX_BAND_RAD_S]
     for width in widths:
         band['speed_abs_below_rad_s'] = float(width)
+        refit_outside_band(model, w, f, width)
         residual, _ = NominalWheel(block).residual(t, w, f)
         events = [e for e in detect_batch(t, w, residual, component=wheel,
                                           false_alarm_rate=false_alarm_rate)
@@ -175,7 +180,7 @@ def calibrate_wheel(wheel: str, time: np.ndarray, speed: np.ndarray, friction: n
         if not events:
             break
     inside = np.abs(w) < band['speed_abs_below_rad_s']
-    band['std_nm'] = float(np.sqrt(np.mean((f - nominal_prediction(model, w))[inside] ** 2))
+    band['std_nm'] = float(np.sqrt(np.mean(fitted_everywhere[inside] ** 2))
                            if inside.any() else noise_model['std_nm'])
     band['samples'] = int(np.sum(inside))
     band['noise_band_rad_s'] = float(widths[0])
@@ -184,6 +189,34 @@ def calibrate_wheel(wheel: str, time: np.ndarray, speed: np.ndarray, friction: n
     warnings = [f'{wheel}: a friction change ({e.kind}) at t = {e.time:.1f} s in the '
                 f'calibration data; a nominal model needs fault-free data' for e in events]
     return block, warnings
+
+
+def refit_outside_band(model: dict[str, Any], speed: np.ndarray, friction: np.ndarray,
+                       band_rad_s: float) -> None:
+    """Refit the model's weights, in place, on the samples the detectors test.
+
+    The detectors never test |w| < ``band_rad_s`` (the low-speed band), so the nominal
+    model is fitted where it is used: least squares on |w| >= band only. Fitted on every
+    sample, the few smooth-speed knots near zero (and Stribeck-type columns) bend to the
+    hysteresis inside the band and leave a bias of ~5e-6 N m just outside it (measured on
+    the bus: 4-6 rad/s), which the LLR detector, testing changes of that size, declares
+    once a wheel dwells there, e.g. when the controller moves the other wheels' speeds
+    after a fault. Columns are scaled to unit RMS over the fitting samples; a column with
+    no support there (a knot wholly inside the band) gets weight 0, and directions the
+    fitting samples cannot tell apart are cut by the relative singular-value cut-off.
+    """
+    from rwa_monitor.core.identify.model import regressors_from_config
+    regs = regressors_from_config(model)
+    use = np.abs(speed) >= band_rad_s
+    if np.count_nonzero(use) < 2 * len(regs.names):
+        return
+    x = regs.matrix(speed[use])
+    scale = np.sqrt(np.mean(x ** 2, axis=0))
+    keep = scale > 0
+    coef = np.zeros(x.shape[1])
+    coef[keep] = np.linalg.lstsq(x[:, keep] / scale[keep], friction[use],
+                                 rcond=REFIT_RCOND)[0] / scale[keep]
+    model['weights'] = {n: float(c) for n, c in zip(regs.names, coef)}
 
 
 def fss_reference(speed: np.ndarray, friction: np.ndarray, friction_model: Mapping[str, Any],
