@@ -11,17 +11,23 @@ per axis the residual ``e = (g_{k-1} + g_k)/2 - w_st,k``
   the nominal before it is declared).
 - Evolving class and distance (lines 15-20, eq. (8)): the signed distance of the newest
   block mean to the nominal centre, ``d``; a fault when ``|d|`` exceeds the level threshold
-  on ``confirm_blocks`` successive blocks (line 26).
+  on ``confirm_blocks`` successive blocks (line 26) or, beyond the paper, when a two-sided
+  CUSUM of ``d / block_std`` (reference value ``cusum_allowance``) passes
+  ``cusum_threshold``.
 - Drift or bias (lines 27-34): instead of the spread of ``d`` against self-adapted sigma
-  limits, a likelihood comparison on the last ``decide_blocks`` distances of a step
-  (bias) and a ramp (drift), each with its onset fitted: the kind is declared when one
-  model explains the data better by ``decide_chi2`` (in block variances), or after
+  limits, a likelihood comparison on the half-block means of the last ``decide_blocks``
+  blocks of a step (bias) and a ramp (drift), each with its onset fitted, whitened with
+  the calibrated noise model (:meth:`ResidualAxis._whitener`): the kind is declared when
+  one model explains the data better by ``decide_chi2`` (in block variances), or after
   ``max_wait_blocks`` by the better one. The fitted onset is the event's change time.
 - While faulty: drift becomes bias when the least-squares slope over the last
-  ``fit_blocks`` blocks falls below half the slope threshold, bias becomes drift above it
-  (both confirmed on ``confirm_blocks`` blocks, and not before the fault has lasted
-  ``fit_blocks`` blocks: the step itself is a slope); recovery when ``|d|`` stays below
-  ``recovery_fraction`` of the threshold for ``confirm_blocks`` blocks.
+  ``fit_blocks`` blocks falls below half the slope threshold; bias becomes drift only
+  when the level has also moved from the held bias level by the level threshold and the
+  slope is above the slope threshold (a kind change needs its own evidence at the level
+  of the declaration); both confirmed on ``confirm_blocks`` blocks, and not before the
+  fault has lasted ``fit_blocks`` blocks (the step itself is a slope). Recovery when
+  ``|d|`` stays below ``recovery_fraction`` of the threshold for ``confirm_blocks``
+  blocks.
 
 Thresholds come from :func:`rwa_monitor.core.gyro_calibration.calibrate_gyro` (the
 ``gyro:`` block of calibration.yaml) or, without one, from ``DEFAULT_BLOCK_STD``.
