@@ -120,4 +120,10 @@ def test_commands_end_to_end(tmp_path, capsys):
     assert main(['fss', 'train', str(ds), '-o', str(tmp_path / 'm.json'), '--bins', '5']) == 0
     assert main(['fss', 'evaluate', str(ds), '--model', str(tmp_path / 'm.json')]) == 0
     assert 'nominal' in capsys.readouterr().out
+    assert json.loads((tmp_path / 'm.json').read_text())['relative'] is True
+    legacy = tmp_path / 'legacy'
+    assert main(['fss', 'build', str(legacy), '--per-status', '1', '--samples', '6000',
+                 '--anomalies', 'legacy']) == 0
+    assert main(['fss', 'evaluate', str(legacy), '--model', str(tmp_path / 'm.json')]) == 0
+    assert 'absolute features' in capsys.readouterr().err
     assert main(['diagnose', str(tmp_path / 'missing.csv'), '-o', str(out)]) == 2
