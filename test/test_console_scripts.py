@@ -179,3 +179,10 @@ def test_killed_detector_restarted_shows_the_anomaly_to_a_late_subscriber(tmp_pa
         finally:
             restarted.send_signal(signal.SIGTERM)
             restarted.wait(timeout=20)
+
+
+@pytest.mark.parametrize('command', ['params', 'params --yaml', 'params --markdown'])
+def test_output_piped_into_head_ends_quietly(command):
+    result = subprocess.run(f'{_script("rwa-monitor")} {command} | head -c 10', shell=True,
+                            capture_output=True, text=True, timeout=120)
+    assert result.stderr == '' and len(result.stdout) == 10
