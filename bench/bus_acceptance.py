@@ -52,12 +52,37 @@ def plan(seeds: tuple[int, ...] = EVAL_SEEDS) -> list[dict[str, Any]]:
     return runs
 
 
+def _cache_path(seed: int, specs: list[str], hours: float) -> pathlib.Path:
+    """Return the cached telemetry file of a run, keyed by the simulator's source too."""
+    import hashlib
+
+    import rwa_monitor.sim as sim
+    from bench.report import REPO
+    digest = hashlib.sha256(repr((seed, specs, hours)).encode())
+    for name in ('basilisk.py', 'basilisk_config.py'):
+        digest.update((pathlib.Path(sim.__file__).parent / name).read_bytes())
+    return REPO / 'data' / 'generated' / 'bus_acceptance' / (
+        f'seed{seed}-{digest.hexdigest()[:16]}.csv')
+
+
 def simulate(seed: int, specs: list[str], hours: float = HOURS):
-    """Return the bus telemetry of one run (default scenario)."""
+    """Return the bus telemetry of one run (default scenario), cached in data/generated.
+
+    The cache key holds the seed, the faults, the duration and the simulator's source,
+    so a re-scored acceptance (e.g. after a detector change) reuses the same telemetry.
+    The detectors always read the CSV file (10 significant digits), first run or not.
+    """
+    from rwa_monitor.telemetry import read_telemetry, write_telemetry
+    path = _cache_path(seed, specs, hours)
+    if path.is_file():
+        return read_telemetry(path)
     from rwa_monitor.sim.basilisk import BasiliskBus
     from rwa_monitor.sim.basilisk_config import BusConfig, parse_fault
-    return BasiliskBus(BusConfig(), [parse_fault(s) for s in specs], seed=seed).run(
+    tele = BasiliskBus(BusConfig(), [parse_fault(s) for s in specs], seed=seed).run(
         hours * 3600.0)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    write_telemetry(path, tele)
+    return read_telemetry(path)   # the file, as a user has it, cached or not
 
 
 def calibrate(out_dir: pathlib.Path, seed: int = CALIBRATION_SEED,
@@ -471,14 +496,31 @@ def live(path: pathlib.Path, calibration: pathlib.Path, timeout_s: float = 3600.
 
 
 def main(argv: list[str] | None = None) -> int:
-    """``python -m bench.bus_acceptance FILE EVENTS.json`` or ``live FILE CALIBRATION``."""
+    """``python -m bench.bus_acceptance FILE EVENTS.json`` or ``live FILE CAL [EVENTS]``.
+
+    ``live`` also writes its summary (and, given the events of ``detect`` without
+    calibration on the same file, their summary) to bench/results/demo_bus.json, which
+    the bus section of docs/results.md shows (bench/bench_bus.py).
+    """
     import json
     import sys
 
+    from bench.report import RESULTS_DIR
     from rwa_monitor.telemetry import read_telemetry
+    from rwa_monitor.telemetry.atomic import write_text_atomic
     args = sys.argv[1:] if argv is None else argv
     if args and args[0] == 'live':
-        print('\n'.join(live(pathlib.Path(args[1]), pathlib.Path(args[2]))), flush=True)
+        lines = live(pathlib.Path(args[1]), pathlib.Path(args[2]))
+        print('\n'.join(lines), flush=True)
+        raw = []
+        if len(args) > 3:
+            events = json.loads(pathlib.Path(args[3]).read_text())['events']
+            raw = summarise(read_telemetry(args[1]), events)
+        RESULTS_DIR.mkdir(parents=True, exist_ok=True)
+        write_text_atomic(RESULTS_DIR / 'demo_bus.json', json.dumps(
+            {'command': 'make demo-bus', 'file': args[1], 'calibration': args[2],
+             'date_utc': time.strftime('%Y-%m-%d %H:%M', time.gmtime()),
+             'live': lines, 'without_calibration': raw}, indent=2) + '\n')
         return 0
     tele = read_telemetry(args[0])
     events = json.loads(pathlib.Path(args[1]).read_text())['events']
