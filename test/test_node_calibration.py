@@ -1,12 +1,15 @@
 """The detector nodes' ``calibration_file``: same events as ``detect --calibration``."""
 
-from diagnostic_msgs.msg import DiagnosticArray
+import hashlib
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 import pytest
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from ros_harness import Collector, RosWorld
 import yaml
 
+from rwa_monitor.core import keys
 from rwa_monitor.exceptions import ConfigError
 from rwa_monitor.nodes import messages
 from rwa_monitor.nodes.common import EVENTS_QOS
@@ -33,6 +36,11 @@ def _files(tmp_path):
     path = tmp_path / 'faulted.csv'
     write_telemetry(path, faulted)
     return cal, path, read_telemetry(path)
+
+
+def _changes(collector):
+    return [s for m in collector.messages for s in m.status
+            if messages.status_event(s).kind == keys.CALIBRATION_KIND]
 
 
 def _key(event):
@@ -71,9 +79,36 @@ def test_node_with_calibration_equals_detect_and_keeps_the_last_good_file(tmp_pa
             assert not result.successful and str(wrong) in result.reason
             assert words in result.reason
         assert detector.calibration.path == str(cal) and detector.calibration.loads == 1
+        assert not [s for m in anomalies.messages for s in m.status
+                    if messages.status_event(s).kind == keys.CALIBRATION_KIND]
+        # A new, valid file: reloaded, one calibration_changed event, shown in diagnostics.
+        other = tmp_path / 'other.yaml'
+        other.write_text(cal.read_text().replace('version: 1', 'version: 1\n  note: 2', 1))
         assert detector.set_parameters([Parameter('calibration_file',
-                                                  value=str(cal))])[0].successful
+                                                  value=str(other))])[0].successful
         assert detector.calibration.loads == 2
+        world.wait_until(lambda: _changes(anomalies), 10.0, 'calibration event')
+        status = _changes(anomalies)[-1]
+        assert status.level == DiagnosticStatus.OK
+        event = messages.status_event(status)
+        assert (event.detector, event.component, event.index) == ('llr', 'calibration', -1)
+        assert event.details[keys.CALIBRATION_FILE] == str(other)
+        assert event.details[keys.PREVIOUS_CALIBRATION] == str(cal)
+        digest = hashlib.sha256(other.read_bytes()).hexdigest()
+        assert event.details[keys.CALIBRATION_SHA256] == digest
+        health = detector.diagnostics.status(detector.diagnostics.components['calibration'])
+        shown = {kv.key: kv.value for kv in health.values}
+        assert shown[keys.CALIBRATION_FILE] == str(other)
+        assert shown[keys.CALIBRATION_SHA256] == digest
+        assert health.level == DiagnosticStatus.OK and 'sha256' in health.message
+        # A malformed file at run time: refused naming file and key; the last good stays.
+        result = detector.set_parameters([Parameter('calibration_file', value=str(bad))])[0]
+        assert not result.successful and 'key calibration.wheels' in result.reason
+        assert detector.calibration.path == str(other) and detector.calibration.sha256 == digest
+        world.spin_for(0.5)
+        assert len(_changes(anomalies)) == 1
+        assert not any(a.event.kind == keys.CALIBRATION_KIND
+                       for a in detector.alarms.store.active())
 
 
 def test_node_refuses_to_start_on_a_bad_calibration(tmp_path):

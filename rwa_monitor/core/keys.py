@@ -24,6 +24,8 @@ NOISE_STD = 'noise_std_nm'
 FRICTION_KINDS = ('dry', 'viscous', 'both')
 GYRO_KINDS = ('drift', 'bias')
 WINDOW_KINDS = ('dry', 'viscous', 'fss1', 'fss2')
+# A detector node's calibration in force changed at run time (level OK, not an alarm).
+CALIBRATION_KIND = 'calibration_changed'
 
 # Names of fields in the events JSON that differ from the KeyValue key.
 JSON_NAME = {CHANGE_TIME: 'time', CHANGE_INDEX: 'index',
@@ -38,6 +40,14 @@ LOG10_P_VALUE = 'log10_p_value'
 KIND_GUESS = 'kind_guess'           # better single kind when kind is 'undecided'
 DETECTABLE_DRY = 'detectable_dry_nm'          # dry step found with 90 % power after
 DETECTABLE_VISCOUS = 'detectable_viscous_nms'  # the change (inf: not separable)
+
+# Calibration in force (detector nodes' ``calibration_file``): event and health fields.
+CALIBRATION_FILE = 'calibration_file'
+CALIBRATION_SHA256 = 'calibration_sha256'
+CALIBRATION_LOADED = 'calibration_loaded_unix_s'
+CALIBRATION_WHEELS = 'calibration_wheels'
+CALIBRATION_LOADS = 'calibration_loads'
+PREVIOUS_CALIBRATION = 'previous_calibration_file'
 
 # FSS window diagnoser (physics-informed FSS paper): window and extracted components.
 WINDOW_START = 'window_start_s'

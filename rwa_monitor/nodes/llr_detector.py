@@ -17,6 +17,12 @@ go to the detector, which skips and counts them. Each case is counted in diagnos
 logged once; none reaches the detector's statistics. The stamp rules are
 :class:`rwa_monitor.core.streams.StampGate` (shared with the other nodes).
 
+Calibration (``calibration_file``, :mod:`rwa_monitor.nodes.calibration`): each wheel is
+tested against its calibrated nominal; a change at run time restarts the wheel
+detectors, is published on ``anomalies`` as an event of kind ``calibration_changed``
+(level OK) and the calibration in force (file, sha256, load time) is the /diagnostics
+status ``calibration``; a bad file is refused and the last good calibration stays.
+
 Reliability (docs/nodes.md "Alarms" and "Failures"): declared anomalies are latched
 (:mod:`rwa_monitor.nodes.latched`: ``events_file`` journal, ``~/acknowledge``, reloaded
 and re-published at start) and survive detector restarts; an exception in one wheel's
@@ -116,6 +122,9 @@ class LLRDetectorNode(Node):
             self, period=self.params['diagnostic_period'],
             stale_timeout=self.params['stale_timeout'])
         self.diagnostics.provide(INPUT_ID, 'input', self._input_health)
+        self.diagnostics.provide(calibration.COMPONENT, 'calibration', self.calibration.health)
+        self.diagnostics.component(calibration.COMPONENT, 'calibration').stale_timeout = (
+            float('inf'))   # a setting, not an input: never stale
         self._anomaly_pub = self.create_publisher(
             DiagnosticArray, 'anomalies', EVENTS_QOS,
             event_callbacks=qos_event_callbacks(self, 'anomalies', True))
@@ -153,6 +162,7 @@ class LLRDetectorNode(Node):
             for wheel_id, wheel in self.wheels.items():
                 wheel.restart()
                 wheel.detector = self._new_detector(wheel_id)
+            self._publish_calibration_change()
         elif name == 'wheels':
             self._allowed = common.wheel_names(self.params['wheels'])
 
@@ -302,6 +312,18 @@ class LLRDetectorNode(Node):
         wheel.events += len(found)
         wheel.last_event = found[-1]
         self.events.extend(found)
+
+    def _publish_calibration_change(self) -> None:
+        """Publish the calibration now in force on ``anomalies`` (kind calibration_changed).
+
+        Not journalled with the alarms: it is a setting, not an anomaly (level OK).
+        """
+        out = DiagnosticArray()
+        now = self.get_clock().now()
+        out.header.stamp = now.to_msg()
+        out.status = [self.calibration.change_status('llr', now.nanoseconds * 1e-9,
+                                                     self.get_name())]
+        self._anomaly_pub.publish(out)
 
     def _wheel_health(self, wheel: _Wheel) -> tuple[bytes, str, dict[str, Any]]:
         values: dict[str, Any] = {'samples': wheel.samples, 'events': wheel.events}
