@@ -33,8 +33,8 @@ def _settings(quick: bool) -> dict[str, Any]:
         return {'runs': 2, 'n': 100_000, 'paper_runs': 1, 'temp_runs': 1, 'temp_n': 20_000,
                 'det_runs': 4, 'det_temp_runs': 2}
     # Sized for a shared 2-core machine: 1e6 samples per cell (a lower bound of 3.3e5
-    # without alarms); the temperature cells (p = 3, ~5000 samples/s) get 1e5.
-    return {'runs': 4, 'n': 250_000, 'paper_runs': 1, 'temp_runs': 2, 'temp_n': 50_000,
+    # without alarms), the temperature cells (p = 3, ~5000 samples/s) too.
+    return {'runs': 4, 'n': 250_000, 'paper_runs': 1, 'temp_runs': 4, 'temp_n': 250_000,
             'det_runs': 20, 'det_temp_runs': 4}
 
 

@@ -38,7 +38,9 @@ from rwa_monitor.sim.basilisk_config import available, BusConfig, FrictionFault,
     GyroFault, INSTALL_HINT
 
 NAME = 'bus_gyro'
-SEEDS = tuple(range(3000, 3010))
+#: Fresh seeds of this round, fixed before any result of the sequential test was seen
+#: (3000-3009 scored the previous version and were looked at).
+SEEDS = tuple(range(4100, 4110))
 QUICK_SEEDS = (11, 12)
 CALIBRATION_SEED = 1
 HOURS = 3.0

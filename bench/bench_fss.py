@@ -4,7 +4,11 @@ Detection-probability matrix over 30 random 20 % / 80 % splits (Fig. 11), ARL at
 missed detection vs window size, W_b and jump size (Fig. 7), excess RMSE with and without
 changepoints (Fig. 8), rejections per window (Table II), DP iterations vs changepoints
 and the effect of the beam (Fig. 10), time per stage on 80,000-sample windows (Fig. 13).
-Data: ``rwa-monitor fss build`` (seed 0, 100 windows per status) in data/generated/fss.
+Those figures use the first bench's anomalies (``legacy``: 2.5-3x away from nominal,
+``rwa-monitor fss build --anomalies legacy``, seed 0, 100 windows per status, in
+data/generated/fss_legacy). The tables that count are at realistic sizes (bench/fss_sizes.py:
+x1.1-x3 of each wheel's nominal, laws estimated from commissioning windows, learned and
+baseline side by side, the paper-Example windows with a calibration).
 """
 
 from __future__ import annotations
@@ -29,26 +33,31 @@ ANOMALIES = ('dry', 'viscous', 'fss1', 'fss2')
 
 
 def _dataset(quick: bool, seed: int = 0, per_status: int | None = None) -> pathlib.Path:
-    name = ('fss_quick' if quick else 'fss') + (f'_seed{seed}' if seed else '')
+    name = ('fss_legacy_quick' if quick else 'fss_legacy') + (f'_seed{seed}' if seed else '')
     path = pathlib.Path('data/generated') / name
     per_status = per_status or (10 if quick else 100)
     try:
         manifest = fss.load_manifest(path)
-        if manifest['per_status'] == per_status and manifest['seed'] == seed:
+        if manifest['per_status'] == per_status and manifest['seed'] == seed and \
+                manifest.get('anomalies') == 'legacy':
             return path
     except ValueError:
         pass
-    fss.build_dataset(path, per_status=per_status, seed=seed)
+    fss.build_dataset(path, per_status=per_status, seed=seed, anomalies='legacy')
     return path
 
 
 def shipped_model_held_out(quick: bool) -> dict:
-    """Return the shipped model's detection matrix on an independent data set (seed 1)."""
+    """Return the shipped model's detection matrix on an independent legacy set (seed 1).
+
+    Legacy windows have no reference window; their nominal is (1, 1) +- 10 %, where a
+    calibrated wheel's reference puts it, so the absolute features are given.
+    """
     from rwa_monitor.telemetry.fss_model import load_model
     path = _dataset(quick, seed=1, per_status=4 if quick else 40)
     items = fss.dataset_extractions(path)
     model = load_model()
-    matrix = detection_matrix(model, items)
+    matrix = detection_matrix(model, items, relative=False)
     nominal = [it for it in items if it['status'] == 'nominal']
     return {'windows': len(items), 'seed': 1, 'matrix': matrix,
             'trained_on': model.spec.get('trained_on', {}),
@@ -143,7 +152,7 @@ def _summary(values) -> dict:
 
 
 def timing_pass(path: pathlib.Path, manifest: dict, items: list[dict],
-                repeats: int = 3) -> dict:
+                repeats: int = 3, count: int = 100) -> dict:
     """Return per-stage wall and CPU times over all windows, each the minimum of repeats.
 
     The machine is shared: a wall-clock run measures the other processes as much as this
@@ -154,11 +163,15 @@ def timing_pass(path: pathlib.Path, manifest: dict, items: list[dict],
     """
     from rwa_monitor.telemetry.fss_model import load_model
     model = load_model()
+    count = min(count, len(items))
     stages = ('changepoints', 'least_squares', 'assignment', 'classification', 'total')
     wall: dict[str, list[float]] = {k: [] for k in stages}
     cpu: dict[str, list[float]] = {k: [] for k in stages}
     load_before = os.getloadavg()
-    for entry, item in zip(manifest['windows'], items):
+    per_status = count // len(STATUSES)
+    chosen = [(e, it) for e, it in zip(manifest['windows'], items)
+              if int(e['file'].split('_')[-1][:4]) < per_status]
+    for entry, item in chosen:
         speed, friction = fss.load_window(path, entry)
         best_wall: dict[str, float] = {}
         best_cpu: dict[str, float] = {}
@@ -177,6 +190,7 @@ def timing_pass(path: pathlib.Path, manifest: dict, items: list[dict],
             cpu[k].append(best_cpu[k])
     return {'wall': {k: _summary(v) for k, v in wall.items()},
             'cpu': {k: _summary(v) for k, v in cpu.items()}, 'repeats': repeats,
+            'windows': len(chosen),
             'load_average_before': list(load_before),
             'load_average_after': list(os.getloadavg())}
 
@@ -265,12 +279,16 @@ def beam_effect(path: pathlib.Path, manifest: dict, count: int,
 
 def run(out_dir: pathlib.Path, quick: bool) -> dict:
     """Run every experiment; write fss.json, plots and the fss section of results.md."""
+    from bench import fss_sizes
+    from rwa_monitor.telemetry.fss_model import load_model
     started = time.perf_counter()
+    sizes = fss_sizes.run_sizes(quick)
+    paper = fss_sizes.paper_examples(load_model(), quick)
     path = _dataset(quick)
     manifest = fss.load_manifest(path)
     items = fss.dataset_extractions(path)  # cached per code and parameters
     stats_ = [it['stats'] for it in items]
-    timing = timing_pass(path, manifest, items, repeats=3)
+    timing = timing_pass(path, manifest, items, repeats=3, count=25 if quick else 100)
     splits = 5 if quick else 30
     results = {
         'dataset': {'path': str(path), 'windows': len(items), 'per_status': manifest[
@@ -290,6 +308,8 @@ def run(out_dir: pathlib.Path, quick: bool) -> dict:
         'bins': bins_sweep(items, splits),
         'held_out': shipped_model_held_out(quick),
         'timing_s': timing,
+        'sizes': sizes,
+        'paper_examples': paper,
     }
     results['goals'] = goals(results)
     results['bench_seconds'] = time.perf_counter() - started
@@ -310,9 +330,10 @@ def goals(results: dict) -> dict:
     nominal = results['classification']['nominal_any_flag']['mean']
     t = results['timing_s']['cpu']
     # Timing goals: the thread's CPU time per stage, minimum of 3 runs (timing_pass).
-    return {'detection_min_over_anomalies': {'value': worst, 'goal': 0.97,
-                                             'met': worst >= 0.97},
-            'nominal_flagged': {'value': nominal, 'goal': 0.03, 'met': nominal <= 0.03},
+    return {'legacy_detection_min_over_anomalies': {'value': worst, 'goal': 0.97,
+                                                    'met': worst >= 0.97},
+            'legacy_nominal_flagged': {'value': nominal, 'goal': 0.03,
+                                       'met': nominal <= 0.03},
             'changepoint_cpu_median_s': {'value': t['changepoints']['median'], 'goal': 0.05,
                                          'met': t['changepoints']['median'] <= 0.05},
             'assignment_cpu_max_s': {'value': t['assignment']['max'], 'goal': 0.1,

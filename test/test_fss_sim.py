@@ -35,9 +35,9 @@ def test_mean_residence_of_example_1():
 
 
 @pytest.mark.parametrize('status', fss.STATUSES)
-def test_anomalies_change_only_their_component(status):
+def test_legacy_anomalies_change_only_their_component(status):
     rng = np.random.default_rng(2)
-    sig = fss.simulate_wheel(20_000, status, rng, profile='biased')
+    sig = fss.simulate_wheel(20_000, status, rng, profile='biased', anomalies='legacy')
     dry_range = fss.ANOMALY_BASE_DRY if status == 'dry' else fss.NOMINAL_BASE_DRY
     visc_range = fss.ANOMALY_VISCOUS if status == 'viscous' else fss.NOMINAL_VISCOUS
     assert dry_range[0] <= sig['base_dry'] <= dry_range[1]
@@ -49,6 +49,36 @@ def test_anomalies_change_only_their_component(status):
             assert np.all((sig['levels'][sel, s] >= lo) & (sig['levels'][sel, s] <= hi))
     assert (systems[0].levels != EXAMPLE_1.levels) == (status == 'fss1')
     assert (systems[1].levels != EXAMPLE_2.levels) == (status == 'fss2')
+
+
+@pytest.mark.parametrize('status', fss.STATUSES)
+@pytest.mark.parametrize('size', [1.1, 2.0, 3.0])
+def test_realistic_anomalies_scale_the_wheels_own_nominal(status, size):
+    wheel = {'base_dry': 0.95, 'viscous': 1.05, 'noise_std': 0.025}
+    sig = fss.simulate_wheel(20_000, status, np.random.default_rng(5), profile='biased',
+                             wheel=wheel, size=size)
+    assert sig['nominal'] == wheel
+    assert sig['base_dry'] == pytest.approx(0.95 * (size if status == 'dry' else 1.0))
+    assert sig['viscous'] == pytest.approx(1.05 * (size if status == 'viscous' else 1.0))
+    assert sig['size'] == (None if status == 'nominal' else size)
+    systems = fss.systems_for(status, size=size)
+    active = systems[0].levels[1]
+    assert active == pytest.approx((0.3 * size, 0.4 * size) if status == 'fss1' else (0.3, 0.4))
+    steps = [lo for lo, _ in systems[1].levels]
+    assert steps == pytest.approx([0.0, 0.5, 1.0] if status != 'fss2' else
+                                  [0.0, 0.5 * size, 1.0 * size])
+    for s, system in enumerate(systems):
+        for q, (lo, hi) in enumerate(system.levels):
+            sel = sig['configs'][:, s] == q
+            assert np.all((sig['levels'][sel, s] >= lo) & (sig['levels'][sel, s] <= hi))
+
+
+def test_realistic_sizes_are_drawn_in_range():
+    sizes = [fss.simulate_wheel(200, 'dry', np.random.default_rng(k))['size']
+             for k in range(50)]
+    assert all(fss.ANOMALY_SIZE[0] <= z <= fss.ANOMALY_SIZE[1] for z in sizes)
+    with pytest.raises(ValueError, match='size'):
+        fss.simulate_wheel(200, 'dry', np.random.default_rng(0), size=0.5)
 
 
 def test_telemetry_sign_units_and_truth():
@@ -78,8 +108,25 @@ def test_dataset_builder_is_seeded_with_a_manifest(tmp_path):
         a = fss.load_window(tmp_path / 'a', entry)
         b = fss.load_window(tmp_path / 'b', entry)
         assert np.array_equal(a[1], b[1]) and a[0].size == 2000
+        ref = fss.load_window(tmp_path / 'a', entry, reference=True)
+        assert ref[0].size == 2000 and not np.array_equal(ref[1], a[1])
     with pytest.raises(ValueError, match='manifest'):
         fss.load_manifest(tmp_path)
+
+
+def test_legacy_dataset_reproduces_the_first_bench_draws(tmp_path):
+    # Window j of status s of a legacy data set is simulate_wheel on the seed sequence
+    # (seed, s, j) with the legacy anomalies: the first bench's windows, unchanged.
+    manifest = fss.build_dataset(tmp_path, per_status=1, seed=0, n_samples=2000,
+                                 anomalies='legacy', statuses=('dry',))
+    entry = manifest['windows'][0]
+    rng = np.random.default_rng(np.random.SeedSequence(0, spawn_key=(1, 0)))
+    sig = fss.simulate_wheel(2000, 'dry', rng, anomalies='legacy')
+    assert fss.ANOMALY_BASE_DRY[0] <= entry['base_dry'] == sig['base_dry']
+    assert np.array_equal(fss.load_window(tmp_path, entry)[1],
+                          sig['friction'].astype(np.float32))
+    with pytest.raises(ValueError, match='reference'):
+        fss.load_window(tmp_path, entry, reference=True)
 
 
 def test_bad_simulator_parameters():

@@ -7,11 +7,12 @@ import pytest
 
 from rwa_monitor.cli.main import main
 from rwa_monitor.core.identify.consistency import compare_effects
-from rwa_monitor.core.identify.data import prepare, speed_history
+from rwa_monitor.core.identify.data import speed_history
 from rwa_monitor.core.identify.differentiate import choose_half_width
 from rwa_monitor.core.identify.effects import stribeck_shape
 from rwa_monitor.core.identify.report import identifiability
 from rwa_monitor.core.identify.select import identify
+from rwa_monitor.pipelines.identify import prepare
 from rwa_monitor.telemetry import Telemetry, Wheel, write_telemetry
 
 

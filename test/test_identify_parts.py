@@ -1,13 +1,15 @@
 """Identification parts: residual tests, effect columns, config snippet errors."""
 
+from hypothesis import given, HealthCheck, settings, strategies as st
 import numpy as np
 import pytest
 
-from rwa_monitor.core.identify.data import IdentData
+from rwa_monitor.core.identify.data import IdentData, prepare as prepare_samples
 from rwa_monitor.core.identify.effects import regressor_columns
 from rwa_monitor.core.identify.model import aux_channels, regressors_from_config
 from rwa_monitor.core.identify.residuals import diagnose
-from rwa_monitor.exceptions import ConfigError
+from rwa_monitor.core.identify.select import identify
+from rwa_monitor.exceptions import ConfigError, RwaMonitorError
 
 
 def _data(n=6000, seed=0):
@@ -74,3 +76,90 @@ def test_snippet_errors_name_the_problem():
     with pytest.raises(KeyError, match='rw1_temperature'):
         regs.matrix(np.ones(3), np.zeros(3), {})
     assert regressors_from_config({}).names == ('dry', 'viscous')
+
+
+@st.composite
+def shuffled_records(draw):
+    """Draw a record whose times come in any order, repeat, or are not finite."""
+    n = draw(st.integers(60, 500))
+    rng = np.random.default_rng(draw(st.integers(0, 2 ** 16)))
+    t = np.cumsum(rng.uniform(0.05, 0.15, n))
+    order = draw(st.sampled_from(['shuffled', 'reversed', 'duplicates', 'step_back',
+                                  'sorted']))
+    if order == 'shuffled':
+        t = rng.permutation(t)
+    elif order == 'reversed':
+        t = t[::-1].copy()
+    elif order == 'duplicates':
+        t = np.repeat(t[: (n + 1) // 2], 2)[:n]
+    elif order == 'step_back':
+        k = draw(st.integers(1, n - 1))
+        t[k:] -= draw(st.floats(0.0, 2.0 * float(t[-1])))
+    w = 20.0 * np.sin(2 * np.pi * np.arange(n) / draw(st.integers(5, 200)))
+    f = -(2e-4 * np.sign(w) + 5e-7 * w) + 1e-5 * rng.standard_normal(n)
+    for _ in range(draw(st.integers(0, 8))):
+        column = draw(st.sampled_from([t, w, f]))
+        column[draw(st.integers(0, n - 1))] = draw(st.sampled_from([np.nan, np.inf,
+                                                                    -np.inf]))
+    return t, w, f, draw(st.booleans())
+
+
+@settings(max_examples=25, deadline=None, derandomize=True,
+          suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
+@given(shuffled_records())
+def test_any_time_order_is_dropped_counted_or_refused_in_one_line(record):
+    t, w, f, derived = record
+    try:
+        with np.errstate(all='ignore'):
+            data = prepare_samples(t, w, None if derived else f, inertia=1.0)
+            identify(data, max_effects=1)
+    except RwaMonitorError as err:
+        assert str(err) and '\n' not in str(err)
+        return
+    assert np.all(np.diff(data.time) > 0)
+    assert np.array_equal(data.time, t[data.rows])
+    finite = np.isfinite(t) & np.isfinite(w) & (True if derived else np.isfinite(f))
+    last, late = -np.inf, 0
+    for stamp in t[finite]:      # the rule, one row at a time
+        if stamp > last:
+            last = stamp
+        else:
+            late += 1
+    c = data.counts
+    assert c['non_finite_rows'] == int(np.sum(~finite))
+    assert c['time_not_increasing_rows'] == late
+    dropped = c['non_finite_rows'] + c['time_not_increasing_rows'] + c.get(
+        'dropped_short_run_rows', 0) + c.get('dropped_run_edge_rows', 0)
+    assert len(data) == c['rows'] - dropped
+
+
+def test_repeated_and_backward_stamps_are_dropped_and_counted():
+    n = 400
+    t = np.arange(n, dtype=float)
+    t[100] = t[99]                  # a repeated stamp
+    t[200:210] = t[200:210] - 50.0  # ten stamps stepping back into the past
+    w = 30.0 * np.sin(2 * np.pi * np.arange(n) / 97.0)
+    f = -(2e-4 * np.sign(w) + 5e-7 * w)
+    data = prepare_samples(t, w, f)
+    assert data.counts['time_not_increasing_rows'] == 11
+    assert data.counts['non_finite_rows'] == 0
+    assert len(data) == n - 11 and np.all(np.diff(data.time) > 0)
+    assert 100 not in data.rows and not set(range(200, 210)) & set(data.rows)
+
+
+def test_identify_schema_bounds_are_the_core_bounds(tmp_path):
+    from rwa_monitor.cli.main import main
+    from rwa_monitor.core.schema import IDENTIFY
+    data, _ = _data(n=200)
+    IDENTIFY.validate({'alpha': 0.5, 'half_width': 1000})
+    for name, value in (('alpha', 0.51), ('alpha', 0.0), ('half_width', 0),
+                        ('half_width', 1001), ('inertia', 0.0)):
+        with pytest.raises(ConfigError):
+            IDENTIFY.validate({name: value})
+    with pytest.raises(ValueError, match='alpha'):
+        identify(data, alpha=0.51)
+    for h in (0, 1001):
+        with pytest.raises(ValueError, match='half_width'):
+            prepare_samples(data.time, data.speed, data.speed, half_width=h)
+    with pytest.raises(SystemExit):
+        main(['identify', 'x.csv', '--alpha', '0.6', '-o', str(tmp_path)])

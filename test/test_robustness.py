@@ -212,10 +212,10 @@ def _fss_model():
 
 @settings(max_examples=8, deadline=None, derandomize=True,
           suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
-@given(wheel_streams(n_max=600, parts='wf'))
+@given(wheel_streams(n_max=600, parts='twf'))
 def test_identify_never_raises_anything_but_its_own_errors(stream):
-    """Feed arbitrary speeds and frictions (increasing times: see the issue-17 report)."""
-    from rwa_monitor.core.identify.data import prepare
+    """Feed arbitrary times, speeds and frictions (times out of order: dropped, counted)."""
+    from rwa_monitor.pipelines.identify import prepare
     from rwa_monitor.core.identify.select import identify
     from rwa_monitor.telemetry import Telemetry
     from rwa_monitor.telemetry.schema import Wheel
@@ -230,7 +230,7 @@ def test_identify_never_raises_anything_but_its_own_errors(stream):
 
 
 def test_identify_refuses_speeds_that_are_not_physical():
-    from rwa_monitor.core.identify.data import prepare
+    from rwa_monitor.pipelines.identify import prepare
     from rwa_monitor.core.identify.select import identify
     from rwa_monitor.telemetry import Telemetry
     from rwa_monitor.telemetry.schema import Wheel

@@ -187,3 +187,34 @@ def test_bus_slew_and_thermal_inputs_are_validated():
         BusConfig(slew_duration=10.0, slew_ramp=20.0).validated()
     with pytest.raises(ValueError, match='gyro_thermal_amplitude'):
         BusConfig(gyro_thermal_amplitude=-1.0).validated()
+
+
+@pytest.mark.slow
+def test_demo_drift_then_hold_is_one_drift_then_one_bias():
+    """The gyro stream of ``make demo``: a medium drift on y at 5400 s, held from 5600 s.
+
+    Without a calibration the default block spread (bus, 4 Hz) is half this stream's
+    (10 Hz, 4 s blocks), so the slope test alone flipped the kind 18 times; a bias turns
+    into a drift only when the level has also moved by the level threshold.
+    """
+    from rwa_monitor.cli.cmd_demo import DEFAULT_HOURS, DEFAULT_SEED, RATE_HZ
+    from rwa_monitor.sim.aocs import named_fault, simulate_aocs
+    duration = DEFAULT_HOURS * 3600.0
+    time = np.arange(int(duration * RATE_HZ)) / RATE_HZ
+    tele = simulate_aocs(fault=named_fault('medium', 'y', round(duration / 2)),
+                         seed=DEFAULT_SEED, time=time)
+    truth = tele.truth['gyro_y']
+    changes = time[np.flatnonzero(np.diff(truth)) + 1]
+    assert changes.tolist() == pytest.approx([5400.0, 5600.0], abs=0.2)
+    res = gc.step_residuals(tele.time, tele.gyro, tele.attitude)
+    kinds = []
+    for axis in range(3):
+        channel = GyroDiagnosis().channels[axis]
+        ok = np.isfinite(res[:, axis])
+        for t, e in zip(time[ok], res[ok, axis]):
+            tr = channel.update(e, t, t)
+            if tr is not None:
+                kinds.append(('xyz'[axis], tr.state, tr.declared))
+    assert [k[:2] for k in kinds] == [('y', 1), ('y', 2)]     # drift, then bias
+    assert 5400.0 < kinds[0][2] < 5500.0
+    assert 5600.0 < kinds[1][2] < 5700.0

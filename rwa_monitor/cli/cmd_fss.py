@@ -29,6 +29,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     build.add_argument('--samples', type=int, default=80_000,
                        help='samples per window at 10 Hz (default 80000)')
     build.add_argument('--seed', type=int, default=0)
+    build.add_argument('--anomalies', choices=('realistic', 'legacy'), default='realistic',
+                       help='anomaly sizes: x1.1-x3 of the wheel nominal, with a nominal '
+                            'reference window per window (default), or the first bench '
+                            '2.5-3x (docs/fss.md)')
     build.set_defaults(func=_build)
     train = sub.add_parser('train', help='train the SVMs on a data set')
     train.add_argument('dataset')
@@ -57,7 +61,7 @@ def _build(args: argparse.Namespace) -> int:
     from rwa_monitor.sim.fss import build_dataset
     try:
         manifest = build_dataset(args.dataset, per_status=args.per_status, seed=args.seed,
-                                 n_samples=args.samples)
+                                 n_samples=args.samples, anomalies=args.anomalies)
     except ValueError as err:
         raise ConfigError(str(err)) from None
     print(f'{len(manifest["windows"])} windows written to {args.dataset}')
@@ -79,13 +83,16 @@ def _train(args: argparse.Namespace) -> int:
     rng = np.random.default_rng(args.seed)
     n_train = max(1, int(round(args.train_fraction * len(items))))
     chosen = [items[i] for i in sorted(rng.permutation(len(items))[:n_train])]
+    # Windows with a nominal reference (realistic data sets) train on features relative
+    # to it, the way a calibrated wheel is judged (docs/fss.md, "Calibrated").
+    relative = all('reference' in it for it in chosen)
     try:
         model = train_model(chosen, bins=args.bins, c=args.c, seed=args.seed,
-                            use=args.use)
+                            use=args.use, relative=relative)
     except ValueError as err:
         raise ConfigError(str(err)) from None
     model.spec['trained_on'] = {'dataset': str(args.dataset), 'windows': n_train,
-                                'seed': args.seed}
+                                'seed': args.seed, 'relative': relative}
     save_model(model, args.output)
     print(f'model trained on {n_train} windows written to {args.output}')
     return 0
@@ -97,7 +104,12 @@ def _evaluate(args: argparse.Namespace) -> int:
         model = load_model(args.model)
     except (OSError, ValueError) as err:
         raise ConfigError(str(err)) from None
-    matrix = detection_matrix(model, _items(args.dataset))
+    items = _items(args.dataset)
+    relative = bool(model.spec.get('relative')) and all('reference' in it for it in items)
+    if model.spec.get('relative') and not relative:
+        print('note: the data set has no reference windows (legacy); the relative model '
+              'is given absolute features', file=sys.stderr)
+    matrix = detection_matrix(model, items, relative=relative)
     names = list(next(iter(matrix.values())))
     print('status      ' + ''.join(f'{n:>9}' for n in names))
     for status, row in matrix.items():

@@ -11,7 +11,8 @@ effects side by side, wheels whose effects differ from their siblings' flagged).
 and body at a time, into an in-memory record with only a speed column; friction is then
 J dw/dt (no drive torque during a coast), with J from the folder's pendulum swings
 (telemetry/coastdown.py) unless ``--inertia`` is given. Nothing is copied or written
-outside DIR.
+outside DIR. The options' defaults, bounds and help come from the ``identify`` block of
+the parameter schema (core/schema.py IDENTIFY, docs/parameters.md).
 """
 
 from __future__ import annotations
@@ -21,9 +22,10 @@ import json
 import pathlib
 
 from rwa_monitor.cli.options import add_topics, INPUT_HELP
+from rwa_monitor.core.schema import AUTO, default_text, help_text, IDENTIFY, Param
 from rwa_monitor.exceptions import RwaMonitorError
-from rwa_monitor.pipelines.identify_report import identify_wheel, side_by_side
-from rwa_monitor.pipelines.identify_report import wheels_markdown, write_outputs
+from rwa_monitor.pipelines.identify import identify_wheel
+from rwa_monitor.pipelines.identify_report import side_by_side, wheels_markdown, write_outputs
 from rwa_monitor.telemetry import read_telemetry
 from rwa_monitor.telemetry.atomic import write_text_atomic
 from rwa_monitor.telemetry.coastdown import coastdown_folder, coastdown_runs
@@ -37,7 +39,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         description='Fit the Coulomb + viscous friction model (jumps segmented), diagnose '
                     'the residual, add named effects by forward selection validated on '
                     'held-out data, and write DIR/report.json, plots, a markdown report '
-                    'and the refined model as a config snippet (friction_model.yaml).')
+                    'and the refined model as a config snippet (friction_model.yaml).',
+        epilog=help_text(IDENTIFY), formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument('file', type=pathlib.Path, help=INPUT_HELP + ', or the '
                    'coast-down per-revolution CSV with --format coastdown')
     add_topics(p)
@@ -45,20 +48,43 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument('--wheel', help='wheel id (default: the first wheel; "all": every wheel, '
                    'one sub-folder each, effects side by side in DIR/wheels.md); with '
                    '--format coastdown the body: drum (default) or wheel')
-    p.add_argument('--inertia', type=float, help='wheel inertia J (kg m^2): estimate '
-                   'friction from speed when the file has no friction column')
-    p.add_argument('--torque-constant', type=float,
-                   help='motor torque constant K_T (N m/A) for f = J dw/dt - K_T I')
+    _option(p, 'inertia')
+    _option(p, 'torque_constant')
     p.add_argument('--format', choices=('telemetry', 'coastdown'), default='telemetry')
     p.add_argument('--run', help='coast-down run name (--format coastdown); "list" lists')
-    p.add_argument('--half-width', type=int, default=None,
-                   help='differentiator half window in samples (default: chosen from the '
-                   'data, noise against bias, when friction is derived from speed; 5 '
-                   'otherwise)')
-    p.add_argument('--alpha', type=float, default=1e-3,
-                   help='family-wise level of the effect and jump tests (default 1e-3)')
-    p.add_argument('--no-jumps', action='store_true', help='do not segment friction jumps')
+    _option(p, 'half_width')
+    _option(p, 'alpha')
+    jumps = IDENTIFY['jumps']
+    p.add_argument('--no-jumps', dest='jumps', action='store_false', default=jumps.default,
+                   help=f'do not: {jumps.description[0].lower()}{jumps.description[1:]}')
     p.set_defaults(func=run)
+
+
+def _option(parser: argparse.ArgumentParser, name: str) -> None:
+    """Add ``--<name>`` with the schema's default, bounds and meaning."""
+    param = IDENTIFY[name]
+    unit = f' [{param.unit}]' if param.unit else ''
+    parser.add_argument('--' + name.replace('_', '-'), type=_converter(param),
+                        default=param.default, metavar=name.upper(),
+                        help=f'{param.description}{unit} Allowed: {param.allowed()}; default '
+                             f'{default_text(param)}.')
+
+
+def _converter(param: Param):
+    """Return the argparse type of a schema parameter (its own check, one-line errors)."""
+    def convert(text: str):
+        if param.auto and text == AUTO:
+            return AUTO
+        try:
+            return param.check(param.type(text))
+        except ValueError as err:
+            raise argparse.ArgumentTypeError(str(err)) from None
+    return convert
+
+
+def _given(value):
+    """Return None for an automatic value, else the value."""
+    return None if value == AUTO else value
 
 
 def run(args: argparse.Namespace) -> int:
@@ -70,23 +96,22 @@ def run(args: argparse.Namespace) -> int:
             return 0 if args.run == 'list' else _fail('--run NAME is needed (or --run list)')
         body = args.wheel or 'drum'
         tele = read_coastdown(args.file, args.run, body)
-        inertia = args.inertia if args.inertia is not None else pendulum_inertia(
-            coastdown_folder(args.file), body)
+        inertia = _given(args.inertia) or pendulum_inertia(coastdown_folder(args.file), body)
         wheels = [body]
     else:
         tele = read_telemetry(args.file, args.topics).only('wheels')
-        inertia = args.inertia
+        inertia = _given(args.inertia)
         wheels = list(tele.wheels) if args.wheel == 'all' else [args.wheel]
         if args.wheel == 'all' and not wheels:
             _fail('the file has no <id>_speed column: nothing to identify')
-    half_width = 'auto' if args.half_width is None else args.half_width
     title = str(args.file) + (f' [{args.run}]' if args.run else '')
     results = {}
     for wheel in wheels:
         out = args.out / wheel if len(wheels) > 1 else args.out
         try:
-            selection, extra = identify_wheel(tele, wheel, inertia, args.torque_constant,
-                                              half_width, args.alpha, not args.no_jumps)
+            selection, extra = identify_wheel(tele, wheel, inertia,
+                                              _given(args.torque_constant), args.half_width,
+                                              args.alpha, args.jumps)
         except ValueError as err:
             if isinstance(err, RwaMonitorError):
                 raise

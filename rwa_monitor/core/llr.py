@@ -23,8 +23,8 @@ from rwa_monitor.core.gchi2 import (gchi2_logsf_general, log_sf2, log_sf2_t,
                                     skip_threshold)
 from rwa_monitor.core.llr_common import (candidate_log_p2, checkpoints, COUNTER_NAMES,
                                          declaration, fit_noise_model, make_event,
-                                         NoiseModel, reference_base, validate_parameters,
-                                         window_statistics)
+                                         NoiseModel, reference_base, revision_due,
+                                         validate_parameters, window_statistics)
 from rwa_monitor.core.params import AUTO
 
 __all__ = ['candidate_log_p2', 'COUNTER_NAMES', 'detect_batch', 'detect_batch_with_counters',
@@ -521,9 +521,8 @@ class LLRDetector:
         after = cat['gap'] + np.asarray(self._pref, dtype=float)
         new = llr_stats.categorise(cat['before'], cat['n_before'], after, self._p,
                                    self._noise_var, self._z_thr)
-        if ((new.kind, new.guess) == (cat['kind'], cat['guess'])
-                and (cat['confirmed'] or not new.confirmed)):
-            return []   # revision: new kind or guess, or the same kind now confirmed
+        if not revision_due(cat['kind'], cat['guess'], cat['confirmed'], new):
+            return []
         cat['kind'] = new.kind
         cat['guess'] = new.guess
         cat['confirmed'] = new.confirmed

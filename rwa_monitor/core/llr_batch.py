@@ -27,7 +27,7 @@ from rwa_monitor.core.events import AnomalyEvent
 from rwa_monitor.core.gchi2 import skip_threshold
 from rwa_monitor.core.llr_common import (candidate_log_p2, checkpoints, declaration,
                                          fit_noise_model, make_event, reference_base,
-                                         whiten, window_statistics)
+                                         revision_due, whiten, window_statistics)
 
 CHUNK = 1 << 13
 
@@ -237,8 +237,7 @@ def detect_paper_model(t: np.ndarray, w: np.ndarray, f: np.ndarray, cfg: Mapping
             after = cat['gap'] + ref.at(j + 1)
             new = llr_stats.categorise(cat['before'], cat['n_before'], after, 2, noise_var,
                                        z_thr)
-            if ((new.kind, new.guess) != (cat['kind'], cat['guess'])
-                    or (new.confirmed and not cat['confirmed'])):
+            if revision_due(cat['kind'], cat['guess'], cat['confirmed'], new):
                 cat['kind'] = new.kind
                 cat['guess'] = new.guess
                 cat['confirmed'] = new.confirmed

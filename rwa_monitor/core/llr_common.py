@@ -152,6 +152,20 @@ def declaration(prefix: np.ndarray, first: int, c: int, k_min: int, n: int,
     return Declaration(tau, max(tau, k_min), category)
 
 
+def revision_due(kind: str, guess: str, confirmed: bool, new: llr_stats.Category) -> bool:
+    """Return True when a re-check of a declared change's kind gives a revision event.
+
+    Not in the paper (docs/llr.md "Categorisation"): a kind confirmed for the first time
+    or replaced by another confirmed kind, or, while unconfirmed, a new best guess. A
+    confirmed kind is never withdrawn to ``undecided``: a later evaluation whose other
+    component sits between the 5 % and the category level is ambiguous, not evidence
+    against it (a different confirmed kind is).
+    """
+    if new.confirmed:
+        return not confirmed or new.kind != kind
+    return not confirmed and (new.kind, new.guess) != (kind, guess)
+
+
 def reference_base(c: int, first: int, reference_max: int | None) -> int:
     """Return the first position of the before-segment used at a declaration.
 

@@ -362,7 +362,8 @@ RESIDUAL_PARAMETERS = ('feature', 'calibration_file', 'saturation_rad_s', 'resid
                        'residual_guard_blocks', 'residual_fit_blocks',
                        'residual_decide_blocks', 'residual_confirm_blocks',
                        'residual_max_wait_blocks', 'residual_decide_chi2',
-                       'residual_freeze_fraction', 'residual_recovery_fraction')
+                       'residual_freeze_fraction', 'residual_recovery_fraction',
+                       'residual_cusum_threshold', 'residual_cusum_allowance')
 
 VSADC = Schema('vsadc_detector', (
     Param('feature', 'residual', 'residual: gyro minus star-tracker rate, the true rate '
@@ -386,14 +387,18 @@ VSADC = Schema('vsadc_detector', (
           high=10_000),
     Param('residual_confirm_blocks', 2, 'Successive blocks that confirm a change.', low=1,
           high=1000),
-    Param('residual_max_wait_blocks', 6, 'Blocks after which an undecided kind is the '
+    Param('residual_max_wait_blocks', 2, 'Blocks after which an undecided kind is the '
           'better fit.', low=0, high=1000),
-    Param('residual_decide_chi2', 9.0, 'Margin (block variances) by which step or ramp '
+    Param('residual_decide_chi2', 6.0, 'Margin (block variances) by which step or ramp '
           'must fit better.', low=0.0),
     Param('residual_freeze_fraction', 0.5, 'The nominal stops learning beyond this '
           'fraction of the level threshold.', low=0.0, high=1.0),
     Param('residual_recovery_fraction', 0.5, 'A fault ends below this fraction of the '
           'level threshold.', low=0.0, high=1.0, low_open=True),
+    Param('residual_cusum_threshold', 6.0, 'CUSUM of the block distances (block standard '
+          'deviations) that starts the kind decision; 0 = level test only.', low=0.0),
+    Param('residual_cusum_allowance', 1.5, 'CUSUM reference value (block standard '
+          'deviations): the lag of the tracked nominal under a slow wander.', low=0.0),
     Param('window', 200, 'SW: samples of the nominal batch and of the evolving window '
           '(vsadc paper, Algorithm 1).', low=2, high=100_000, unit='samples'),
     Param('sigma_window', 200, 'Distances in the sigma of line 22; auto = window (the '
@@ -443,11 +448,19 @@ VSADC = Schema('vsadc_detector', (
 # ----------------------------------------------------------------------- identification
 
 IDENTIFY = Schema('identify', (
-    Param('half_width', 5, 'Half window of the local-polynomial differentiator.', low=1,
-          high=1000, unit='samples', scope='file'),
+    Param('half_width', AUTO, 'Half window of the local-polynomial differentiator; auto = '
+          'chosen from the data (noise against bias) when friction is derived from speed, '
+          '5 otherwise.', low=1, high=1000, auto=True, kind=int, unit='samples',
+          scope='file'),
     Param('alpha', 1.0e-3, 'Family-wise level of the effect and jump tests.', low=0.0,
-          high=1.0, low_open=True, high_open=True, scope='file'),
+          high=0.5, low_open=True, scope='file'),
     Param('jumps', True, 'Segment friction jumps before fitting.', scope='file'),
+    Param('inertia', AUTO, 'Wheel inertia J: friction = J dw/dt - K_T I (eq. 1b) when the '
+          'file has no friction column; auto = none (the coast-down folder: its pendulum).',
+          low=0.0, low_open=True, auto=True, kind=float, unit='kg m^2', scope='file'),
+    Param('torque_constant', AUTO, 'Motor torque constant K_T of eq. 1b, needed with a '
+          '<id>_current column; auto = none.', low=0.0, low_open=True, auto=True,
+          kind=float, unit='N m/A', scope='file'),
 ), 'Identification of what the friction model misses (`rwa-monitor identify`); '
    'docs/identify.md.')
 

@@ -32,11 +32,12 @@ s) is STALE, never OK. Events kept in memory are bounded (``MAX_KEPT``).
 from __future__ import annotations
 
 from collections import deque
-from typing import Any, Sequence
+from typing import Any, Callable, Sequence
 
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import QuaternionStamped, Vector3Stamped
 from rclpy.node import Node
+from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import Imu
 
 from rwa_monitor.core import keys, streams
@@ -83,10 +84,12 @@ class VsadcDetectorNode(Node):
         self.counters = {'gyro_messages': 0, 'star_tracker_messages': 0,
                          'reference_messages': 0, 'unpaired_gyro': 0,
                          'unpaired_star_tracker': 0, 'reference_from_parameter': 0,
-                         'time_jump_reset': 0, 'detector_failures': 0}
+                         'time_jump_reset': 0, 'detector_failures': 0,
+                         'undecodable': 0}
         self.events: deque[AnomalyEvent] = deque(maxlen=MAX_KEPT)
         self._last_event: dict[str, AnomalyEvent] = {}
         self.samples = 0
+        self.index = 0      # samples fed since the detector (re)started: the event index
         self._pairer = streams.StampPairer(self.params['pair_tolerance'],
                                            self.params['max_lag'], self.params['time_jump'])
         self._refs: deque = deque(maxlen=64)
@@ -105,7 +108,8 @@ class VsadcDetectorNode(Node):
             event_callbacks=qos_event_callbacks(self, 'anomalies', True))
         self.alarms = LatchedAlarms(self, self._anomaly_pub, self.diagnostics,
                                     self.params['events_file'], kind_level)
-        subs = [self.create_subscription(msg_type, topic, callback, telemetry_qos(),
+        subs = [self.create_subscription(msg_type, topic, self._raw(msg_type, callback),
+                                         telemetry_qos(), raw=True,
                                          event_callbacks=qos_event_callbacks(self, topic))
                 for msg_type, topic, callback in (
                     (Imu, 'telemetry/gyro', self.on_gyro),
@@ -138,6 +142,7 @@ class VsadcDetectorNode(Node):
             self.reference = list(value)
         elif name in DETECTOR_PARAMETERS:
             self.detector = self._make_detector(self._detector_config())
+            self.index = 0
             self._axis_checks()
             self.get_logger().info(f'{name} = {value}: detector restarted')
 
@@ -150,30 +155,77 @@ class VsadcDetectorNode(Node):
                                      lambda i=i: self._axis_health(i))
 
     # ---------------------------------------------------------------------- input
+    def _raw(self, msg_type: Any, on_message: Callable[[Any], None]
+             ) -> Callable[[bytes], None]:
+        """Return the raw-bytes callback of one input topic.
+
+        Decision (issue 17): the subscriptions are raw and decode the bytes by hand
+        (:func:`messages.decode_stamped`), as llr_detector does for the wheels. Building
+        the generated Python message cost more than the detector itself (an Imu, with its
+        three covariance arrays, over 100 us on this machine) and made this node the
+        slowest reader, holding the largest backlog (docs/nodes.md "VSADC input").
+        Bytes the decoder refuses go through rclpy's deserialisation; bytes neither can
+        read are counted as ``undecodable``.
+        """
+        count = messages.STAMPED_SIZES[msg_type.__name__]
+        handle = {Imu: self._gyro_sample, QuaternionStamped: self._star_sample,
+                  Vector3Stamped: self._reference_sample}[msg_type]
+        counter = {Imu: 'gyro_messages', QuaternionStamped: 'star_tracker_messages',
+                   Vector3Stamped: 'reference_messages'}[msg_type]
+
+        def on_bytes(buffer: bytes) -> None:
+            try:
+                t, values = messages.decode_stamped(buffer, count)
+            except ValueError:
+                try:
+                    msg = deserialize_message(buffer, msg_type)
+                except Exception:  # noqa: BLE001 - undecodable input is counted, not fatal
+                    self.counters[counter] += 1
+                    self.counters['undecodable'] += 1
+                    return
+                on_message(msg)
+                return
+            if msg_type is Imu:
+                values = values[messages.IMU_ANGULAR_VELOCITY]
+            handle(t, values)
+        return on_bytes
+
     def on_gyro(self, msg: Imu) -> None:
         """Queue one gyro sample and feed every sample that can be paired now."""
-        self.counters['gyro_messages'] += 1
         v = msg.angular_velocity
-        t = messages.to_seconds(msg.header.stamp)
-        if self._pairer.push_gyro(t, (v.x, v.y, v.z)):
+        self._gyro_sample(messages.to_seconds(msg.header.stamp), (v.x, v.y, v.z))
+
+    def _gyro_sample(self, t: float, rate: Sequence[float]) -> None:
+        self.counters['gyro_messages'] += 1
+        if self._pairer.push_gyro(t, tuple(rate)):
             self.counters['time_jump_reset'] += 1
             self.get_logger().warning(f'gyro time jumped back to t={t:.3f} s: restart')
             self.detector.reset()
-            self._refs.clear()
+            self.index = 0
+            for _ in range(len(self._refs)):        # keep the new pass's reference rates
+                stamp, ref = self._refs.popleft()
+                if stamp <= t + self.params['time_jump']:
+                    self._refs.append((stamp, ref))
         self._drain()
 
     def on_star_tracker(self, msg: QuaternionStamped) -> None:
         """Queue one star-tracker quaternion and feed what can be paired now."""
-        self.counters['star_tracker_messages'] += 1
         q = msg.quaternion
-        self._pairer.push_star(messages.to_seconds(msg.header.stamp), (q.x, q.y, q.z, q.w))
+        self._star_sample(messages.to_seconds(msg.header.stamp), (q.x, q.y, q.z, q.w))
+
+    def _star_sample(self, t: float, q: Sequence[float]) -> None:
+        self.counters['star_tracker_messages'] += 1
+        self._pairer.push_star(t, tuple(q))
         self._drain()
 
     def on_reference(self, msg: Vector3Stamped) -> None:
         """Keep the recent guidance reference rates."""
-        self.counters['reference_messages'] += 1
         v = msg.vector
-        self._refs.append((messages.to_seconds(msg.header.stamp), (v.x, v.y, v.z)))
+        self._reference_sample(messages.to_seconds(msg.header.stamp), (v.x, v.y, v.z))
+
+    def _reference_sample(self, t: float, xyz: Sequence[float]) -> None:
+        self.counters['reference_messages'] += 1
+        self._refs.append((t, tuple(xyz)))
         self._drain()
 
     def _drain(self) -> None:
@@ -205,12 +257,13 @@ class VsadcDetectorNode(Node):
         detector = self.detector
         before = [ch.samples for ch in detector.channels]
         try:
-            found = detector.update(t, rate, q, ref, self.samples)
+            found = detector.update(t, rate, q, ref, self.index)
         except Exception as err:  # noqa: BLE001 - a detector failure never stops the node
             self._detector_failed(err)
             return
         finally:
             self.samples += 1
+            self.index += 1
         now = self.diagnostics.now()
         self.diagnostics.mark_input(INPUT_ID, 'input', now)
         for axis, ch, n in zip(detector.axes, detector.channels, before):
@@ -227,6 +280,7 @@ class VsadcDetectorNode(Node):
             self.get_logger().error(f'detector failed: {self._failure[1]}; detector '
                                     'restarted (further failures are only counted)')
         self.detector = self._make_detector(self._detector_config())
+        self.index = 0
         self._axis_checks()
 
     # --------------------------------------------------------------------- output

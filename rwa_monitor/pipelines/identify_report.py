@@ -152,38 +152,6 @@ def _axis_values(data, name: str) -> np.ndarray:
     return data.aux[name[4:]]
 
 
-def identify_wheel(tele, wheel: str | None, inertia: float | None = None,
-                   torque_constant: float | None = None, half_width: int | str = 'auto',
-                   alpha: float = 1e-3, jumps: bool = True) -> tuple[Selection, dict]:
-    """Prepare one wheel, identify it, and add the output error when friction is derived.
-
-    Returns the selection and the ``extra`` of :func:`write_outputs`: with friction
-    derived from speed and a known inertia, report.json gains ``speed_rmse`` (before /
-    after, rad/s) and selection.json its per-segment details and the differentiator's
-    choice of width.
-    """
-    from rwa_monitor.core.identify.data import prepare
-    from rwa_monitor.core.identify.output_error import speed_rmse
-    from rwa_monitor.core.identify.select import identify
-    data = prepare(tele, wheel, inertia, torque_constant, half_width)
-    selection = identify(data, alpha=alpha, jumps=jumps)
-    extra: dict = {'details': {'differentiator': data.differentiator or
-                               {'half_width': data.half_width, 'chosen_from': 'given'}}}
-    if data.derived and inertia is not None:
-        current = tele.aux.get(f'{data.wheel}_current')
-        torque = None if current is None else torque_constant * np.asarray(
-            current, dtype=float)[_kept_rows(tele, data)]
-        sr = speed_rmse(selection, inertia, torque)
-        extra['report'] = {'speed_rmse': {'before': sr['before'], 'after': sr['after']}}
-        extra['details']['speed_rmse'] = sr
-    return selection, extra
-
-
-def _kept_rows(tele, data) -> np.ndarray:
-    """Return the file rows the identification kept (matched on time)."""
-    return np.searchsorted(np.asarray(tele.time, dtype=float), data.time)
-
-
 def side_by_side(results: dict[str, dict]) -> dict:
     """Return every wheel's effects and fit side by side, with the consistency check."""
     from rwa_monitor.core.identify.consistency import compare_effects

@@ -8,8 +8,12 @@ units with the project's sign, friction torque = -f^d sign(w) - f^v w + noise.
 
 Statuses (docs/simulators.md, "FSS"): ``nominal`` and one anomaly at a time, ``dry``
 (base dry friction up), ``viscous`` (viscous coefficient up), ``fss1`` and ``fss2``
-(that system's friction-level distribution changed, eq. 9b). A labelled data set is a
-directory of windows (``.npz``) with a ``manifest.json``.
+(that system's friction-level distribution changed, eq. 9b). Anomaly sizes
+(``anomalies``): ``realistic`` (default) multiplies the wheel's own nominal quantity by a
+factor ``size`` in ANOMALY_SIZE (x1.1 to x3, docs/fss.md); ``legacy`` is the first
+bench's fixed ranges, 2.5-3x away from nominal, reproduced draw for draw from the same
+seeds. A labelled data set is a directory of windows (``.npz``, each with a nominal
+window of the same wheel for its commissioning reference) and a ``manifest.json``.
 """
 
 from __future__ import annotations
@@ -24,6 +28,7 @@ import numpy as np
 from rwa_monitor.core.fss.model import DEFAULT_SYSTEMS, SwitchingSystem
 from rwa_monitor.core.params import check_choice, check_int, check_real
 from rwa_monitor.telemetry import Telemetry, Wheel
+from rwa_monitor.telemetry.atomic import atomic_write, write_text_atomic
 
 STATUSES = ('nominal', 'dry', 'viscous', 'fss1', 'fss2')
 TORQUE_SCALE_NM = 2.0e-4       # one normalised torque unit (the nominal base dry friction)
@@ -36,7 +41,11 @@ BURN_IN = 60_000               # steps simulated before the window: FSS states a
 NOMINAL_BASE_DRY = (0.9, 1.1)
 NOMINAL_VISCOUS = (0.9, 1.1)
 NOISE_STD = (0.02, 0.03)       # the paper's Fig. 9: |error| > 0.08 at 1e-3 -> sigma ~ 0.025
-# Anomalies (docs/fss.md explains the magnitudes).
+# Realistic anomalies: factor on the wheel's own nominal (base dry, viscous, FSS-1 active
+# level, FSS-2 level step), drawn uniformly unless given.
+ANOMALY_SIZE = (1.1, 3.0)
+ANOMALY_MODES = ('realistic', 'legacy')
+# Legacy anomalies (the first bench; docs/fss.md explains the magnitudes).
 ANOMALY_BASE_DRY = (2.5, 3.0)
 ANOMALY_VISCOUS = (1.3, 1.6)
 ANOMALY_FSS1_LEVELS = ((0.0, 0.1), (0.42, 0.55))
@@ -44,15 +53,31 @@ ANOMALY_FSS2_LEVELS = ((0.0, 0.2), (1.1, 1.3), (2.2, 2.4))
 
 
 def systems_for(status: str,
-                systems: Sequence[SwitchingSystem] = DEFAULT_SYSTEMS
-                ) -> tuple[SwitchingSystem, ...]:
-    """Return the switching systems of a wheel with ``status`` (eq. 9b for fss1/fss2)."""
+                systems: Sequence[SwitchingSystem] = DEFAULT_SYSTEMS,
+                size: float | None = None) -> tuple[SwitchingSystem, ...]:
+    """Return the switching systems of a wheel with ``status`` (eq. 9b for fss1/fss2).
+
+    ``size`` None: the legacy anomalous levels. Else the factor on the nominal levels:
+    FSS 1's active level range times ``size``; FSS 2's configuration q level range
+    shifted from 0.5 q to 0.5 q ``size`` (every cage step ``size`` times larger).
+    """
     check_choice('status', status, STATUSES)
     out = list(systems)
     if status == 'fss1':
-        out[0] = out[0].with_levels(ANOMALY_FSS1_LEVELS)
+        if size is None:
+            out[0] = out[0].with_levels(ANOMALY_FSS1_LEVELS)
+        else:
+            low = out[0].levels[0]
+            out[0] = out[0].with_levels((low,) + tuple(
+                (lo * size, hi * size) for lo, hi in out[0].levels[1:]))
     elif status == 'fss2':
-        out[1] = out[1].with_levels(ANOMALY_FSS2_LEVELS)
+        if size is None:
+            out[1] = out[1].with_levels(ANOMALY_FSS2_LEVELS)
+        else:
+            floor = out[1].levels[0][0]
+            out[1] = out[1].with_levels(tuple(
+                (lo + (size - 1.0) * (lo - floor), hi + (size - 1.0) * (lo - floor))
+                for lo, hi in out[1].levels))
     return tuple(out)
 
 
@@ -119,19 +144,44 @@ def spin_profile(n: int, rng: np.random.Generator, rate_hz: float = RATE_HZ,
 
 def simulate_wheel(n: int, status: str, rng: np.random.Generator, *,
                    systems: Sequence[SwitchingSystem] = DEFAULT_SYSTEMS,
-                   profile: str = 'realistic', rate_hz: float = RATE_HZ) -> dict:
+                   profile: str = 'realistic', rate_hz: float = RATE_HZ,
+                   anomalies: str = 'realistic', size: float | None = None,
+                   wheel: dict | None = None) -> dict:
     """Return one wheel's normalised signals and truth, paper sign (eq. 4a-4b).
 
     Keys: ``speed``, ``friction`` (f_k, positive opposes motion), ``base_dry``,
     ``viscous``, ``noise_std``, ``dry`` (f^d_k), per system ``levels`` / ``configs``
-    (n x S), ``jump`` (1-based index of the system that jumped at k, 0 if none).
+    (n x S), ``jump`` (1-based index of the system that jumped at k, 0 if none),
+    ``size`` (the anomaly factor, None for legacy or nominal), ``nominal`` (the wheel's
+    nominal base dry, viscous and noise std). ``anomalies='realistic'``: the wheel's
+    nominal is drawn (or given as ``wheel``, a ``nominal`` dict) and the anomaly
+    multiplies it by ``size`` (drawn in ANOMALY_SIZE when None). ``'legacy'``: the
+    first bench's draws, unchanged.
     """
     check_choice('status', status, STATUSES)
+    check_choice('anomalies', anomalies, ANOMALY_MODES)
     n = check_int('n', n, 1)
-    sys_used = systems_for(status, systems)
-    base = rng.uniform(*(ANOMALY_BASE_DRY if status == 'dry' else NOMINAL_BASE_DRY))
-    visc = rng.uniform(*(ANOMALY_VISCOUS if status == 'viscous' else NOMINAL_VISCOUS))
-    noise = rng.uniform(*NOISE_STD)
+    if anomalies == 'legacy':
+        sys_used = systems_for(status, systems)
+        base = rng.uniform(*(ANOMALY_BASE_DRY if status == 'dry' else NOMINAL_BASE_DRY))
+        visc = rng.uniform(*(ANOMALY_VISCOUS if status == 'viscous' else NOMINAL_VISCOUS))
+        noise = rng.uniform(*NOISE_STD)
+        nominal = None
+    else:
+        if wheel is None:
+            nominal = {'base_dry': rng.uniform(*NOMINAL_BASE_DRY),
+                       'viscous': rng.uniform(*NOMINAL_VISCOUS),
+                       'noise_std': rng.uniform(*NOISE_STD)}
+        else:
+            nominal = {k: float(wheel[k]) for k in ('base_dry', 'viscous', 'noise_std')}
+        if status != 'nominal' and size is None:
+            size = float(rng.uniform(*ANOMALY_SIZE))
+        if status != 'nominal':
+            size = check_real('size', size, 1.0)
+        sys_used = systems_for(status, systems, size)
+        base = nominal['base_dry'] * (size if status == 'dry' else 1.0)
+        visc = nominal['viscous'] * (size if status == 'viscous' else 1.0)
+        noise = nominal['noise_std']
     levels = np.empty((n, len(sys_used)))
     configs = np.empty((n, len(sys_used)), dtype=int)
     jump = np.zeros(n, dtype=int)
@@ -143,7 +193,8 @@ def simulate_wheel(n: int, status: str, rng: np.random.Generator, *,
     friction = dry * np.sign(speed) + visc * speed + rng.normal(0.0, noise, n)
     return {'speed': speed, 'friction': friction, 'base_dry': base, 'viscous': visc,
             'noise_std': noise, 'dry': dry, 'levels': levels, 'configs': configs,
-            'jump': jump, 'status': status}
+            'jump': jump, 'status': status, 'size': size if status != 'nominal' else None,
+            'nominal': nominal}
 
 
 def to_si(speed: np.ndarray, friction: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -154,14 +205,15 @@ def to_si(speed: np.ndarray, friction: np.ndarray) -> tuple[np.ndarray, np.ndarr
 def simulate_fss(*, statuses: Sequence[str] = ('nominal',) * 4,
                  wheels: Sequence[str] | None = None, n_samples: int = WINDOW_SAMPLES,
                  rate_hz: float = RATE_HZ, profile: str = 'realistic',
-                 seed: int = 0) -> Telemetry:
+                 seed: int = 0, anomalies: str = 'realistic',
+                 size: float | None = None) -> Telemetry:
     """Return telemetry of one wheel per status, with truth columns (SI units).
 
     Wheel i draws from the seed sequence (seed, i). Truth per wheel ``<id>``:
     ``<id>_dry`` (N m), ``<id>_viscous`` (N m s/rad), ``<id>_noise_std`` (N m),
     ``<id>_base_dry`` (N m), ``<id>_fss<s>`` (level, N m) and ``<id>_fss<s>_q``,
     ``<id>_jump`` (which FSS jumped at the sample, 0 none) and ``<id>_status``
-    (index into STATUSES).
+    (index into STATUSES). ``anomalies`` and ``size``: as :func:`simulate_wheel`.
     """
     for status in statuses:
         check_choice('status', status, STATUSES)
@@ -173,7 +225,8 @@ def simulate_fss(*, statuses: Sequence[str] = ('nominal',) * 4,
     tele = Telemetry(time=np.arange(n) / rate_hz)
     for i, (wheel_id, status) in enumerate(zip(ids, statuses)):
         rng = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(i,)))
-        sig = simulate_wheel(n, status, rng, profile=profile, rate_hz=rate_hz)
+        sig = simulate_wheel(n, status, rng, profile=profile, rate_hz=rate_hz,
+                             anomalies=anomalies, size=size)
         speed, friction = to_si(sig['speed'], sig['friction'])
         tele.wheels[wheel_id] = Wheel(speed=speed, friction=friction)
         truth = {'dry': sig['dry'] * TORQUE_SCALE_NM,
@@ -191,36 +244,59 @@ def simulate_fss(*, statuses: Sequence[str] = ('nominal',) * 4,
 
 
 def build_dataset(out_dir: str | os.PathLike, *, per_status: int = 50, seed: int = 0,
-                  n_samples: int = WINDOW_SAMPLES, profile: str = 'realistic') -> dict:
+                  n_samples: int = WINDOW_SAMPLES, profile: str = 'realistic',
+                  anomalies: str = 'realistic', statuses: Sequence[str] = STATUSES,
+                  sizes: Sequence[float] | None = None) -> dict:
     """Write a labelled data set: ``per_status`` windows of each status, and a manifest.
 
     Window j of status s is drawn from the seed sequence (seed, s, j), so any window can
-    be regenerated alone. Files hold normalised float32 ``speed`` and ``friction`` (paper
-    sign) and the truth; ``manifest.json`` lists them with their labels and parameters.
+    be regenerated alone (``legacy`` data sets are the first bench's, window for window).
+    Files hold normalised float32 ``speed`` and ``friction`` (paper sign) and the truth;
+    with ``realistic`` anomalies also ``ref_speed`` / ``ref_friction``, a nominal window
+    of the same wheel (seed sequence (seed, s, j, 1)): its commissioning reference.
+    ``sizes``: the anomaly factors to cycle through (window j gets sizes[j % len]);
+    None draws them in ANOMALY_SIZE. ``manifest.json`` lists the windows with their
+    labels and parameters.
     """
     per_status = check_int('per_status', per_status, 1, 100_000)
     n = check_int('n_samples', n_samples, 100, 10**7)
+    check_choice('anomalies', anomalies, ANOMALY_MODES)
     out = pathlib.Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     entries = []
-    for s_idx, status in enumerate(STATUSES):
+    for status in statuses:
+        s_idx = STATUSES.index(check_choice('status', status, STATUSES))
         for j in range(per_status):
             rng = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(s_idx, j)))
-            sig = simulate_wheel(n, status, rng, profile=profile)
+            size = None if sizes is None or status == 'nominal' else float(
+                sizes[j % len(sizes)])
+            sig = simulate_wheel(n, status, rng, profile=profile, anomalies=anomalies,
+                                 size=size)
+            arrays = {'speed': sig['speed'].astype(np.float32),
+                      'friction': sig['friction'].astype(np.float32),
+                      'jump': sig['jump'].astype(np.int8)}
+            if sig['nominal'] is not None:
+                ref_rng = np.random.default_rng(np.random.SeedSequence(
+                    seed, spawn_key=(s_idx, j, 1)))
+                ref = simulate_wheel(n, 'nominal', ref_rng, profile=profile,
+                                     wheel=sig['nominal'])
+                arrays.update(ref_speed=ref['speed'].astype(np.float32),
+                              ref_friction=ref['friction'].astype(np.float32))
             name = f'{status}_{j:04d}.npz'
-            np.savez(out / name, speed=sig['speed'].astype(np.float32),
-                     friction=sig['friction'].astype(np.float32),
-                     jump=sig['jump'].astype(np.int8))
+            with atomic_write(out / name, 'wb', encoding=None) as handle:
+                np.savez(handle, **arrays)
             entries.append({'file': name, 'status': status, 'seed': [seed, s_idx, j],
                             'base_dry': sig['base_dry'], 'viscous': sig['viscous'],
-                            'noise_std': sig['noise_std'],
+                            'noise_std': sig['noise_std'], 'size': sig['size'],
+                            'nominal': sig['nominal'],
                             'n_jumps': int(np.count_nonzero(sig['jump']))})
-    manifest = {'kind': 'fss-dataset', 'version': 1, 'seed': seed, 'per_status': per_status,
+    manifest = {'kind': 'fss-dataset', 'version': 2, 'seed': seed, 'per_status': per_status,
                 'n_samples': n, 'rate_hz': RATE_HZ, 'profile': profile,
-                'statuses': list(STATUSES), 'units': 'normalised, paper sign',
+                'anomalies': anomalies, 'sizes': None if sizes is None else list(sizes),
+                'statuses': list(statuses), 'units': 'normalised, paper sign',
                 'torque_scale_nm': TORQUE_SCALE_NM, 'speed_scale_rad_s': SPEED_SCALE_RAD_S,
                 'windows': entries}
-    (out / 'manifest.json').write_text(json.dumps(manifest, indent=1) + '\n')
+    write_text_atomic(out / 'manifest.json', json.dumps(manifest, indent=1) + '\n')
     return manifest
 
 
@@ -235,23 +311,48 @@ def load_manifest(path: str | os.PathLike) -> dict:
     return manifest
 
 
-def load_window(path: str | os.PathLike, entry: dict) -> tuple[np.ndarray, np.ndarray]:
-    """Return (speed, friction) of one data-set window, normalised, paper sign."""
+def load_window(path: str | os.PathLike, entry: dict, reference: bool = False
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """Return (speed, friction) of one data-set window, normalised, paper sign.
+
+    ``reference``: the window's nominal reference window instead (ValueError if the
+    data set has none, i.e. legacy anomalies).
+    """
     with np.load(pathlib.Path(path) / entry['file']) as data:
-        return data['speed'].astype(float), data['friction'].astype(float)
+        if not reference:
+            return data['speed'].astype(float), data['friction'].astype(float)
+        if 'ref_speed' not in data:
+            raise ValueError(f'{entry["file"]}: no reference window (legacy data set)')
+        return data['ref_speed'].astype(float), data['ref_friction'].astype(float)
+
+
+def extraction_item(speed: np.ndarray, friction: np.ndarray, config) -> dict:
+    from rwa_monitor.core.fss.baseline import ls_summary
+    from rwa_monitor.core.fss.pipeline import extract
+    ext = extract(speed, friction, config)
+    return {'features': ext.features(), 'identifiable': ext.identifiable,
+            'ls': ls_summary(speed, friction, ext.accepted, dk_error=config.dk_error,
+                             viscous_prior=config.viscous_prior),
+            'stats': {'detected': int(ext.detected.size), 'rejected': ext.rejected,
+                      'accepted': int(ext.accepted.size), 'iterations': ext.iterations,
+                      'exact': ext.exact, 'rmse': ext.rmse, 'sigma': ext.sigma,
+                      'timings': ext.timings}}
 
 
 def dataset_extractions(path: str | os.PathLike, config=None, *, cache: bool = True,
                         progress=None) -> list[dict]:
     """Return stages 1-3 of every window of a data set, cached in ``extractions.json``.
 
-    Each item: ``file``, ``status``, ``features`` (classifier input) and ``stats``
-    (changepoints detected, rejected, DP iterations, exactness, stage times in s). The
-    cache is reused only when it was made with the same diagnoser parameters.
+    Each item: ``file``, ``status``, ``size``, ``features`` (classifier input),
+    ``identifiable``, ``ls`` (the baseline's least-squares estimates, core/fss/baseline.py)
+    and ``stats`` (changepoints detected, rejected, DP iterations, exactness, stage times
+    in s); with realistic anomalies also ``reference``, the same for the window's nominal
+    reference window. The cache is reused only when it was made with the same diagnoser
+    parameters, switching laws and code.
     """
     from dataclasses import asdict
 
-    from rwa_monitor.core.fss.pipeline import extract, FssConfig
+    from rwa_monitor.core.fss.pipeline import FssConfig
     config = FssConfig() if config is None else config
     path = pathlib.Path(path)
     manifest = load_manifest(path)
@@ -270,17 +371,16 @@ def dataset_extractions(path: str | os.PathLike, config=None, *, cache: bool = T
             return cached['items']
     items = []
     for j, entry in enumerate(manifest['windows']):
-        speed, friction = load_window(path, entry)
-        ext = extract(speed, friction, config)
-        items.append({'file': entry['file'], 'status': entry['status'],
-                      'features': ext.features(),
-                      'stats': {'detected': int(ext.detected.size), 'rejected': ext.rejected,
-                                'accepted': int(ext.accepted.size),
-                                'iterations': ext.iterations, 'exact': ext.exact,
-                                'rmse': ext.rmse, 'sigma': ext.sigma,
-                                'timings': ext.timings}})
+        item = {'file': entry['file'], 'status': entry['status'], 'size': entry.get('size'),
+                **extraction_item(*load_window(path, entry), config)}
+        if entry.get('nominal') is not None:
+            ref = extraction_item(*load_window(path, entry, reference=True), config)
+            item['reference'] = {k: ref[k] for k in ('features', 'identifiable', 'ls')}
+            item['reference']['sigma'] = ref['stats']['sigma']
+        items.append(item)
         if progress is not None:
             progress(j + 1, len(manifest['windows']))
     if cache:
-        cache_file.write_text(json.dumps({'signature': signature, 'items': items}) + '\n')
+        write_text_atomic(cache_file, json.dumps({'signature': signature,
+                                                  'items': items}) + '\n')
     return items

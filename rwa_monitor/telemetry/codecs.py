@@ -278,7 +278,7 @@ class JointStateCodec:
 class StampedCodec:
     """Encode a message that is a Header followed only by float64 values, by hand.
 
-    Vector3Stamped (3 values), QuaternionStamped (4) and Imu (41: orientation,
+    Vector3Stamped (3 values), QuaternionStamped (4) and Imu (37: orientation,
     its covariance, angular velocity, its covariance, linear acceleration, its
     covariance) have this shape: after ``frame_id`` the values start at the next multiple
     of 8 and follow each other. ``template`` holds the constant values; ``slots`` says
@@ -304,6 +304,34 @@ class StampedCodec:
             row[slot] = value
         return b''.join((_CDR_LE, self._stamp.pack(*split_seconds(seconds)), self._middle,
                          self._values.pack(*row)))
+
+
+# Float64 values after the header of each message that is a Header and float64s only.
+STAMPED_SIZES = {'Vector3Stamped': 3, 'QuaternionStamped': 4, 'Imu': 37}
+IMU_ANGULAR_VELOCITY = slice(13, 16)  # angular_velocity x, y, z among the Imu's 37 values
+
+
+def decode_stamped(buffer: bytes, count: int) -> tuple[float, tuple[float, ...]]:
+    """Return ``(time, values)`` of a serialised Header-then-``count``-float64 message.
+
+    The inverse of :class:`StampedCodec` for any ``frame_id`` (so also bytes another
+    serialiser wrote); up to 7 trailing padding bytes are accepted, as for the JointState.
+    Raise ValueError if the bytes are not such a little-endian CDR message (the caller
+    falls back to rclpy's deserialisation).
+    """
+    if buffer[:2] != b'\x00\x01':
+        raise ValueError('not little-endian CDR')
+    data = memoryview(buffer)[4:]
+    try:
+        sec, nanosec, frame_len = _HEAD.unpack_from(data, 0)
+        offset = (12 + frame_len + 7) & ~7
+        values = struct.unpack_from(f'<{count}d', data, offset)
+    except struct.error as err:
+        raise ValueError(f'not a stamped message of {count} values: {err}') from None
+    left = len(data) - offset - 8 * count
+    if frame_len < 1 or not 0 <= left < 8:
+        raise ValueError(f'not a stamped message of {count} values: {left} bytes left over')
+    return sec + nanosec / 1e9, values
 
 
 def vector3_codec(frame_id: str = 'body') -> StampedCodec:

@@ -144,20 +144,57 @@ class WindowClassifier:
         return out
 
 
+def relative_features(features: dict, reference: dict) -> dict:
+    """Return window features in units of the wheel's nominal reference.
+
+    Dividing the torque by the reference's base dry friction and the speed by base dry /
+    viscous makes the reference (1, 1), as :func:`rwa_monitor.core.calibrate.fss_inputs`
+    does on telemetry: base dry and levels are divided by the reference's base dry, the
+    viscous coefficient by the reference's viscous coefficient.
+    """
+    base, visc = float(reference['base_dry']), float(reference['viscous'])
+    if not (base > 0 and visc > 0):
+        raise ValueError('the reference needs a positive base dry friction and viscous '
+                         'coefficient')
+    return {'base_dry': features['base_dry'] / base, 'viscous': features['viscous'] / visc,
+            'levels': [[v / base for v in levels] for levels in features['levels']]}
+
+
+def item_features(item: dict, relative: bool) -> dict:
+    """Return an extraction item's features, relative to its reference when asked."""
+    if not relative:
+        return item['features']
+    if 'reference' not in item:
+        raise ValueError('relative features need windows with a nominal reference '
+                         '(a data set built with realistic anomalies)')
+    return relative_features(item['features'], item['reference']['features'])
+
+
 def train_model(items: Sequence[dict], *, bins: int = 20, c: float = 1.0, seed: int = 0,
-                use: str = 'both') -> WindowClassifier:
-    """Return a WindowClassifier trained on labelled extractions (``features``, ``status``)."""
-    return WindowClassifier.fit([it['features'] for it in items],
-                                [it['status'] for it in items], bins=bins, c=c, seed=seed,
-                                use=use)
+                use: str = 'both', relative: bool = False) -> WindowClassifier:
+    """Return a WindowClassifier trained on labelled extractions (``features``, ``status``).
+
+    ``relative``: on features relative to each window's nominal reference
+    (:func:`relative_features`), the way a calibrated wheel is judged.
+    """
+    model = WindowClassifier.fit([item_features(it, relative) for it in items],
+                                 [it['status'] for it in items], bins=bins, c=c, seed=seed,
+                                 use=use)
+    model.spec['relative'] = bool(relative)
+    return model
 
 
-def detection_matrix(classifier: WindowClassifier, items: Sequence[dict]
-                     ) -> dict[str, dict[str, float]]:
-    """Return status -> anomaly -> fraction of that status's windows flagged."""
+def detection_matrix(classifier: WindowClassifier, items: Sequence[dict],
+                     relative: bool | None = None) -> dict[str, dict[str, float]]:
+    """Return status -> anomaly -> fraction of that status's windows flagged.
+
+    ``relative`` None: as the classifier was trained (its spec's ``relative``).
+    """
+    if relative is None:
+        relative = bool(classifier.spec.get('relative', False))
     out: dict[str, dict[str, list[bool]]] = {}
     for it in items:
-        flags = classifier.predict(it['features'])
+        flags = classifier.predict(item_features(it, relative))
         row = out.setdefault(it['status'], {k: [] for k in flags})
         for k, v in flags.items():
             row[k].append(v)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Mapping
 
 import numpy as np
 
@@ -12,7 +13,6 @@ from rwa_monitor.core.identify.differentiate import local_polynomial_derivative
 from rwa_monitor.core.identify.history import History, history
 from rwa_monitor.core.params import check_int, check_real
 from rwa_monitor.exceptions import NotIdentifiableError
-from rwa_monitor.telemetry.schema import Telemetry
 
 MIN_SAMPLES = 50
 DEFAULT_HALF_WIDTH = 5
@@ -30,7 +30,7 @@ class IdentData:
 
     ``derived`` is True when friction was estimated from speed (eq. 1b); then the
     residual noise is correlated over ``stride`` samples and the whiteness test uses
-    every ``stride``-th residual.
+    every ``stride``-th residual. ``rows`` are the input rows kept (None: all).
     """
 
     wheel: str
@@ -48,6 +48,7 @@ class IdentData:
     runs: list[int] = field(default_factory=lambda: [0])
     half_width: int = 0
     differentiator: dict = field(default_factory=dict)
+    rows: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         if self.past is None:
@@ -62,18 +63,6 @@ class IdentData:
         return float(np.sqrt(np.mean(self.noise_std ** 2)))
 
 
-def choose_wheel(tele: Telemetry, wheel: str | None) -> str:
-    """Return the wheel id to identify: the one asked for, or the file's only/first."""
-    if not tele.wheels:
-        raise NotIdentifiableError('the file has no <id>_speed column: nothing to identify')
-    if wheel is None:
-        return next(iter(tele.wheels))
-    if wheel not in tele.wheels:
-        raise NotIdentifiableError(f'no wheel {wheel!r} in the file; it has: '
-                                   f'{", ".join(tele.wheels)}')
-    return wheel
-
-
 def _chunks(time: np.ndarray, ok: np.ndarray) -> list[np.ndarray]:
     """Return index arrays of runs of valid samples without long time gaps."""
     index = np.flatnonzero(ok)
@@ -85,13 +74,41 @@ def _chunks(time: np.ndarray, ok: np.ndarray) -> list[np.ndarray]:
     return np.split(index, breaks)
 
 
-def prepare(tele: Telemetry, wheel: str | None = None, inertia: float | None = None,
+def _increasing(time: np.ndarray, ok: np.ndarray) -> np.ndarray:
+    """Return ``ok`` without the rows whose time is not later than every earlier kept row.
+
+    The rule for stamps out of order or repeated (docs/identify.md, "Bad input"): a row
+    is kept only when its time exceeds the largest time of the rows kept before it, so
+    the kept times increase strictly; a duplicate keeps its first row, a step back
+    drops the rows until time passes the last kept stamp again.
+    """
+    finite_time = np.where(ok, time, -np.inf)
+    before = np.concatenate([[-np.inf], np.maximum.accumulate(finite_time)[:-1]])
+    return ok & (time > before)
+
+
+def _usable(time: np.ndarray, ok: np.ndarray, counts: dict[str, int]) -> np.ndarray:
+    """Count the non-finite rows and the rows out of time order; return the usable mask."""
+    counts['non_finite_rows'] = int(np.sum(~ok))
+    usable = _increasing(time, ok)
+    counts['time_not_increasing_rows'] = int(np.sum(ok & ~usable))
+    return usable
+
+
+def prepare(time: np.ndarray, speed: np.ndarray, friction: np.ndarray | None = None, *,
+            wheel: str = 'rw1', aux: Mapping[str, np.ndarray] | None = None,
+            signals: Mapping[str, np.ndarray] | None = None, inertia: float | None = None,
             torque_constant: float | None = None, half_width: int | str = 'auto'
             ) -> IdentData:
     """Return the samples of one wheel, with friction measured or estimated (eq. 1b).
 
-    Rows with a non-finite time, speed or friction are dropped and counted. Without a
-    friction column the friction is J dw/dt - K_T I from a local-polynomial derivative on
+    ``time``, ``speed``, ``friction`` (None or all NaN: derive it from speed) and every
+    array of ``aux`` (this wheel's auxiliary channels: candidate effects; the motor
+    current ``<wheel>_current`` enters eq. 1b) and ``signals`` (every other channel of the
+    record: residual diagnostics only) have one value per row.
+    Rows with a non-finite time, speed or friction are dropped and counted, then rows
+    whose time does not increase (:func:`_increasing`). Without friction the friction is
+    J dw/dt - K_T I from a local-polynomial derivative on
     each run of valid samples (runs split at NaN rows and at time gaps longer than five
     typical steps; runs shorter than two windows are dropped and counted). The first and
     last h samples of each run are dropped (counted): their windows are all the same
@@ -100,48 +117,56 @@ def prepare(tele: Telemetry, wheel: str | None = None, inertia: float | None = N
     (differentiate.choose_half_width, on the longest run) when friction is derived from
     speed, and uses DEFAULT_HALF_WIDTH otherwise.
     """
+    aux = dict(aux or {})
+    time = np.asarray(time, dtype=float)
+    speed = np.asarray(speed, dtype=float)
+    if friction is not None:
+        friction = np.asarray(friction, dtype=float)
     differentiator: dict = {}
-    wheel = choose_wheel(tele, wheel)
-    channels = tele.wheels[wheel]
-    measured = channels.friction is not None and np.any(np.isfinite(channels.friction))
-    if half_width == 'auto':
-        half_width, differentiator = (DEFAULT_HALF_WIDTH, {}) if measured else \
-            _auto_half_width(tele, wheel)
-    half_width = check_int('half_width', half_width, 1, 1000)
-    time = np.asarray(tele.time, dtype=float)
-    speed = np.asarray(channels.speed, dtype=float)
+    measured = friction is not None and bool(np.any(np.isfinite(friction)))
     counts = {'rows': len(time)}
     notes: list[str] = []
     if measured:
-        ok = np.isfinite(time) & np.isfinite(speed) & np.isfinite(channels.friction)
-        counts['non_finite_rows'] = int(np.sum(~ok))
+        ok = _usable(time, np.isfinite(time) & np.isfinite(speed) & np.isfinite(friction),
+                     counts)
+        if half_width == 'auto':
+            half_width = DEFAULT_HALF_WIDTH
+        half_width = check_int('half_width', half_width, 1, 1000)
         keep = np.flatnonzero(ok)
         _need(len(keep))
-        friction = np.asarray(channels.friction, dtype=float)[keep]
+        friction = friction[keep]
         noise = local_noise_std(time[keep], friction, half_width, 2, _block(len(keep)),
                                 exclude=_near_sign_change(speed[keep], half_width))
         derived, stride = False, 1
         run_starts = _run_starts(time[keep])
     else:
+        current = aux.get(f'{wheel}_current')
+        current = None if current is None else np.asarray(current, dtype=float)
+        _check_physics(wheel, inertia, torque_constant, current)
+        ok = np.isfinite(time) & np.isfinite(speed)
+        if current is not None:
+            ok &= np.isfinite(current)
+        ok = _usable(time, ok, counts)
+        if half_width == 'auto':
+            half_width, differentiator = _auto_half_width(time, speed, ok)
+        half_width = check_int('half_width', half_width, 1, 1000)
         keep, friction, noise, run_starts = _from_speed(
-            tele, wheel, inertia, torque_constant, half_width, counts, notes)
+            time, speed, ok, current, float(inertia), torque_constant, half_width, counts,
+            notes)
         derived, stride = True, 2 * half_width + 1
-    others = tuple(f'{w}_' for w in tele.wheels if w != wheel)
-    aux = _aux_channels(tele, keep, notes, counts, others)
-    signals = _other_signals(tele, keep, wheel, others)
     return IdentData(wheel=wheel, time=time[keep], speed=speed[keep], friction=friction,
-                     noise_std=noise, aux=aux, derived=derived, stride=stride,
-                     counts=counts, notes=notes, signals=signals,
+                     noise_std=noise, aux=_aux_channels(time, aux, keep, notes, counts),
+                     derived=derived, stride=stride, counts=counts, notes=notes,
+                     signals=_other_signals(signals or {}, keep),
                      past=speed_history(time[keep], speed[keep], half_width),
                      runs=run_starts, half_width=half_width,
-                     differentiator=differentiator)
+                     differentiator=differentiator, rows=keep)
 
 
-def _auto_half_width(tele: Telemetry, wheel: str) -> tuple[int, dict]:
+def _auto_half_width(time: np.ndarray, speed: np.ndarray, ok: np.ndarray
+                     ) -> tuple[int, dict]:
     """Return the differentiator half width chosen on the longest valid run, and why."""
-    time = np.asarray(tele.time, dtype=float)
-    speed = np.asarray(tele.wheels[wheel].speed, dtype=float)
-    runs = _chunks(time, np.isfinite(time) & np.isfinite(speed))
+    runs = _chunks(time, ok)
     if not runs or len(max(runs, key=len)) < 2 * HALF_WIDTHS[0] + 1:
         return DEFAULT_HALF_WIDTH, {}
     run = max(runs, key=len)
@@ -178,24 +203,15 @@ def speed_history(time: np.ndarray, speed: np.ndarray, half_width: int = 2) -> H
     return history(time, speed, rate, noise)
 
 
-def _other_signals(tele: Telemetry, keep: np.ndarray, wheel: str, others: tuple[str, ...]
+def _other_signals(signals: Mapping[str, np.ndarray], keep: np.ndarray
                    ) -> dict[str, np.ndarray]:
-    """Return every other finite signal of the file on the kept rows (diagnostics only).
+    """Return every other signal of the record on the kept rows, if finite there.
 
-    Other wheels' speeds, frictions and channels: not candidate effects (aux above), but
-    the residual is tested against them so that nothing in the file goes unlooked at.
+    Other wheels' speeds, frictions and channels: not candidate effects (aux), but the
+    residual is tested against them (diagnostics only) so that nothing in the record
+    goes unlooked at.
     """
-    out = {}
-    for other, ch in tele.wheels.items():
-        if other == wheel:
-            continue
-        for kind in ('speed', 'friction'):
-            values = getattr(ch, kind, None)
-            if values is not None:
-                out[f'{other}_{kind}'] = np.asarray(values, dtype=float)[keep]
-    for name, values in tele.aux.items():
-        if others and name.startswith(others):
-            out[name] = np.asarray(values, dtype=float)[keep]
+    out = {name: np.asarray(values, dtype=float)[keep] for name, values in signals.items()}
     return {k: v for k, v in out.items() if np.all(np.isfinite(v))}
 
 
@@ -215,11 +231,10 @@ def _need(n: int) -> None:
             f'too few valid samples: {n}; the identification needs at least {MIN_SAMPLES}')
 
 
-def _from_speed(tele: Telemetry, wheel: str, inertia: float | None,
-                torque_constant: float | None, half_width: int, counts: dict[str, int],
-                notes: list[str]) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[int]]:
+def _check_physics(wheel: str, inertia: float | None, torque_constant: float | None,
+                   current: np.ndarray | None) -> None:
+    """Raise NotIdentifiableError unless eq. 1b has what it needs (J; K_T with a current)."""
     current_name = f'{wheel}_current'
-    current = tele.aux.get(current_name)
     if inertia is None:
         need = 'the wheel inertia J (--inertia, kg m^2)'
         if current is not None:
@@ -227,23 +242,24 @@ def _from_speed(tele: Telemetry, wheel: str, inertia: float | None,
         raise NotIdentifiableError(
             f'no {wheel}_friction column: friction must be estimated from speed as '
             f'f = J dw/dt - K_T I (eq. 1b), which needs {need}')
-    inertia = check_real('inertia', inertia, 0.0, low_open=True)
+    check_real('inertia', inertia, 0.0, low_open=True)
     if current is not None and torque_constant is None:
         raise NotIdentifiableError(
             f'the file has a {current_name} column (motor current): the friction '
             f'estimate f = J dw/dt - K_T I needs the torque constant (--torque-constant, '
             f'N m/A)')
     if torque_constant is not None:
-        torque_constant = check_real('torque_constant', torque_constant, 0.0, low_open=True)
+        check_real('torque_constant', torque_constant, 0.0, low_open=True)
         if current is None:
             raise NotIdentifiableError(
                 f'--torque-constant given but the file has no {current_name} column')
-    time = np.asarray(tele.time, dtype=float)
-    speed = np.asarray(tele.wheels[wheel].speed, dtype=float)
-    ok = np.isfinite(time) & np.isfinite(speed)
-    if current is not None:
-        ok &= np.isfinite(current)
-    counts['non_finite_rows'] = int(np.sum(~ok))
+
+
+def _from_speed(time: np.ndarray, speed: np.ndarray, ok: np.ndarray,
+                current: np.ndarray | None, inertia: float, torque_constant: float | None,
+                half_width: int, counts: dict[str, int], notes: list[str]
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[int]]:
+    """Return kept rows, friction J dw/dt - K_T I, its noise, and the runs' first rows."""
     pieces, dropped, edges = [], 0, 0
     for run in _chunks(time, ok):
         if len(run) < 4 * half_width + 1:
@@ -275,20 +291,17 @@ def _from_speed(tele: Telemetry, wheel: str, inertia: float | None,
             np.concatenate([p[2] for p in pieces]), [int(s) for s in starts])
 
 
-def _aux_channels(tele: Telemetry, keep: np.ndarray, notes: list[str],
-                  counts: dict[str, int], others: tuple[str, ...] = ()
-                  ) -> dict[str, np.ndarray]:
+def _aux_channels(time: np.ndarray, aux: Mapping[str, np.ndarray], keep: np.ndarray,
+                  notes: list[str], counts: dict[str, int]) -> dict[str, np.ndarray]:
     """Return the aux channels on the kept rows, gaps filled by interpolation in time.
 
-    Channels of other wheels (``<other id>_...``) are left out: another wheel's
-    temperature or current does not act on this wheel's bearing, and through the attitude
-    loop it correlates with this wheel's speed history, which would pass for an effect.
+    Only this wheel's channels belong here: another wheel's temperature or current does
+    not act on this wheel's bearing, and through the attitude loop it correlates with
+    this wheel's speed history, which would pass for an effect (those go to ``signals``).
     """
     out = {}
-    time = np.asarray(tele.time, dtype=float)[keep]
-    for name, values in tele.aux.items():
-        if others and name.startswith(others):
-            continue
+    time = time[keep]
+    for name, values in aux.items():
         values = np.asarray(values, dtype=float)[keep]
         ok = np.isfinite(values)
         if np.sum(ok) < 0.5 * len(values):

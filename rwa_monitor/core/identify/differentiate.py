@@ -54,7 +54,12 @@ def _local_fit_weights(time: np.ndarray, half_width: int, order: int, force: boo
     u = dt / scale[:, None]
     powers = u[:, :, None] ** np.arange(order + 1)[None, None, :]      # (n, m, q)
     gram = np.einsum('nmp,nmq->npq', powers, powers)
-    coef = np.linalg.solve(gram, np.transpose(powers, (0, 2, 1)))      # (n, q, m)
+    try:
+        coef = np.linalg.solve(gram, np.transpose(powers, (0, 2, 1)))  # (n, q, m)
+    except np.linalg.LinAlgError:
+        # A window whose times are degenerate at double precision (a stamp 1e300 s
+        # away from its neighbours): the least-norm fit keeps every weight finite.
+        coef = np.linalg.pinv(powers)                                  # (n, q, m)
     coef /= scale[:, None, None] ** np.arange(order + 1)[None, :, None]
     return idx, coef
 

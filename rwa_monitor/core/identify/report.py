@@ -3,8 +3,10 @@
 report.json has exactly the keys of DESIGN.md: ``baseline`` (model and parameters),
 ``noise_floor`` (N m), ``rmse_before`` / ``rmse_after`` (each ``in_sample`` and
 ``held_out``, N m) and ``effects`` (in the order added: ``name``, ``parameters``,
-``evidence``). Everything else (the steps of the selection with every candidate's
-evidence, the residual tests before and after, the jumps) goes to selection.json.
+``evidence``), plus ``dropped_rows`` (rows with a non-finite value, rows whose time
+does not increase) when any input row was left out. Everything else (the steps of the
+selection with every candidate's evidence, the residual tests before and after, the
+jumps) goes to selection.json.
 This module builds the dictionaries and the markdown text (no I/O, no plots);
 pipelines/identify_report.py draws the figures and writes the files.
 """
@@ -17,6 +19,9 @@ from typing import Any
 import numpy as np
 
 from rwa_monitor.core.identify.model import column_names, plain
+
+# Input rows left out, reported in report.json when there are any (docs/contracts.md).
+DROPPED = ('non_finite', 'time_not_increasing')
 
 
 def _finite(value: Any) -> Any:
@@ -63,11 +68,16 @@ def report(selection) -> dict:
         effects.append({'name': eff.name,
                         'parameters': effect_parameters(eff, final.coef),
                         'evidence': {k: _finite(v) for k, v in plain(eff.evidence).items()}})
-    return {'baseline': {'model': 'coulomb+viscous', 'parameters': parameters},
-            'noise_floor': float(selection.data.noise_floor),
-            'rmse_before': {'in_sample': base.rmse_train, 'held_out': base.rmse_held_out},
-            'rmse_after': {'in_sample': final.rmse_train, 'held_out': final.rmse_held_out},
-            'effects': effects}
+    out = {'baseline': {'model': 'coulomb+viscous', 'parameters': parameters},
+           'noise_floor': float(selection.data.noise_floor),
+           'rmse_before': {'in_sample': base.rmse_train, 'held_out': base.rmse_held_out},
+           'rmse_after': {'in_sample': final.rmse_train, 'held_out': final.rmse_held_out},
+           'effects': effects}
+    counts = selection.data.counts
+    dropped = {key: int(counts.get(f'{key}_rows', 0)) for key in DROPPED}
+    if any(dropped.values()):
+        out['dropped_rows'] = dropped
+    return out
 
 
 def _tests(diag: dict) -> dict:

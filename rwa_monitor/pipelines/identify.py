@@ -1,0 +1,100 @@
+"""Identification of a telemetry record: the record's channels to the core's arrays.
+
+The core (core/identify/) takes arrays: time, speed, friction, this wheel's auxiliary
+channels and every other signal. Here a Telemetry record is split into those for one
+wheel (:func:`prepare`), and :func:`identify_wheel` runs the identification with the
+output error when friction is derived from speed. Used by ``rwa-monitor identify`` and
+the identify benchmark; pipelines/identify_report.py writes the outputs.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from threadpoolctl import threadpool_limits
+
+from rwa_monitor.core.identify import data as samples
+from rwa_monitor.core.identify.data import IdentData
+from rwa_monitor.core.identify.output_error import speed_rmse
+from rwa_monitor.core.identify.select import identify, Selection
+from rwa_monitor.exceptions import NotIdentifiableError
+from rwa_monitor.telemetry.schema import Telemetry
+
+# BLAS threads during an identification. Its products are thin (n x a few columns): a
+# threaded BLAS gains nothing on them, and on a loaded machine its threads wait for
+# each other (measured, bench identify: 100k samples 20 s wall with the default threads
+# against 8 s with one, for 4 s of CPU time either way).
+BLAS_THREADS = 1
+
+
+def choose_wheel(tele: Telemetry, wheel: str | None) -> str:
+    """Return the wheel id to identify: the one asked for, or the file's only/first."""
+    if not tele.wheels:
+        raise NotIdentifiableError('the file has no <id>_speed column: nothing to identify')
+    if wheel is None:
+        return next(iter(tele.wheels))
+    if wheel not in tele.wheels:
+        raise NotIdentifiableError(f'no wheel {wheel!r} in the file; it has: '
+                                   f'{", ".join(tele.wheels)}')
+    return wheel
+
+
+def wheel_channels(tele: Telemetry, wheel: str
+                   ) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
+    """Return (aux, signals) of one wheel: its candidate channels, and everything else.
+
+    ``aux``: the record's auxiliary channels except other wheels' (``<other id>_...``);
+    ``signals``: other wheels' speeds, frictions and channels (diagnostics only).
+    """
+    others = tuple(f'{w}_' for w in tele.wheels if w != wheel)
+    aux, signals = {}, {}
+    for other, ch in tele.wheels.items():
+        if other == wheel:
+            continue
+        for kind in ('speed', 'friction'):
+            values = getattr(ch, kind, None)
+            if values is not None:
+                signals[f'{other}_{kind}'] = values
+    for name, values in tele.aux.items():
+        if others and name.startswith(others):
+            signals[name] = values
+        else:
+            aux[name] = values
+    return aux, signals
+
+
+def prepare(tele: Telemetry, wheel: str | None = None, inertia: float | None = None,
+            torque_constant: float | None = None, half_width: int | str = 'auto'
+            ) -> IdentData:
+    """Return the samples of one wheel of a record (core.identify.data.prepare)."""
+    wheel = choose_wheel(tele, wheel)
+    aux, signals = wheel_channels(tele, wheel)
+    channels = tele.wheels[wheel]
+    return samples.prepare(tele.time, channels.speed, channels.friction, wheel=wheel,
+                           aux=aux, signals=signals, inertia=inertia,
+                           torque_constant=torque_constant, half_width=half_width)
+
+
+def identify_wheel(tele: Telemetry, wheel: str | None, inertia: float | None = None,
+                   torque_constant: float | None = None, half_width: int | str = 'auto',
+                   alpha: float = 1e-3, jumps: bool = True) -> tuple[Selection, dict]:
+    """Prepare one wheel, identify it, and add the output error when friction is derived.
+
+    Returns the selection and the ``extra`` of identify_report.write_outputs: with
+    friction derived from speed and a known inertia, report.json gains ``speed_rmse``
+    (before / after, rad/s) and selection.json its per-segment details and the
+    differentiator's choice of width.
+    """
+    with threadpool_limits(BLAS_THREADS):
+        data = prepare(tele, wheel, inertia, torque_constant, half_width)
+        selection = identify(data, alpha=alpha, jumps=jumps)
+    extra: dict = {'details': {'differentiator': data.differentiator or
+                               {'half_width': data.half_width, 'chosen_from': 'given'}}}
+    if data.derived and inertia is not None:
+        current = tele.aux.get(f'{data.wheel}_current')
+        torque = None if current is None else torque_constant * np.asarray(
+            current, dtype=float)[data.rows]
+        with threadpool_limits(BLAS_THREADS):
+            sr = speed_rmse(selection, inertia, torque)
+        extra['report'] = {'speed_rmse': {'before': sr['before'], 'after': sr['after']}}
+        extra['details']['speed_rmse'] = sr
+    return selection, extra
