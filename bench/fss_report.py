@@ -294,9 +294,10 @@ def sizes_markdown(sizes: dict, paper: dict) -> list[str]:
     seeds = sizes['seeds']
     laws = sizes['laws']
     lines = ['### Realistic anomalies: detection against size (the tables that count)', '',
-             f'`python -m bench fss` (bench/fss_sizes.py), scoring seeds {seeds["laws"]} '
-             f'(commissioning), {seeds["train"]} (training), {seeds["test"]} (test), fixed '
-             'before any result; development used seeds 11-13. Anomalies multiply the '
+             f'`python -m bench fss` (bench/fss_sizes.py), {sizes["seed_set"]} seeds '
+             f'{seeds["laws"]} (commissioning), {seeds["train"]} (training), '
+             f'{seeds["test"]} (test), fixed before any result; development used seeds '
+             '11-14 (1001-1004 were set aside after a quick run). Anomalies multiply the '
              "wheel's own nominal (base dry, viscous, FSS-1 active level, FSS-2 level step) "
              'by the size; every window is judged against a separate nominal window of the '
              f'same wheel (its commissioning reference). Switching laws of stage 3 estimated '
@@ -353,7 +354,9 @@ def sizes_markdown(sizes: dict, paper: dict) -> list[str]:
               f'{", ".join(paper["calibrate_effects"]) or "none"}, '
               f'{paper["calibrate_warnings"]} warnings of friction changes: the FSS jumps); '
               '`model1` = the same contract with a model-(1) nominal (bench/fss_sizes.py '
-              '`model1_block`). Then through core/calibrate.py `diagnose_fss` with the '
+              '`model1_block`); `model1_3windows` = model (1) on three nominal windows of '
+              'the wheel end to end (6.7 h). Then through core/calibrate.py `diagnose_fss` '
+              'with the '
               f'shipped model, {paper["windows_per_case"]} windows per case, and the same '
               'windows without calibration. Named right: nominal with no flag, or only the '
               "right kind; estimates are medians relative to the calibration's reference "

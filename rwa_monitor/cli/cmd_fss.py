@@ -104,7 +104,12 @@ def _evaluate(args: argparse.Namespace) -> int:
         model = load_model(args.model)
     except (OSError, ValueError) as err:
         raise ConfigError(str(err)) from None
-    matrix = detection_matrix(model, _items(args.dataset))
+    items = _items(args.dataset)
+    relative = bool(model.spec.get('relative')) and all('reference' in it for it in items)
+    if model.spec.get('relative') and not relative:
+        print('note: the data set has no reference windows (legacy); the relative model '
+              'is given absolute features', file=sys.stderr)
+    matrix = detection_matrix(model, items, relative=relative)
     names = list(next(iter(matrix.values())))
     print('status      ' + ''.join(f'{n:>9}' for n in names))
     for status, row in matrix.items():

@@ -90,11 +90,9 @@ def extract(speed: np.ndarray, friction: np.ndarray, config: FssConfig = FssConf
     n = speed.size
     timings = {}
     t0, c0 = _time.perf_counter(), _time.thread_time()
-    cps = detect_changepoints(friction, speed, window=config.wglr_window,
-                              w_bias=config.w_bias,
-                              viscous_prior=config.viscous_prior, p_false=config.p_false)
+    detected = _changepoints(speed, friction, config)
     t1, c1 = _time.perf_counter(), _time.thread_time()
-    fit = fit_intervals(friction, speed, cps.changepoints, dk_error=config.dk_error,
+    fit = fit_intervals(friction, speed, detected, dk_error=config.dk_error,
                         viscous_prior=config.viscous_prior)
     t2, c2 = _time.perf_counter(), _time.thread_time()
     sigma2 = fit.sigma2 if np.isfinite(fit.sigma2) and fit.sigma2 > 0 else 1.0
@@ -115,12 +113,30 @@ def extract(speed: np.ndarray, friction: np.ndarray, config: FssConfig = FssConf
     t3, c3 = _time.perf_counter(), _time.thread_time()
     timings.update(changepoints=t1 - t0, least_squares=t2 - t1, assignment=t3 - t2)
     cpu = {'changepoints': c1 - c0, 'least_squares': c2 - c1, 'assignment': c3 - c2}
-    return Extraction(detected=cps.changepoints, accepted=accepted, systems_of=inputs,
+    return Extraction(detected=detected, accepted=accepted, systems_of=inputs,
                       deltas=np.diff(refit.dry), base_dry=base, viscous=refit.viscous,
                       levels=levels, configs=qs, sigma=float(np.sqrt(refit.sigma2)),
                       rmse=refit.rmse, rejected=int(np.sum(assignment.inputs == 0)),
                       iterations=assignment.iterations, exact=assignment.exact,
                       identifiable=refit.identifiable, timings=timings, cpu_timings=cpu)
+
+
+def _changepoints(speed: np.ndarray, friction: np.ndarray, config: FssConfig) -> np.ndarray:
+    """Return stage 1's changepoints, the wGLR run on the finite samples only.
+
+    Samples left out (non-finite, or skipped by a calibration: its low-speed band and
+    speeds outside its range) are removed before the wGLR and the indices mapped back,
+    so that a jump inside a gap is found at the first sample after it (in the full
+    series a gap empties one side of the window and the statistic is 0 there: the jump
+    would be missed and its two levels fitted as one).
+    """
+    finite = np.flatnonzero(np.isfinite(speed) & np.isfinite(friction))
+    if finite.size < 4:
+        return np.zeros(0, dtype=np.int64)
+    cps = detect_changepoints(friction[finite], speed[finite], window=config.wglr_window,
+                              w_bias=config.w_bias, viscous_prior=config.viscous_prior,
+                              p_false=config.p_false)
+    return finite[cps.changepoints]
 
 
 def normalise(speed_rad_s: np.ndarray, friction_nm: np.ndarray, config: FssConfig
