@@ -30,7 +30,9 @@ from rwa_monitor.sim.aocs import (AocsConfig, DRIFT_SLOPES, GyroFault, named_fau
 
 SCENARIOS = ('fast', 'medium', 'slow', 'bias')
 DURATION_S, FAULT_S, TS = 3600.0, 900.0, 0.25
-SEEDS = tuple(range(100, 106))     # tuning used seeds 0-3; these are fresh
+#: Fresh seeds of this round, fixed before any result (tuning used seeds 0-3; the
+#: previous rounds scored 100-105). Three, to keep the run near 20 machine minutes.
+SEEDS = tuple(range(4200, 4203))
 QUICK_SEEDS = (100,)
 TRAIN_FRACTION = 0.7
 #: Records the ``cross`` protocol trains on: other seeds, half of each fault sign.
@@ -311,6 +313,27 @@ def _markdown(res: dict[str, Any]) -> str:
         'depends on the record layout). vsadc-literal = Algorithm 1 read literally '
         '(docs/vsadc.md). VSADC settings: ' + ', '.join(
             f'{k}={v}' for k, v in res['config'].items() if k in pipeline.DEFAULTS) + '.', '']
+    cross = agg['cross']
+    rows = [[m0] + [_fmt(paper[sc][m0][m]) for sc in SCENARIOS
+                    for m in ('accuracy', 'idr', 'delay_s')] for m0 in ('residual', 'vsadc')]
+    rows += [[n] + [_fmt(cross[sc][n][m]) for sc in SCENARIOS
+                    for m in ('accuracy', 'idr', 'delay_s')] for n in baseline_names]
+    lines += [f'**Headline, fair protocol: baselines trained on {CROSS_RECORDS} other records '
+              '(own seeds and levels, both fault signs) on window means, never on the scored '
+              'record; every method scored on the same 30 % test rows of the record. '
+              'residual = the gyro-minus-star-tracker diagnosis (default settings, no '
+              'calibration); vsadc = Algorithm 1 on the two residuals of the paper. Accuracy / '
+              'IDR (%) / delay (s)**', '', report.table(
+                  ['method'] + [f'{sc} {m}' for sc in SCENARIOS
+                                for m in ('acc', 'IDR', 'delay')], rows), '']
+    best = {sc: max((cross[sc][n]['accuracy'], n) for n in baseline_names)
+            for sc in SCENARIOS}
+    lines += ['Best cross-trained baseline by accuracy: ' + '; '.join(
+        f'{sc} {best[sc][1]} {best[sc][0]:.2f} (residual {paper[sc]["residual"]["accuracy"]:.2f}'
+        f', vsadc {paper[sc]["vsadc"]["accuracy"]:.2f})' for sc in SCENARIOS) + '.', '',
+        '**The protocol of the paper** (each baseline trains on a random 70 % of the rows of '
+        'the record it is scored on, so it sees the time neighbours of its test rows; kept for '
+        'comparison with the tables of the paper only)', '']
     lines += _paper_tables(paper, names)
     rows = [[name] + [_fmt(paper[sc][name]['delay_s']) for sc in SCENARIOS] for name in names]
     lines += ['**Detection delay (s): first faulty label on a test row after the onset**', '',
@@ -321,9 +344,7 @@ def _markdown(res: dict[str, Any]) -> str:
               'truth changes 2 times, once for the bias step)', '',
               report.table(['method', *SCENARIOS], rows), '']
     for protocol, title in (
-            ('smoothed', 'Baselines on the window means of VSADC, same random 70/30 split'),
-            ('cross', f'Baselines on window means, trained on {CROSS_RECORDS} other records '
-                      '(own seeds and levels, both fault signs), tested on this one')):
+            ('smoothed', 'Baselines on the window means of VSADC, same random 70/30 split'),):
         rows = [[m0] + [_fmt(paper[sc][m0][m]) for sc in SCENARIOS
                         for m in ('accuracy', 'idr')] for m0 in ('residual', 'vsadc')]
         rows += [[n] + [_fmt(agg[protocol][sc][n][m]) for sc in SCENARIOS
@@ -432,7 +453,7 @@ def run(out_dir: pathlib.Path, quick: bool) -> dict[str, Any]:
     result = {'config': config, 'seeds': list(seeds), 'method_order': names,
               'aggregate': aggregate, 'vsadc_detail': detail, 'runs': runs,
               'throughput': throughput(config, 0.5 if quick else 3.0),
-              'tracking': tracking_study(config, seeds[:1] if quick else seeds[:3])}
+              'tracking': tracking_study(config, seeds[:1])}
     report.write_json(out_dir, 'vsadc', result)
     _plot(out_dir, config, seeds[0])
     if not quick:

@@ -45,6 +45,27 @@ def test_calibration_of_a_fault_free_wheel(stribeck_block):
     assert block['speed_range_rad_s'] == [float(speed.min()), float(speed.max())]
 
 
+def test_nominal_is_fitted_where_it_is_tested_outside_the_low_speed_band():
+    # Noise-free model (1) plus a Stribeck excess near zero: a coarse piecewise-linear
+    # nominal fitted on every sample bends to the excess and is biased just outside the
+    # band; refitted on |w| >= band it is exact there up to the excess left at the band edge.
+    w = 12.0 * np.sin(np.linspace(0.0, 40.0 * np.pi, 20000))
+    f = -5e-4 * np.sign(w) - 2e-6 * w - 3e-4 * np.sign(w) * np.exp(-(w / 1.0) ** 2)
+    model = {'effects': [{'name': 'smooth_speed', 'kind': 'smooth_speed',
+                          'params': {'knots_rad_s': [-12.0, -1.5, 0.0, 1.5, 12.0]}}],
+             'weights': {}}
+    from rwa_monitor.core.identify.model import regressors_from_config
+    x = regressors_from_config(model).matrix(w)
+    coef = np.linalg.lstsq(x, f, rcond=None)[0]
+    model['weights'] = dict(zip(regressors_from_config(model).names, coef))
+    tested = np.abs(w) >= 3.0
+    before = np.max(np.abs(core.nominal_prediction(model, w) - f)[tested])
+    core.refit_outside_band(model, w, f, 3.0)
+    after = np.max(np.abs(core.nominal_prediction(model, w) - f)[tested])
+    assert before > 2e-6
+    assert after < 1e-7   # the excess itself at |w| = 3: 3e-4 exp(-9) = 4e-8
+
+
 def test_noise_band_found_where_the_residual_is_larger():
     rng = np.random.default_rng(3)
     speed = np.linspace(-30, 30, 20000)
@@ -92,6 +113,26 @@ def test_band_and_range_samples_are_not_tested_and_counted():
         np.array([0.0, 1e-3, 0.0, 0.0, np.nan]))
     assert counts == {'low_speed_band': 1, 'outside_calibrated_range': 1}
     assert np.isnan(residual[[0, 2, 3, 4]]).all() and residual[1] == pytest.approx(0.0)
+
+
+def test_streaming_residual_is_the_batch_residual_and_the_model(stribeck_block):
+    block, _ = stribeck_block
+    nominal = core.NominalWheel(block)
+    rng = np.random.default_rng(3)
+    lo, hi = block['speed_range_rad_s']
+    speed = np.concatenate([rng.uniform(lo - 1.0, hi + 1.0, 3000), [0.0, lo, hi, np.nan]])
+    friction = rng.normal(0.0, 1e-4, speed.size)
+    time = np.arange(speed.size, dtype=float)
+    batch, counts = nominal.residual(time, speed, friction)
+    one = [nominal.residual_one(*row) for row in zip(time, speed, friction)]
+    assert np.array_equal(batch, np.array([r for r, _ in one]), equal_nan=True)
+    assert counts == {reason: sum(why == reason for _, why in one)
+                      for reason in ('low_speed_band', 'outside_calibrated_range')}
+    tested = np.isfinite(batch)
+    exact = friction - core.nominal_prediction(block['friction_model'], speed)
+    assert tested.sum() > 2000
+    assert np.max(np.abs(batch - exact)[tested]) < 1e-3 * block['noise']['std_nm']
+    assert nominal.table_error_nm < 1e-3 * block['noise']['std_nm']
 
 
 def _document(block):

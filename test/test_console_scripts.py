@@ -12,13 +12,14 @@ import pytest
 from rclpy.node import Node
 from ros_harness import Collector, RosWorld
 
+from rwa_monitor.cli import cmd_dashboard
 from rwa_monitor.nodes import messages
 from rwa_monitor.nodes.common import EVENTS_QOS
 from rwa_monitor.sim.friction import Anomaly, simulate_friction_with_truth
 from rwa_monitor.telemetry import write_telemetry
 
 NODES = ('rwa-monitor-llr', 'rwa-monitor-vsadc', 'rwa-monitor-fss', 'rwa-monitor-replay',
-         'rwa-monitor-bus')
+         'rwa-monitor-bus', 'rwa-monitor-record', 'rwa-monitor-foxglove')
 
 
 def _script(name):
@@ -36,6 +37,47 @@ def test_help_lists_parameters_and_exits_0(name):
     assert result.stdout.startswith('usage:')
     if name != 'rwa-monitor':
         assert 'parameters' in result.stdout and 'Traceback' not in result.stderr
+
+
+def test_every_console_script_is_checked():
+    from importlib.metadata import entry_points
+    scripts = {e.name for e in entry_points(group='console_scripts')
+               if e.value.startswith('rwa_monitor.')}
+    assert scripts == set(NODES) | {'rwa-monitor'}
+
+
+@pytest.mark.parametrize('command', ['calibrate', 'dashboard', 'demo', 'detect', 'diagnose',
+                                     'fss', 'identify', 'params'])
+def test_every_subcommand_help_exits_0(command, capsys):
+    from rwa_monitor.cli.main import main
+    with pytest.raises(SystemExit) as stop:
+        main([command, '--help'])
+    assert stop.value.code == 0
+    assert capsys.readouterr().out.startswith('usage: rwa-monitor ' + command)
+
+
+@pytest.mark.ros
+@pytest.mark.parametrize('sig', [signal.SIGINT, signal.SIGTERM])
+def test_dashboard_stops_cleanly_on_signals(sig):
+    with RosWorld() as world:
+        proc = subprocess.Popen([_script('rwa-monitor'), 'dashboard', '--interval', '0.2'],
+                                env=world.env(), stdout=subprocess.PIPE,
+                                stderr=subprocess.PIPE, text=True)
+        try:
+            assert proc.stdout.readline().startswith('rwa_monitor dashboard')  # running
+            proc.send_signal(sig)
+            out, err = proc.communicate(timeout=60)
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+    assert proc.returncode == 0 and err == '', err
+    assert out.rstrip().endswith('anomalies: 0')   # the last view was drawn
+
+
+def _latched_shown(board):
+    """Return True once the restarted node's /diagnostics show rw2's latched anomaly."""
+    return any(hw == 'alarms' and item['level'] > 0 and 'rw2' in str(item['fields'])
+               for (_, hw), item in board.health.items())
 
 
 def _wait_for_text(proc_log, text, timeout):
@@ -61,6 +103,8 @@ def test_nodes_and_replay_stop_cleanly_on_signals(tmp_path, sig):
         procs = {}
         for name, args in (('rwa-monitor-llr', ['-p', 'window:=100']),
                            ('rwa-monitor-vsadc', []), ('rwa-monitor-fss', []),
+                           ('rwa-monitor-record', ['-p', f'output:={tmp_path / "rec"}']),
+                           ('rwa-monitor-foxglove', ['-p', 'port:=0']),
                            ('rwa-monitor-replay', ['-p', f'file:={path}', '-p', 'rate:=50.0',
                                                    '-p', 'min_subscribers:=2'])):
             log = tmp_path / f'{name}.log'
@@ -84,6 +128,7 @@ def test_nodes_and_replay_stop_cleanly_on_signals(tmp_path, sig):
                 pytest.fail(f'{name} did not stop on {sig.name}')
             text = log.read_text(errors='replace')
             assert 'Traceback' not in text and 'RCLError' not in text, text
+            assert 'context is invalid' not in text, text    # no logging after shutdown
             # A process still importing its modules (a loaded machine) has no handler
             # yet and ends by the signal's default action: no traceback, nothing to clean.
             assert code == 0 or (code == -sig and not text.strip()), (name, code, text)
@@ -124,11 +169,23 @@ def test_killed_detector_restarted_shows_the_anomaly_to_a_late_subscriber(tmp_pa
                                      stderr=subprocess.STDOUT)
         try:
             time.sleep(3.0)                                   # the subscriber joins later
-            late = world.node(Node, 'late_dashboard')
+            late = world.node(Node, 'late_subscriber')
             anomalies = Collector(late, DiagnosticArray, 'anomalies', EVENTS_QOS)
-            world.wait_until(lambda: anomalies.messages, 30.0, 'the re-published anomaly')
+            board = cmd_dashboard.Board()                     # and the dashboard itself
+            world.add(cmd_dashboard.make_node(board, context=world.context))
+            world.wait_until(lambda: anomalies.messages and board.n_events
+                             and _latched_shown(board), 60.0, 'the re-published anomaly')
             events = [messages.status_event(s) for m in anomalies.messages for s in m.status]
             assert {e.component for e in events} == {'rw2'}
+            view = cmd_dashboard.render(board)
+            assert 'anomalies: 1' in view and '  rw2 ' in view, view
         finally:
             restarted.send_signal(signal.SIGTERM)
             restarted.wait(timeout=20)
+
+
+@pytest.mark.parametrize('command', ['params', 'params --yaml', 'params --markdown'])
+def test_output_piped_into_head_ends_quietly(command):
+    result = subprocess.run(f'{_script("rwa-monitor")} {command} | head -c 10', shell=True,
+                            capture_output=True, text=True, timeout=120)
+    assert result.stderr == '' and len(result.stdout) == 10

@@ -16,21 +16,14 @@ from rwa_monitor.pipelines.identify import prepare
 from rwa_monitor.sim.undeclared import simulate_undeclared
 from rwa_monitor.telemetry import Telemetry, Wheel, write_telemetry
 
-# Which names count as finding each undeclared effect: the named effect, or the generic
-# fallback for effects that are functions of speed.
-FOUND = {'stribeck': {'stribeck', 'smooth_speed'}, 'drag': {'drag', 'smooth_speed'},
+# The name that counts as finding each undeclared effect: the named physical effect (the
+# smooth_speed fallback is not a finding when a named effect explains the structure).
+FOUND = {'stribeck': {'stribeck'}, 'drag': {'drag'},
          'temperature': {'aux:rw1_temperature:dry'}, 'drift': {'drift'}}
 
 
-# Known regression of the history effects (issue 11, open): on this Stribeck file the
-# presliding effect is chosen before stribeck (2 of the bench's 5 Stribeck files).
-PRESLIDING_FIRST = pytest.mark.xfail(strict=True, reason='presliding chosen before stribeck '
-                                     '(issue 11, open: undeclared set 28/30)')
-
-
 @pytest.mark.slow
-@pytest.mark.parametrize('effect', [pytest.param(e, marks=PRESLIDING_FIRST)
-                                    if e == 'stribeck' else e for e in sorted(FOUND)])
+@pytest.mark.parametrize('effect', sorted(FOUND))
 def test_undeclared_effect_is_found_and_held_out_rmse_reaches_noise_floor(effect):
     data = prepare(simulate_undeclared(effect, seed=11))
     sel = identify(data)

@@ -145,3 +145,80 @@ def test_out_of_order_and_bad_messages_are_counted():
         assert c['out_of_order'] == 1 and c['invalid_quaternions'] == 2
         assert c['accepted'] == 2          # 1.25 and 2.0 (the first has no rate yet)
         assert detector.detector.states == {'x': 0, 'y': 0, 'z': 0}
+
+
+def _gyro_x_levels(diags):
+    return [s.level for m in diags.messages for s in m.status if s.hardware_id == 'gyro_x']
+
+
+def _node_with_publishers(world, **params):
+    from geometry_msgs.msg import QuaternionStamped
+    from sensor_msgs.msg import Imu
+    detector = _detector(world, diagnostic_period=0.1, **params)
+    src = world.node(Node, 'source')
+    pubs = (src.create_publisher(Imu, 'telemetry/gyro', telemetry_qos()),
+            src.create_publisher(QuaternionStamped, 'telemetry/star_tracker',
+                                 telemetry_qos()))
+    diags = Collector(src, DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
+    events = Collector(src, DiagnosticArray, 'anomalies', EVENTS_QOS)
+    for pub in pubs:
+        world.wait_for_subscribers(pub)
+    return detector, pubs, diags, events
+
+
+def test_star_tracker_blinded_for_minutes_is_stale_then_resumes_without_a_declaration():
+    # Sun in the star tracker's field of view: 4 minutes (960 rows at 4 Hz) without a
+    # quaternion while the gyro goes on. The residual axes hold (STALE while the pairing
+    # waits), then resume on the same nominal: examined again (OK), no event.
+    tele = simulate_aocs(900.0, seed=23)
+    blind = range(1200, 2160)
+    with RosWorld() as world:
+        detector, pubs, diags, events = _node_with_publishers(world, stale_timeout=0.5)
+        _publish_rows(world, pubs, tele, range(1200))
+        world.wait_until(lambda: detector.samples >= 1200, 20.0, '1200 paired samples')
+        assert all(ch.ready for ch in detector.detector.channels)
+        used = detector.detector.channels[0].samples
+        _publish_rows(world, pubs, tele, blind, with_star=False)
+        world.wait_until(lambda: detector.samples >= blind.stop - 41, 20.0, 'gyro fed without q')
+        world.wait_until(lambda: DiagnosticStatus.STALE in _gyro_x_levels(diags)[-3:],
+                         10.0, 'gyro_x STALE while blinded')
+        assert detector.detector.channels[0].samples - used <= 5    # nothing diagnosed
+        blinded_reports = len(_gyro_x_levels(diags))
+        _publish_rows(world, pubs, tele, range(2160, len(tele)))
+        world.wait_until(lambda: detector.samples >= len(tele) - 5, 20.0, 'every row')
+        world.wait_until(lambda: DiagnosticStatus.OK in _gyro_x_levels(diags)[blinded_reports:],
+                         10.0, 'gyro_x examined again (OK)')
+        assert detector.detector.channels[0].samples - used > 1000  # resumed
+        assert detector.detector.counters['star_tracker_gaps'] >= 1
+        world.spin_for(0.2)
+        assert detector.detector.states == {'x': 0, 'y': 0, 'z': 0}
+        assert _events(events) == []
+
+
+def test_saturated_gyro_is_reported_not_diagnosed():
+    # The x rate rails at 1 rad/s (above saturation_rad_s) for 50 s of a healthy record:
+    # the axis reports WARN "saturated", its samples are held, no drift or bias follows.
+    tele = simulate_aocs(600.0, seed=24)
+    gyro = tele.gyro.copy()
+    rail = (tele.time > 400.0) & (tele.time < 450.0)
+    gyro[rail, 0] = 1.0
+    tele = type(tele)(time=tele.time, gyro=gyro, attitude=tele.attitude,
+                      reference_rate=tele.reference_rate, truth=tele.truth)
+    with RosWorld() as world:
+        detector, pubs, diags, events = _node_with_publishers(world, stale_timeout=5.0)
+        first = int(rail.argmax())
+        _publish_rows(world, pubs, tele, range(first + 100))
+        world.wait_until(lambda: detector.samples >= first + 100, 20.0, 'rows into the rail')
+
+        def saturated_warning():
+            return any(s.hardware_id == 'gyro_x' and s.level == DiagnosticStatus.WARN
+                       and 'saturated' in s.message
+                       for m in diags.messages[-3:] for s in m.status)
+        world.wait_until(saturated_warning, 10.0, 'gyro_x WARN saturated')
+        _publish_rows(world, pubs, tele, range(first + 100, len(tele)))
+        world.wait_until(lambda: detector.samples >= len(tele), 20.0, 'every row')
+        world.spin_for(0.3)
+        assert detector.detector.counters['saturated_x'] >= 190
+        assert detector.detector.states == {'x': 0, 'y': 0, 'z': 0}
+        assert not saturated_warning()              # reported while it lasts only
+        assert _events(events) == []

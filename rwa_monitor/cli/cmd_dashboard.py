@@ -230,7 +230,7 @@ def make_node(board: Board, discovery_period: float = 2.0, **kwargs: Any) -> Any
 
 
 def run(args: argparse.Namespace) -> int:
-    """Show the dashboard until Ctrl-C (or for ``--duration`` seconds)."""
+    """Show the dashboard until Ctrl-C or SIGTERM (or for ``--duration`` seconds)."""
     import rclpy
     from rclpy.context import Context
     from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
@@ -243,10 +243,12 @@ def run(args: argparse.Namespace) -> int:
     executor.add_node(node)
     screen = Screen(interval=args.interval, plain_interval=args.interval)
     deadline = time.monotonic() + args.duration if args.duration > 0 else float('inf')
-    # Ctrl-C ends the loop between executor turns: raised inside rclpy's take it can
-    # surface as a RuntimeError traceback instead of KeyboardInterrupt.
+    # Ctrl-C and SIGTERM end the loop between executor turns (exit 0, the last view
+    # drawn): raised inside rclpy's take, a KeyboardInterrupt can surface as a
+    # RuntimeError traceback instead.
     stop = []
-    previous = signal.signal(signal.SIGINT, lambda *_: stop.append(True))
+    previous = {sig: signal.signal(sig, lambda *_: stop.append(True))
+                for sig in (signal.SIGINT, signal.SIGTERM)}
     try:
         while context.ok() and time.monotonic() < deadline and not stop:
             executor.spin_once(timeout_sec=0.05)
@@ -256,7 +258,8 @@ def run(args: argparse.Namespace) -> int:
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
-        signal.signal(signal.SIGINT, previous)
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
         executor.shutdown()
         node.destroy_node()
         rclpy.try_shutdown(context=context)

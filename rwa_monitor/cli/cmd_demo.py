@@ -163,8 +163,13 @@ def _progress(replay: Any, started: float, width: int = 30) -> str:
 
 def run_demo(path: pathlib.Path, *, domain_id: int = 0, executor: str = 'events',
              out: TextIO | None = None, live: bool = True,
-             modules: tuple[str, ...] = DETECTOR_NODES) -> DemoResult:
-    """Replay ``path`` through every detector node in one process; return the result."""
+             modules: tuple[str, ...] = DETECTOR_NODES,
+             overrides: dict[str, Any] | None = None,
+             timeout_s: float = TIMEOUT_S) -> DemoResult:
+    """Replay ``path`` through every detector node in one process; return the result.
+
+    ``overrides``: parameters given to every detector node (e.g. ``calibration_file``).
+    """
     import rclpy
     from rclpy.context import Context
     from rclpy.logging import LoggingSeverity
@@ -186,7 +191,9 @@ def run_demo(path: pathlib.Path, *, domain_id: int = 0, executor: str = 'events'
     runner = None
     try:
         runner, kind = _make_executor(executor, context, notes)
-        detectors = [cls(context=context, cli_args=params_args) for cls in classes]
+        given = [Parameter(k, value=v) for k, v in (overrides or {}).items()]
+        detectors = [cls(context=context, cli_args=params_args, parameter_overrides=given)
+                     for cls in classes]
         board = Board()
         view = make_node(board, context=context)
         replay = TelemetryReplay(context=context, cli_args=params_args, parameter_overrides=[
@@ -209,7 +216,7 @@ def run_demo(path: pathlib.Path, *, domain_id: int = 0, executor: str = 'events'
                 return False
             return llr is None or sum(w.samples for w in llr.wheels.values()) >= \
                 expected_samples
-        while not finished() and time.monotonic() - started < TIMEOUT_S:
+        while not finished() and time.monotonic() - started < timeout_s:
             runner.spin_once(timeout_sec=0.1)
             if screen is not None and screen.due():
                 screen.draw(render(board, title='rwa_monitor demo',
@@ -243,6 +250,8 @@ def _evaluate(tele: Any, events: list[Any], wall: float, kind: str, notes: list[
     changes = changes_from_truth(tele)
     config = {k: llr.params[k] for k in ('window', 'k_verif', 'false_alarm_rate',
                                          'noise_std')} if llr is not None else {}
+    if llr is not None and llr.params['calibration_file']:
+        config['calibration_file'] = llr.params['calibration_file']
     pipeline_events = llr_pipeline.run(tele, config) if llr is not None else []
     # Attribution rule (docs/nodes.md): a declaration belongs to an injected change when
     # its estimated change time lies in [truth - W, truth + 2 W], W = one window of time.

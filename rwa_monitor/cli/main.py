@@ -10,6 +10,7 @@ from typing import Sequence
 
 import rwa_monitor
 from rwa_monitor import cli
+from rwa_monitor.cli.output import quiet_broken_pipe
 from rwa_monitor.exceptions import RwaMonitorError
 
 
@@ -37,7 +38,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
-        return int(args.func(args) or 0)
+        with quiet_broken_pipe():        # every command: ``rwa-monitor ... | head`` is quiet
+            return int(args.func(args) or 0)
+        return 0                         # the reader went away
     except RwaMonitorError as err:
         print(f'rwa-monitor {args.command}: error: {err}', file=sys.stderr)
         return 2

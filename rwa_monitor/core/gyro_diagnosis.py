@@ -11,17 +11,23 @@ per axis the residual ``e = (g_{k-1} + g_k)/2 - w_st,k``
   the nominal before it is declared).
 - Evolving class and distance (lines 15-20, eq. (8)): the signed distance of the newest
   block mean to the nominal centre, ``d``; a fault when ``|d|`` exceeds the level threshold
-  on ``confirm_blocks`` successive blocks (line 26).
+  on ``confirm_blocks`` successive blocks (line 26) or, beyond the paper, when a two-sided
+  CUSUM of ``d / block_std`` (reference value ``cusum_allowance``) passes
+  ``cusum_threshold``.
 - Drift or bias (lines 27-34): instead of the spread of ``d`` against self-adapted sigma
-  limits, a likelihood comparison on the last ``decide_blocks`` distances of a step
-  (bias) and a ramp (drift), each with its onset fitted: the kind is declared when one
-  model explains the data better by ``decide_chi2`` (in block variances), or after
+  limits, a likelihood comparison on the half-block means of the last ``decide_blocks``
+  blocks of a step (bias) and a ramp (drift), each with its onset fitted, whitened with
+  the calibrated noise model (:meth:`ResidualAxis._whitener`): the kind is declared when
+  one model explains the data better by ``decide_chi2`` (in block variances), or after
   ``max_wait_blocks`` by the better one. The fitted onset is the event's change time.
 - While faulty: drift becomes bias when the least-squares slope over the last
-  ``fit_blocks`` blocks falls below half the slope threshold, bias becomes drift above it
-  (both confirmed on ``confirm_blocks`` blocks, and not before the fault has lasted
-  ``fit_blocks`` blocks: the step itself is a slope); recovery when ``|d|`` stays below
-  ``recovery_fraction`` of the threshold for ``confirm_blocks`` blocks.
+  ``fit_blocks`` blocks falls below half the slope threshold; bias becomes drift only
+  when the level has also moved from the held bias level by the level threshold and the
+  slope is above the slope threshold (a kind change needs its own evidence at the level
+  of the declaration); both confirmed on ``confirm_blocks`` blocks, and not before the
+  fault has lasted ``fit_blocks`` blocks (the step itself is a slope). Recovery when
+  ``|d|`` stays below ``recovery_fraction`` of the threshold for ``confirm_blocks``
+  blocks.
 
 Thresholds come from :func:`rwa_monitor.core.gyro_calibration.calibrate_gyro` (the
 ``gyro:`` block of calibration.yaml) or, without one, from ``DEFAULT_BLOCK_STD``.
@@ -46,6 +52,10 @@ from rwa_monitor.core.vsadc import AXES, BIAS, DRIFT, HEALTHY, make_event, Trans
 #: Block-mean spread without a calibration (rad/s): the largest of the three axes measured
 #: by calibrate_gyro on the bus development seeds 1-3 (docs/vsadc.md), rounded up.
 DEFAULT_BLOCK_STD = 4.0e-6
+#: Block length (s) of ``DEFAULT_BLOCK_STD`` (40 steps at 4 Hz). The star-tracker part of a
+#: block mean, which dominates it, falls as 1 / block length: without a calibration the
+#: spread is scaled to the block length of the record (measured on its first block).
+DEFAULT_BLOCK_S = 10.0
 #: Lowest lag-1 correlation of block means the decision's noise model accepts (MA(1) of
 #: differenced star-tracker noise plus white gyro noise: -0.5 is the limit, no gyro noise).
 MIN_LAG1 = -0.45
@@ -78,7 +88,7 @@ def axis_thresholds(calibration: Mapping[str, Any] | None, block: int,
                                         low_open=True)}
         except KeyError as exc:
             raise ValueError(f'gyro calibration lacks {exc.args[0]}') from None
-    std = DEFAULT_BLOCK_STD
+    std = DEFAULT_BLOCK_STD * DEFAULT_BLOCK_S / (block * sample_s)
     return {'block_std': std, 'level': gc.DEFAULT_LEVEL_K * std + gc.DEFAULT_WANDER_RAD_S,
             'quiet': 3.0 * std,
             'slope': gc.DEFAULT_SLOPE_K * gc.slope_std(std, fit_blocks, block * sample_s)}
@@ -109,13 +119,16 @@ class ResidualAxis:
                                             0.0, 1.0, low_open=True)
         self.cusum_threshold = check_real('cusum_threshold', p['cusum_threshold'], 0.0)
         self.cusum_allowance = check_real('cusum_allowance', p['cusum_allowance'], 0.0)
-        th = axis_thresholds(calibration, self.block, self.fit_blocks)
-        self.block_std, self.level_threshold = th['block_std'], th['level']
-        self.quiet_level, self.slope_threshold = th['quiet'], th['slope']
+        self._calibrated = bool(calibration)
+        self._set_thresholds(axis_thresholds(calibration, self.block, self.fit_blocks))
         rho = float((calibration or {}).get('block_lag1_correlation', 0.0))
         self.lag1_correlation = min(max(rho, MIN_LAG1) if math.isfinite(rho) else 0.0, 0.0)
         self._whiteners: dict[int, np.ndarray] = {}
         self.reset()
+
+    def _set_thresholds(self, th: Mapping[str, float]) -> None:
+        self.block_std, self.level_threshold = th['block_std'], th['level']
+        self.quiet_level, self.slope_threshold = th['quiet'], th['slope']
 
     def reset(self) -> None:
         """Forget everything: the next residual starts a new nominal batch."""
@@ -181,6 +194,10 @@ class ResidualAxis:
         halves = (self._first_half / half, (self._sum - self._first_half) / (self.block - half))
         block = (mean, np.array(self._times), self._stamps, halves)
         self._sum, self._times, self._stamps = 0.0, [], []
+        if self._nb == 0 and not self._calibrated:     # defaults at this record's rate
+            step = (block[1][-1] - block[1][0]) / (self.block - 1)
+            if step > 0:
+                self._set_thresholds(axis_thresholds(None, self.block, self.fit_blocks, step))
         return self._on_block(block)
 
     def _on_block(self, block: tuple) -> Transition | None:

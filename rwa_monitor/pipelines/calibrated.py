@@ -123,9 +123,11 @@ def _plot(name: str, block: Mapping[str, Any], data: dict | None,
         ok = np.isfinite(data['speed']) & np.isfinite(data['friction'])
         w, f = data['speed'][ok], data['friction'][ok]
         top.plot(w, f, ',', color='0.6', label='measured')
+        band = block['noise']['low_speed_band']['speed_abs_below_rad_s']
         grid = np.linspace(np.min(w), np.max(w), 2000)
-        top.plot(grid, core.nominal_prediction(block['friction_model'], grid), 'C0',
-                 label='nominal model')
+        nominal = core.nominal_prediction(block['friction_model'], grid)
+        nominal[np.abs(grid) < band] = np.nan   # fitted and used outside the band only
+        top.plot(grid, nominal, 'C0', label='nominal model (tested speeds)')
     band = block['noise']['low_speed_band']['speed_abs_below_rad_s']
     for ax in (top, bottom):
         if band > 0:

@@ -10,6 +10,7 @@ the identify benchmark; pipelines/identify_report.py writes the outputs.
 from __future__ import annotations
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from rwa_monitor.core.identify import data as samples
 from rwa_monitor.core.identify.data import IdentData
@@ -17,6 +18,12 @@ from rwa_monitor.core.identify.output_error import speed_rmse
 from rwa_monitor.core.identify.select import identify, Selection
 from rwa_monitor.exceptions import NotIdentifiableError
 from rwa_monitor.telemetry.schema import Telemetry
+
+# BLAS threads during an identification. Its products are thin (n x a few columns): a
+# threaded BLAS gains nothing on them, and on a loaded machine its threads wait for
+# each other (measured, bench identify: 100k samples 20 s wall with the default threads
+# against 8 s with one, for 4 s of CPU time either way).
+BLAS_THREADS = 1
 
 
 def choose_wheel(tele: Telemetry, wheel: str | None) -> str:
@@ -77,15 +84,17 @@ def identify_wheel(tele: Telemetry, wheel: str | None, inertia: float | None = N
     (before / after, rad/s) and selection.json its per-segment details and the
     differentiator's choice of width.
     """
-    data = prepare(tele, wheel, inertia, torque_constant, half_width)
-    selection = identify(data, alpha=alpha, jumps=jumps)
+    with threadpool_limits(BLAS_THREADS):
+        data = prepare(tele, wheel, inertia, torque_constant, half_width)
+        selection = identify(data, alpha=alpha, jumps=jumps)
     extra: dict = {'details': {'differentiator': data.differentiator or
                                {'half_width': data.half_width, 'chosen_from': 'given'}}}
     if data.derived and inertia is not None:
         current = tele.aux.get(f'{data.wheel}_current')
         torque = None if current is None else torque_constant * np.asarray(
             current, dtype=float)[data.rows]
-        sr = speed_rmse(selection, inertia, torque)
+        with threadpool_limits(BLAS_THREADS):
+            sr = speed_rmse(selection, inertia, torque)
         extra['report'] = {'speed_rmse': {'before': sr['before'], 'after': sr['after']}}
         extra['details']['speed_rmse'] = sr
     return selection, extra

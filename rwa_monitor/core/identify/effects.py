@@ -191,9 +191,7 @@ def named_candidates(data: IdentData, residual: np.ndarray) -> list[Candidate]:
     w = data.speed
     aw = np.abs(w[w != 0])
     out = []
-    scales = sorted({float(np.quantile(aw, q)) for q in STRIBECK_QUANTILES} - {0.0})
-    out.append(Candidate('stribeck', 'stribeck',
-                         [{'velocity_rad_s': s, 'shape': d} for s in scales for d in (2.0, 1.0)]))
+    out.append(stribeck_candidate(aw))
     out.append(hysteresis_candidate(data))
     out.append(presliding_candidate(data))
     share = min(np.mean(w > 0), np.mean(w < 0))
@@ -219,6 +217,24 @@ def named_candidates(data: IdentData, residual: np.ndarray) -> list[Candidate]:
                          tests=max(tested, 1),
                          skipped=None if freqs else 'not testable: too few samples'))
     return out
+
+
+def stribeck_candidate(abs_speed: np.ndarray) -> Candidate:
+    """Return the Stribeck candidate: speeds at quantiles of abs(w), refined in between.
+
+    The Stribeck speed is refined between its grid neighbours as the hysteresis and
+    pre-sliding widths are (select._refine; three tests per grid point): on a grid
+    point alone the true curve fitted no better than a pre-sliding ramp, and the
+    effect chosen depended on where the quantiles fell.
+    """
+    scales = sorted({float(np.quantile(abs_speed, q)) for q in STRIBECK_QUANTILES}
+                    - {0.0}) if len(abs_speed) else []
+    grid = [{'velocity_rad_s': s, 'shape': d} for s in scales for d in (2.0, 1.0)]
+    if len(scales) < 2:
+        return Candidate('stribeck', 'stribeck', grid)
+    ratio = float(max(b / a for a, b in zip(scales[:-1], scales[1:])))
+    return Candidate('stribeck', 'stribeck', grid, tests=3 * len(grid),
+                     extra={'refine': 'velocity_rad_s', 'ratio': ratio})
 
 
 def hysteresis_candidate(data: IdentData) -> Candidate:
@@ -314,19 +330,27 @@ def _refine_by_fit(t: np.ndarray, r: np.ndarray, f0: float, df: float) -> float:
     """Return the frequency within +-1 bin of f0 whose sinusoid best fits the residual.
 
     A frequency off by a fraction of a bin drifts out of phase over a long record; the
-    search over a continuous interval is counted as three tests per bin.
+    search over a continuous interval is counted as three tests per bin. The 21 trial
+    frequencies are equally spaced, so exp(i 2 pi f t) is stepped from one to the next
+    by one complex product (no trigonometric call per trial); the fit of cos and sin
+    needs sum r e^(i w t) and sum e^(2 i w t) only.
     """
+    n = len(t)
+    trials = f0 + df * np.linspace(-1.0, 1.0, 21)
+    phase = np.exp(2j * np.pi * trials[0] * t)
+    step = np.exp(2j * np.pi * (trials[1] - trials[0]) * t)
     best, best_gain = f0, -np.inf
-    for f in f0 + df * np.linspace(-1.0, 1.0, 21):
-        if f <= 0:
-            continue
-        c, s = np.cos(2 * np.pi * f * t), np.sin(2 * np.pi * f * t)
-        X = np.column_stack([c, s])
-        gram = X.T @ X
-        xy = X.T @ r
-        gain = float(xy @ np.linalg.solve(gram + 1e-12 * np.eye(2), xy))
-        if gain > best_gain:
-            best, best_gain = float(f), gain
+    for f in trials:
+        if f > 0:
+            a = complex(np.dot(r, phase))            # sum r cos + i sum r sin
+            b = complex(np.dot(phase, phase))        # sum e^(2 i w t)
+            cc, ss, cs = 0.5 * (n + b.real), 0.5 * (n - b.real), 0.5 * b.imag
+            gram = np.array([[cc, cs], [cs, ss]])
+            xy = np.array([a.real, a.imag])
+            gain = float(xy @ np.linalg.solve(gram + 1e-12 * np.eye(2), xy))
+            if gain > best_gain:
+                best, best_gain = float(f), gain
+        phase *= step
     return best
 
 

@@ -61,6 +61,7 @@ class Design:
         self._yh = self.y[self.held_out]
         self._yt = self.y[self.train]
         self._yy = float(self._yt @ self._yt)
+        self._n_train = len(self._yt)
         self._gram = np.empty((0, 0))
         self._xy = np.empty(0)
         self.add(columns)
@@ -81,22 +82,24 @@ class Design:
 
     def fit(self, columns: np.ndarray | None = None) -> Fit:
         """Return the fit of the current columns, plus ``columns`` if given."""
+        p = self._xh.shape[1]
         if columns is None:
-            gram, xy, xh = self._gram, self._xy, self._xh
+            gram, xy = self._gram, self._xy
         else:
             columns = np.asarray(columns, dtype=float).reshape(len(self.y), -1)
             gram, xy = self._extended(columns)
-            xh = np.hstack([self._xh, columns[self.held_out]])
         diag = np.sqrt(np.maximum(np.diag(gram), 0.0))
         scale = np.where(diag > 0, 1.0 / np.where(diag > 0, diag, 1.0), 0.0)
         z, _, rank, _ = np.linalg.lstsq(gram * scale[:, None] * scale[None, :], xy * scale,
                                         rcond=RCOND)
         coef = z * scale
         rss_train = max(self._yy - 2.0 * coef @ xy + coef @ gram @ coef, 0.0)
-        resid_ho = self._yh - np.einsum('ij,j->i', xh, coef)
+        resid_ho = self._yh - np.einsum('ij,j->i', self._xh, coef[:p])
+        if columns is not None:
+            resid_ho -= np.einsum('ij,j->i', columns[self.held_out], coef[p:])
         return Fit(coef=coef, rank=int(rank), rss_train=float(rss_train),
-                   rss_held_out=float(resid_ho @ resid_ho), n_train=int(np.sum(self.train)),
-                   n_held_out=int(np.sum(self.held_out)))
+                   rss_held_out=float(np.einsum('i,i->', resid_ho, resid_ho)),
+                   n_train=self._n_train, n_held_out=len(self._yh))
 
     def residual(self, fit: Fit) -> np.ndarray:
         """Return y minus the model of ``fit`` (current columns) on every row."""
