@@ -277,6 +277,18 @@ def markdown(acc: dict[str, Any], r: float, rate_hz: float) -> list[str]:
               ' declarations after the faults of these runs by chance alone: the goal 0 '
               'asks for a false-alarm rate well below r, as the detector has on white noise '
               '(section "LLR friction detector", Fig. 5).', '']
+    ramps = {n: e for n, e in cal['per_fault'].items() if 'ramp' in n and e['detected']}
+    if ramps:
+        lines += ['Ramps: at the first declaration the ramp had reached '
+                  + ', '.join(f'{100 * min(e["delay_median_s"] / RAMP_S, 1.0):.0f} % '
+                              f'({name}, median)' for name, e in ramps.items())
+                  + ' of its size, and extra declarations of the same ramp followed ('
+                  + ', '.join(f'{e["extra_declarations"]} in {e["detected"]} {name}s'
+                              for name, e in ramps.items())
+                  + '). The categorisation tests a step: fitted over a window in which the '
+                  'level is still rising, the rise is shared with the other direction '
+                  'wherever |w| trends; measured z values: docs/calibration.md, "Kinds on '
+                  'ramps".', '']
     c = acc['calibration']
     described = '; '.join(
         f'{w}: effects {", ".join(v["effects"]) or "none"}, noise {v["noise_std_nm"]:.3g} N m, '
