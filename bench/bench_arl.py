@@ -140,7 +140,9 @@ def markdown(res: dict[str, Any]) -> str:
         '`bench/llr_arl.py`. Detector (default): AR prewhitening (order <= 3 by BIC on the '
         'first 801 samples); `dry_orbit` adds a sliding reference of '
         f'{cfg["reference_max"]} samples; `dry_orbit_temperature` a temperature column '
-        '(p = 3). Paper: white noise, growing reference. ARL = samples / alarms over all '
+        '(p = 3); `speed_noise` the noise level modelled against |w| '
+        '(`noise_speed_model`, docs/llr.md "Noise growing with speed"). Paper: white '
+        'noise, growing reference. ARL = samples / alarms over all '
         'runs (each alarm restarts the reference); lower 95 % bound from the Poisson '
         f'count. Seeds {SEED0} and up (chosen before the results; development on 1-99). '
         f'Code commit `{res["commit"]}`.',
