@@ -78,7 +78,7 @@ demo-bus: $(BSK_STAMP)
 	  $(BSK_PY) -m bench.bus_acceptance $(DEMO_BUS).csv $(DEMO_BUS)-events-raw.json
 	@echo '== with calibration, live nodes'; \
 	  $(BSK_PY) -m bench.bus_acceptance live $(DEMO_BUS).csv \
-	  $(DEMO_BUS)-calibration/calibration.yaml
+	  $(DEMO_BUS)-calibration/calibration.yaml $(DEMO_BUS)-events-raw.json
 
 bench-bus: $(BSK_STAMP)
 	$(BSK_PY) -m bench bus bus_gyro

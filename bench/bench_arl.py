@@ -33,8 +33,8 @@ def _settings(quick: bool) -> dict[str, Any]:
         return {'runs': 2, 'n': 100_000, 'paper_runs': 1, 'temp_runs': 1, 'temp_n': 20_000,
                 'det_runs': 4, 'det_temp_runs': 2}
     # Sized for a shared 2-core machine: 1e6 samples per cell (a lower bound of 3.3e5
-    # without alarms); the temperature cells (p = 3, ~5000 samples/s) get 1e5.
-    return {'runs': 4, 'n': 250_000, 'paper_runs': 1, 'temp_runs': 2, 'temp_n': 50_000,
+    # without alarms), the temperature cells (p = 3, ~5000 samples/s) too.
+    return {'runs': 4, 'n': 250_000, 'paper_runs': 1, 'temp_runs': 4, 'temp_n': 250_000,
             'det_runs': 20, 'det_temp_runs': 4}
 
 
@@ -140,7 +140,9 @@ def markdown(res: dict[str, Any]) -> str:
         '`bench/llr_arl.py`. Detector (default): AR prewhitening (order <= 3 by BIC on the '
         'first 801 samples); `dry_orbit` adds a sliding reference of '
         f'{cfg["reference_max"]} samples; `dry_orbit_temperature` a temperature column '
-        '(p = 3). Paper: white noise, growing reference. ARL = samples / alarms over all '
+        '(p = 3); `speed_noise` the noise level modelled against |w| '
+        '(`noise_speed_model`, docs/llr.md "Noise growing with speed"). Paper: white '
+        'noise, growing reference. ARL = samples / alarms over all '
         'runs (each alarm restarts the reference); lower 95 % bound from the Poisson '
         f'count. Seeds {SEED0} and up (chosen before the results; development on 1-99). '
         f'Code commit `{res["commit"]}`.',

@@ -209,7 +209,31 @@ def _markdown(results: dict[str, Any]) -> str:
         from bench import bus_acceptance
         lines += [''] + bus_acceptance.markdown(results['acceptance'], results['llr_r'],
                                                 BusConfig.rate_hz)
+    lines += _demo_lines()
     return '\n'.join(lines)
+
+
+def _demo_lines() -> list[str]:
+    """Return the last ``make demo-bus`` summary (bench/results/demo_bus.json), if any."""
+    import json
+
+    from bench.report import RESULTS_DIR
+    path = RESULTS_DIR / 'demo_bus.json'
+    if not path.exists():
+        return []
+    demo = json.loads(path.read_text())
+    lines = ['', '### make demo-bus: live nodes with the calibration', '',
+             f'`make demo-bus` ({demo["date_utc"]} UTC): fault-free commissioning run (seed 1), '
+             '`rwa-monitor calibrate`, then a 3-hour run (seed 2) with a dry step of 3e-4 N m '
+             'on rw2 at 5400 s and a gyro drift of 1e-6 rad/s² on y at 7200 s, replayed live '
+             'through llr_detector and vsadc_detector with `calibration_file`. A declaration '
+             'is a detection when it follows a true change of its wheel or axis within '
+             '1800 s, a false alarm otherwise. Its summary:', '', '```']
+    lines += demo['live'] + ['```']
+    if demo.get('without_calibration'):
+        lines += ['', 'The same file through `rwa-monitor detect` without calibration:', '',
+                  '```'] + demo['without_calibration'] + ['```']
+    return lines
 
 
 def run_acceptance_only(out_dir: pathlib.Path) -> dict[str, Any]:

@@ -25,6 +25,8 @@ WORKERS = 2
 TOL = 500            # a declaration within +-TOL samples of the change detects it
 CHANGE = 1500        # the paper's change step (Fig. 3; also used for Figs. 4 and cat.)
 N_RUN = 3000         # samples per scenario run
+# Categorisation runs: the kind is re-checked at 2, 4, 8 x ~760 samples after the change.
+N_CAT = 8000
 FIG4_SIZES = (0.05, 0.1, 0.15, 0.2, 0.25, 0.3, 0.4, 0.5)
 FIG4_RATES = (1e-3, 1e-4, 1e-5)
 ARL_RATES = (1e-2, 1e-3, 1e-4, 1e-5)
@@ -199,7 +201,7 @@ def categorisation(pool, s: dict) -> dict[str, Any]:
     for scale in CATEGORY_SCALES:
         for name, (dry, visc) in CATEGORIES.items():
             key = name if scale == 1 else f'{name} x{scale:g}'
-            tasks = [{'profile': 'fig3', 'n': N_RUN, 'seed': 30_000 + seed,
+            tasks = [{'profile': 'fig3', 'n': N_CAT, 'seed': 30_000 + seed,
                       'dry': scale * dry, 'viscous': scale * visc, 'change': CHANGE,
                       'tol': TOL, 'llr': [_params()], 'peer': scale == 1}
                      for seed in range(s['cat_runs'])]
@@ -213,7 +215,7 @@ def categorisation(pool, s: dict) -> dict[str, Any]:
                         'final_kind_accuracy': (sum(o['final_kind'] == name for o in hits)
                                                 / len(hits) if hits else math.nan),
                         'kinds': {k: sum(o['final_kind'] == k for o in hits)
-                                  for k in CATEGORIES}}
+                                  for k in (*CATEGORIES, 'undecided')}}
             if scale == 1:
                 out[key]['peer'] = {k: v for k, v in
                                     _peer_stats([r['peer'] for r in res]).items()

@@ -24,10 +24,12 @@ from bench import llr_power, report
 WORKERS = 2
 SEED0 = 3000
 CHANGE = 1500
+# Size runs: the kind is re-checked at 2, 4, 8 x ~760 samples after the change (8 L0 < 6500).
+SIZE_N = 8000
 TOL = 500
 SIZES = {'dry': [(s, 0.0) for s in (0.1, 0.15, 0.2, 0.3, 0.4, 0.5, 0.7)],
          'viscous': [(0.0, s) for s in (0.005, 0.0075, 0.01, 0.015, 0.02, 0.025, 0.035)],
-         'both': [(s, s / 20.0) for s in (0.05, 0.075, 0.1, 0.15, 0.2, 0.25, 0.35)]}
+         'both': [(s, s / 20.0) for s in (0.05, 0.075, 0.1, 0.15, 0.2, 0.25, 0.35, 0.5)]}
 ROC_RATES = (1e-2, 1e-3, 1e-4, 1e-5, 1e-6, 1e-7)
 ROC_STEPS = {'dry': (0.2, 0.0), 'viscous': (0.0, 0.01)}
 FIG6_WINDOWS = (250, 500, 1000)
@@ -54,7 +56,7 @@ def _tasks(s: dict[str, Any]) -> list[dict[str, Any]]:
     for kind, sizes in SIZES.items():
         for i, (d, v) in enumerate(sizes):
             tasks += [{'part': 'size', 'kind': kind, 'size_index': i, 'profile': 'fig3',
-                       'n': 4000, 'seed': SEED0 + j, 'dry': d, 'viscous': v,
+                       'n': SIZE_N, 'seed': SEED0 + j, 'dry': d, 'viscous': v,
                        'change': CHANGE, 'tol': TOL, 'params': _params()}
                       for j in range(s['size_runs'])]
     for rate in ROC_RATES:
@@ -153,10 +155,13 @@ def markdown(res: dict[str, Any]) -> str:
              f'Code commit `{res["commit"]}`; seeds {SEED0} and up (chosen before the '
              'results). Default detector (noise level estimated, AR prewhitening), '
              'w = 500, k_verif = 250, Fig. 3 profile (scaled units, unit noise, x0 = (4, '
-             f'0.01)), change at k = {CHANGE}, 4000 samples per run; detected = a first '
-             f'declaration within {TOL} samples of the change. Kind of the last revision: '
-             'right (confirmed, correct), undecided, wrong (confirmed, incorrect); guess = '
-             'kind or, for undecided, its `kind_guess`.', '']
+             f'0.01)), change at k = {CHANGE}, {SIZE_N} samples per run (the kind is '
+             're-checked 2, 4, 8 L0 ~ 1500, 3000, 6000 samples after the change); detected = '
+             f'a first declaration within {TOL} samples of the change. Kind of the last '
+             'revision: right (confirmed, correct), undecided, wrong (confirmed, incorrect; '
+             'for `both`, mostly a minor component below the `detectable_*` size the event '
+             'states); guess = kind or, for undecided, its `kind_guess`. Rule and limits: '
+             'docs/llr.md "Categorisation".', '']
     for kind, block in res['size'].items():
         rows = [[f'{r["dry"]:g}', f'{r["viscous"]:g}', r['runs'], f'{r["p_detect"]:.2f}',
                  f'{r["median_delay"]:.0f}', f'{r["right"]:.2f}', f'{r["undecided"]:.2f}',

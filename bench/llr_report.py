@@ -164,7 +164,10 @@ def markdown(r: dict[str, Any]) -> str:
             'one-sided 95 % Poisson bound. Sample budgets keep the section to a few minutes; '
             'a cell with no alarm only bounds the ARL from below.', '',
             f'### Categorisation (profile fig3, r = 1e-5, w = 500, {s["cat_runs"]} runs; '
-            'viscous step 0.025 = a 0.5 torque step at 20 rad/s)', '']
+            'viscous step 0.025 = a 0.5 torque step at 20 rad/s; change at 1500 of 8000 '
+            'samples: the kind is re-checked at 2, 4, 8 L0 ~ 1500, 3000, 6000 samples after '
+            'it; "once confirmed" = the last revision is confirmed and right; docs/llr.md '
+            '"Categorisation")', '']
     rows = []
     for name, c in r['categorisation'].items():
         peer = c.get('peer')
@@ -176,7 +179,7 @@ def markdown(r: dict[str, Any]) -> str:
                      '-' if peer is None else _pct(peer['detection_rate']),
                      '-' if peer is None else _q(peer['error'])])
     out.append(table(['change', 'dry / viscous step', 'LLR detected', 'kind at declaration',
-                      'kind once confirmed', 'confirmed kinds', 'LLR loc. error',
+                      'kind once confirmed', 'final kinds', 'LLR loc. error',
                       'peer detected', 'peer loc. error'], rows))
     fa = r['peer_false_alarms']
     llr_cell = next((c for c in r['fig5']['cells']

@@ -115,6 +115,26 @@ def test_band_and_range_samples_are_not_tested_and_counted():
     assert np.isnan(residual[[0, 2, 3, 4]]).all() and residual[1] == pytest.approx(0.0)
 
 
+def test_streaming_residual_is_the_batch_residual_and_the_model(stribeck_block):
+    block, _ = stribeck_block
+    nominal = core.NominalWheel(block)
+    rng = np.random.default_rng(3)
+    lo, hi = block['speed_range_rad_s']
+    speed = np.concatenate([rng.uniform(lo - 1.0, hi + 1.0, 3000), [0.0, lo, hi, np.nan]])
+    friction = rng.normal(0.0, 1e-4, speed.size)
+    time = np.arange(speed.size, dtype=float)
+    batch, counts = nominal.residual(time, speed, friction)
+    one = [nominal.residual_one(*row) for row in zip(time, speed, friction)]
+    assert np.array_equal(batch, np.array([r for r, _ in one]), equal_nan=True)
+    assert counts == {reason: sum(why == reason for _, why in one)
+                      for reason in ('low_speed_band', 'outside_calibrated_range')}
+    tested = np.isfinite(batch)
+    exact = friction - core.nominal_prediction(block['friction_model'], speed)
+    assert tested.sum() > 2000
+    assert np.max(np.abs(batch - exact)[tested]) < 1e-3 * block['noise']['std_nm']
+    assert nominal.table_error_nm < 1e-3 * block['noise']['std_nm']
+
+
 def _document(block):
     return {'calibration': {'version': 1, 'sources': [], 'wheels': {'rw1': block},
                             'gyro': {}}}

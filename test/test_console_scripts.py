@@ -103,6 +103,8 @@ def test_nodes_and_replay_stop_cleanly_on_signals(tmp_path, sig):
         procs = {}
         for name, args in (('rwa-monitor-llr', ['-p', 'window:=100']),
                            ('rwa-monitor-vsadc', []), ('rwa-monitor-fss', []),
+                           ('rwa-monitor-record', ['-p', f'output:={tmp_path / "rec"}']),
+                           ('rwa-monitor-foxglove', ['-p', 'port:=0']),
                            ('rwa-monitor-replay', ['-p', f'file:={path}', '-p', 'rate:=50.0',
                                                    '-p', 'min_subscribers:=2'])):
             log = tmp_path / f'{name}.log'
@@ -126,6 +128,7 @@ def test_nodes_and_replay_stop_cleanly_on_signals(tmp_path, sig):
                 pytest.fail(f'{name} did not stop on {sig.name}')
             text = log.read_text(errors='replace')
             assert 'Traceback' not in text and 'RCLError' not in text, text
+            assert 'context is invalid' not in text, text    # no logging after shutdown
             # A process still importing its modules (a loaded machine) has no handler
             # yet and ends by the signal's default action: no traceback, nothing to clean.
             assert code == 0 or (code == -sig and not text.strip()), (name, code, text)

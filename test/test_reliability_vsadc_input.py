@@ -87,3 +87,31 @@ def test_node_reads_raw_bytes_and_gives_the_events_of_the_message_path():
             sub.callback(b'\x00\x01\x00\x00garbage')
         assert by_bytes.counters['undecodable'] == 3
         assert by_bytes.counters['gyro_messages'] == len(tele) + 1
+
+
+@pytest.mark.ros
+@pytest.mark.parametrize('order', ['gyro_first', 'reference_first'])
+def test_a_replay_loop_gives_the_file_events_again_with_the_file_rows(order):
+    # A replay loop restarts the detector; the events of the second pass must be the
+    # file pipeline's, change index = file row (as llr_detector), whichever of the three
+    # topics brings the first sample of the new pass.
+    from rwa_monitor.pipelines import vsadc as pipeline
+    tele = simulate_aocs(400.0, fault=named_fault('fast', 'y', 150.0), seed=33)
+    config = {'window': 40, 'sigma_window': 40, 'reference_window': 200}
+    expected = [(e.component, e.kind, e.index)
+                for e in pipeline.run(tele, {**pipeline.DEFAULTS, **config})]
+    assert expected
+    overrides = [Parameter(k, value=v) for k, v in config.items()]
+    with RosWorld() as world:
+        node = world.node(VsadcDetectorNode, parameter_overrides=overrides)
+        for _ in range(2):
+            for k, t in enumerate(tele.time.tolist()):
+                calls = [(node.on_gyro, messages.imu(t, tele.gyro[k].tolist())),
+                         (node.on_star_tracker, messages.quaternion(t, tele.attitude[k])),
+                         (node.on_reference, messages.vector3(t, tele.reference_rate[k]))]
+                for call, msg in (calls if order == 'gyro_first' else calls[::-1]):
+                    call(msg)
+        got = [(e.component, e.kind, e.index) for e in node.events]
+        assert node.counters['time_jump_reset'] == 1
+        assert node.counters['unpaired_gyro'] == 0
+    assert got == expected + expected

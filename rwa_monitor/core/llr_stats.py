@@ -28,10 +28,10 @@ NOISE_FLOOR_ABS = 1e-300
 KINDS = ('dry', 'viscous', 'both')
 # The data cannot tell dry from viscous (docs/llr.md "Categorisation"): an event kind.
 UNDECIDED = 'undecided'
-# A single-component kind is confirmed only if the other component, at this fraction of the
-# change's torque at the post-change mean speed, would have been found with this power.
-EXCLUDE_FRACTION = 0.5
-EXCLUDE_POWER_Z = 1.2815515655446004   # one-sided normal quantile of 0.9
+# A single-component kind is confirmed only if the other component is not significant
+# even at 5 % (two-sided): between this and the category level the data are ambiguous.
+Z_ABSENT = 1.959963984540054
+POWER_Z = 1.2815515655446004   # one-sided normal quantile of 0.9 (detectable steps)
 
 
 def width(p: int) -> int:
@@ -159,16 +159,16 @@ class Category(NamedTuple):
     detectable: tuple[float, float] = (math.inf, math.inf)
 
 
-def detectable_steps(before: np.ndarray, after: np.ndarray, p: int, noise_var: float,
-                     z_threshold: float) -> tuple[float, float]:
-    """Return the dry and viscous steps found with 90 % power by the component tests.
+def component_information(before: np.ndarray, after: np.ndarray, p: int
+                          ) -> tuple[float, float]:
+    """Return the information ``(I_dry, I_viscous)`` of the joint fit on the change ``dx``.
 
     Not in the paper. In the joint fit (``x`` before, ``x + dx`` after) the information
     on ``dx`` is the Schur complement ``S = Pi_a - Pi_a (Pi_b + Pi_a)^+ Pi_a`` (its
     inverse is ``Pi_b^-1 + Pi_a^-1`` when both exist); on one component with the others
-    free it is ``I_i = S_ii - S_ir S_rr^+ S_ri``. The likelihood-ratio test of that
-    component at level ``z_threshold`` has power 0.9 for a step of ``(z* + z_0.9) sigma /
-    sqrt(I_i)``: infinite when the post-change speed range cannot separate the two.
+    free it is ``I_i = S_ii - S_ir S_rr^+ S_ri``, so that ``var(dx_i) = sigma^2 / I_i``.
+    0 when the segments cannot separate the component from the others (constant speed
+    after the change, wheel at rest).
     """
     pi_b, _, _ = unpack(before, p)
     pi_a, _, _ = unpack(after, p)
@@ -182,36 +182,47 @@ def detectable_steps(before: np.ndarray, after: np.ndarray, p: int, noise_var: f
         s_ri = s_mat[rest, i]
         info = float(s_mat[i, i] - s_ri @ solve_scaled(s_rr, s_ri))
         scale = max(float(s_mat[i, i]), 1e-300)
-        if not info > 1e-9 * scale:
-            out.append(math.inf)
-        else:
-            out.append((z_threshold + EXCLUDE_POWER_Z) * math.sqrt(noise_var / info))
+        out.append(info if info > 1e-9 * scale else 0.0)
     return out[0], out[1]
+
+
+def detectable_steps(info: tuple[float, float], noise_var: float, z_threshold: float
+                     ) -> tuple[float, float]:
+    """Return the dry and viscous steps found with 90 % power by the component tests.
+
+    Not in the paper. The likelihood-ratio test of one component (information ``I``,
+    :func:`component_information`) at level ``z_threshold`` has power 0.9 for a step of
+    ``(z* + z_0.9) sigma / sqrt(I)``: infinite when the post-change speed range cannot
+    separate the two.
+    """
+    return tuple(math.inf if i <= 0.0 else (z_threshold + POWER_Z) * math.sqrt(noise_var / i)
+                 for i in info)
 
 
 def categorise(before: np.ndarray, n_before: int, after: np.ndarray, p: int,
                noise_var: float | None, z_threshold: float) -> Category:
     """Return the :class:`Category` (kind, dx, z, sigma^2, confirmed) of one change.
 
-    Not in the paper (which promises a categorisation but gives none); the design is in
-    docs/llr.md. Nested likelihood-ratio tests on the joint fit of :func:`change_fits`,
-    ``sigma^2`` from the before fit: ``chi_v = (RSS_dry - RSS_both) / sigma^2`` rejects the
-    dry-only change when ``> z_threshold^2``, ``chi_d = (RSS_viscous - RSS_both) /
-    sigma^2`` the viscous-only change (1 degree of freedom each; when the after segment is
-    identifiable they equal the squared marginal z of ``dx``). ``z_dry = sign(dx_dry)
-    sqrt(chi_d)``, ``z_viscous`` likewise. Both rejected -> ``both``; one rejected -> the
-    other kind; these are *confirmed*. None rejected (the data cannot tell dry from
-    viscous, e.g. the speed barely varied after the change) -> :data:`UNDECIDED`, with
-    ``guess`` the single-component kind that fits better. A single kind is confirmed only
-    if, besides, the other component would have been found (90 % power,
-    :func:`detectable_steps`) at :data:`EXCLUDE_FRACTION` of the change's torque at the
-    post-change mean speed ``|w|_a`` (a dry step ``a`` and a viscous step ``a / |w|_a``
-    give the same torque); otherwise the kind is :data:`UNDECIDED` too. ``dx`` is always
-    the estimate of the hypothesis of ``guess`` (constrained fit for a single component),
-    never the free fit of an unidentifiable segment.
+    Not in the paper (which promises a categorisation but gives none); the design and its
+    error bounds are in docs/llr.md "Categorisation". Nested likelihood-ratio tests on the
+    joint fit of :func:`change_fits`, ``sigma^2`` from the before fit, each of level
+    ``z_threshold`` (two-sided normal quantile): ``chi_v = (RSS_dry - RSS_both) /
+    sigma^2`` rejects the dry-only change when ``> z*^2``, ``chi_d = (RSS_viscous -
+    RSS_both) / sigma^2`` the viscous-only change (1 degree of freedom each; the squared
+    marginal z of ``dx`` when the after segment is identifiable). ``z_dry = sign(dx_dry)
+    sqrt(chi_d)``, ``z_viscous`` likewise. Both rejected -> ``both``. One rejected, say
+    viscous-only, -> ``dry`` if besides the viscous component is not significant even at
+    5 % (``|z_viscous| <= Z_ABSENT``) and a pure viscous change of the same torque at the
+    post-change mean speed ``|w|_a`` would have been found with 90 % power
+    (:func:`detectable_steps`); ``viscous`` symmetrically. These
+    are *confirmed*. Otherwise :data:`UNDECIDED` with ``guess`` the single-component kind
+    that fits better. ``dx`` is always the estimate of the hypothesis of ``guess``
+    (constrained fit for a single component), never the free fit of an unidentifiable
+    segment.
     """
-    explained, dx = change_fits(np.asarray(before, dtype=float),
-                                np.asarray(after, dtype=float), p)
+    before = np.asarray(before, dtype=float)
+    after = np.asarray(after, dtype=float)
+    explained, dx = change_fits(before, after, p)
     if noise_var is None:
         pi_b, q_b, e_b = unpack(before, p)
         rss = float(e_b) - float(solve_scaled(pi_b, q_b) @ q_b)
@@ -226,17 +237,23 @@ def categorise(before: np.ndarray, n_before: int, after: np.ndarray, p: int,
     limit = z_threshold * z_threshold
     no_dry_only = chi_v > limit
     no_viscous_only = chi_d > limit
-    detectable = detectable_steps(np.asarray(before, dtype=float),
-                                  np.asarray(after, dtype=float), p, s2, z_threshold)
+    info = component_information(before, after, p)
+    detectable = detectable_steps(info, s2, z_threshold)
     if no_dry_only and no_viscous_only:
         return Category(KINDS[2], dx[2].copy(), (z_d, z_v), s2, True, KINDS[2], detectable)
     if no_dry_only or no_viscous_only:
         h = 1 if no_dry_only else 0
+        other = 1 - h
+        z_other = (z_d, z_v)[other]
         pi_a = unpack(after, p)[0]
         mean_speed = float(pi_a[0, 1] / pi_a[0, 0]) if pi_a[0, 0] > 0.0 else 0.0
-        torque = abs(float(dx[h, h])) * (mean_speed if h == 1 else 1.0)
-        other = detectable[1 - h] * (mean_speed if h == 0 else 1.0)
-        if other <= EXCLUDE_FRACTION * torque:
+        # Torque of the change under the single-kind fit, and the smallest step of the
+        # other kind its test finds with 90 % power, both at the post-change mean speed (a
+        # dry step a = a viscous step a / |w|_a there): the speed variation separates the
+        # two directions for a change of this size.
+        scale = (1.0, mean_speed)
+        torque = abs(float(dx[h, h])) * scale[h]
+        if abs(z_other) <= Z_ABSENT and detectable[other] * scale[other] <= torque:
             return Category(KINDS[h], dx[h].copy(), (z_d, z_v), s2, True, KINDS[h],
                             detectable)
     else:

@@ -66,8 +66,9 @@ class StampPairer:
     None, reference)`` for every gyro sample that can be decided now. ``reference_for(t,
     lagging)`` gives the reference rate for ``t``, or None to wait for it. Memory: at most
     ``max_lag + 1`` gyro samples and ``4 * max_lag`` quaternions. A gyro stamp more than
-    ``time_jump`` s before the last one released empties the buffers (``push_gyro``
-    returns True: the caller restarts its detector).
+    ``time_jump`` s before the last one released empties the buffers but for the
+    quaternions of the new pass (``push_gyro`` returns True: the caller restarts its
+    detector).
     """
 
     def __init__(self, tolerance: float = 1e-3, max_lag: int = 40,
@@ -99,8 +100,11 @@ class StampPairer:
             return False
         jumped = t < self.last_released - self.time_jump
         if jumped:
+            # Quaternions of the new pass may have arrived first: keep those.
+            new_pass = [s for s in self._star if s[0] < self.last_released - self.time_jump]
             self.counters['time_jump_reset'] += 1
             self.reset()
+            self._star.extend(new_pass)
         self._gyro.append((t, rate))
         return jumped
 

@@ -22,7 +22,6 @@ import time
 from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticStatus
-import numpy as np
 
 from rwa_monitor.core import keys
 from rwa_monitor.core.calibrate import NominalWheel
@@ -32,6 +31,7 @@ from rwa_monitor.telemetry.codecs import key_values
 
 NAME = keys.CALIBRATION_FILE
 COMPONENT = 'calibration'   # the component of the change events and of the health status
+REASONS = ('low_speed_band', 'outside_calibrated_range')   # samples not tested
 
 
 def check(values: dict[str, Any]) -> None:
@@ -105,12 +105,11 @@ class CalibrationInForce:
         nominal = self._wheels.get(wheel_id)
         if nominal is None:
             return friction
-        out, skipped = nominal.residual(np.array([t]), np.array([speed]),
-                                        np.array([friction]))
-        counts = self.not_tested.setdefault(wheel_id, {k: 0 for k in skipped})
-        for reason, n in skipped.items():
-            counts[reason] += n
-        return float(out[0])
+        out, reason = nominal.residual_one(t, speed, friction)
+        counts = self.not_tested.setdefault(wheel_id, dict.fromkeys(REASONS, 0))
+        if reason is not None:
+            counts[reason] += 1
+        return out
 
     def values(self, wheel_id: str | None = None) -> dict[str, Any]:
         """Return the diagnostics KeyValues of the calibration (per wheel if given)."""

@@ -14,6 +14,7 @@ from __future__ import annotations
 from typing import Any, Sequence
 
 from diagnostic_msgs.msg import DiagnosticArray
+import rclpy.logging
 from rclpy.node import Node
 
 from rwa_monitor.exceptions import ConfigError, OutputError
@@ -72,7 +73,11 @@ class Recorder(Node):
         if writer is not None:
             self.writer = None
             writer.close()
-            self.get_logger().info(f'recorded {writer.counts} into {writer.path}')
+            # After SIGINT/SIGTERM the context is gone: the node's logger would also try
+            # /rosout and print an error line; a logger of another name only prints.
+            logger = self.get_logger() if self.context.ok() else \
+                rclpy.logging.get_logger(f'{NODE_NAME}.closed')
+            logger.info(f'recorded {writer.counts} into {writer.path}')
         super().destroy_node()
 
 

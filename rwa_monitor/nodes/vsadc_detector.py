@@ -89,6 +89,7 @@ class VsadcDetectorNode(Node):
         self.events: deque[AnomalyEvent] = deque(maxlen=MAX_KEPT)
         self._last_event: dict[str, AnomalyEvent] = {}
         self.samples = 0
+        self.index = 0      # samples fed since the detector (re)started: the event index
         self._pairer = streams.StampPairer(self.params['pair_tolerance'],
                                            self.params['max_lag'], self.params['time_jump'])
         self._refs: deque = deque(maxlen=64)
@@ -141,6 +142,7 @@ class VsadcDetectorNode(Node):
             self.reference = list(value)
         elif name in DETECTOR_PARAMETERS:
             self.detector = self._make_detector(self._detector_config())
+            self.index = 0
             self._axis_checks()
             self.get_logger().info(f'{name} = {value}: detector restarted')
 
@@ -199,7 +201,11 @@ class VsadcDetectorNode(Node):
             self.counters['time_jump_reset'] += 1
             self.get_logger().warning(f'gyro time jumped back to t={t:.3f} s: restart')
             self.detector.reset()
-            self._refs.clear()
+            self.index = 0
+            for _ in range(len(self._refs)):        # keep the new pass's reference rates
+                stamp, ref = self._refs.popleft()
+                if stamp <= t + self.params['time_jump']:
+                    self._refs.append((stamp, ref))
         self._drain()
 
     def on_star_tracker(self, msg: QuaternionStamped) -> None:
@@ -251,12 +257,13 @@ class VsadcDetectorNode(Node):
         detector = self.detector
         before = [ch.samples for ch in detector.channels]
         try:
-            found = detector.update(t, rate, q, ref, self.samples)
+            found = detector.update(t, rate, q, ref, self.index)
         except Exception as err:  # noqa: BLE001 - a detector failure never stops the node
             self._detector_failed(err)
             return
         finally:
             self.samples += 1
+            self.index += 1
         now = self.diagnostics.now()
         self.diagnostics.mark_input(INPUT_ID, 'input', now)
         for axis, ch, n in zip(detector.axes, detector.channels, before):
@@ -273,6 +280,7 @@ class VsadcDetectorNode(Node):
             self.get_logger().error(f'detector failed: {self._failure[1]}; detector '
                                     'restarted (further failures are only counted)')
         self.detector = self._make_detector(self._detector_config())
+        self.index = 0
         self._axis_checks()
 
     # --------------------------------------------------------------------- output
