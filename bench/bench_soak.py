@@ -532,6 +532,7 @@ def run(out_dir: pathlib.Path, quick: bool) -> dict[str, Any]:
         'diagnostics_messages_per_s': diag['messages'] / wall,
         'diagnostics_statuses_per_s': diag['statuses'] / wall,
         'machine': report.machine(),
+        'commit': _commit(),
     }
     results['failed'] = verdict(results)
     results['passed'] = not results['failed']
@@ -542,6 +543,15 @@ def run(out_dir: pathlib.Path, quick: bool) -> dict[str, Any]:
     print(json.dumps({k: v for k, v in results.items() if k != 'machine'}, indent=1,
                      default=str))
     return results
+
+
+def _commit() -> str:
+    """Return the code's commit (``+changes`` when the work tree differs from it)."""
+    def git(*args: str) -> str:
+        return subprocess.run(['git', *args], cwd=report.REPO, capture_output=True,
+                              text=True).stdout.strip()
+    head = git('rev-parse', '--short', 'HEAD') or 'unknown'
+    return head + ('+changes' if git('status', '--porcelain', '--', 'rwa_monitor') else '')
 
 
 def _section(r: dict[str, Any], quick: bool) -> None:
@@ -586,7 +596,20 @@ def _section(r: dict[str, Any], quick: bool) -> None:
             f'topic; recording seed {r["seed"]} ({s["file_s"]:.0f} s, 4 wheels at 10 Hz, '
             f'dry step on rw2, gyro_y bias, in every pass). `python -m bench soak'
             f'{" --quick" if quick else ""}`; method in bench/bench_soak.py.\n\n'
-            + report.table(['measure', 'value'], rows))
+            + report.table(['measure', 'value'], rows)
+            + f'\n\nHow to read (measured on {r.get("commit", "?")}, '
+            f'{r["machine"]["date"][:10]}, load average {r["load_average_1min"]["mean"]:.0f} '
+            f'on {r["machine"]["cpus"]} cores): sustained rows/s is what the whole system '
+            'kept up with on this machine at that load (the rate steers itself; a row is one '
+            '4-wheel JointState plus one gyro, star-tracker and reference message). "Sent '
+            'while down" counts the rows published from the kill to the first status of the '
+            'new process (an upper bound of the downtime: the process subscribes shortly '
+            'before its first status), "backlog at kill" the rows the node had fallen behind '
+            'in the last 30 s; a SIGKILL loses what the node held, so the lost messages should '
+            'not exceed their sum (a negative rest: the bound was generous). Unpaired gyro '
+            'samples include the gyro messages of the malformed burst (random stamps, no '
+            'partner). Anomalies of the file: the events of `rwa-monitor detect` on one pass; '
+            'each must come from a node with the same change index in some pass.')
     report.update_section('soak', text)
 
 
