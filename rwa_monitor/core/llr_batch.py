@@ -212,7 +212,7 @@ def detect_paper_model(t: np.ndarray, w: np.ndarray, f: np.ndarray, cfg: Mapping
     h1, h2 = -np.sign(wv), -wv
     speed_model = cfg['noise_speed_model']
     if cfg['noise_ar_max_order'] > 0 or speed_model:
-        aw = np.abs(wv)
+        aw = np.abs(wv) if speed_model else None
         fit_n = cfg['noise_fit_samples']
         m = speed_fit_length(aw, fit_n) if speed_model else fit_n
         while True:   # the streaming detector's schedule of fits (llr.LLRDetector)
@@ -220,15 +220,16 @@ def detect_paper_model(t: np.ndarray, w: np.ndarray, f: np.ndarray, cfg: Mapping
                 return [], counters
             h_fit = np.column_stack([paper_h1(wv[:m]), -wv[:m]])
             model = fit_noise_model(h_fit, fv[:m], cfg['noise_ar_max_order'],
-                                    aw[:m] if speed_model else None)
+                                    None if aw is None else aw[:m])
             if not speed_model or speed_fit_done(m, fit_n, model):
                 break
             m += fit_n
         ar = model.ar
-        h1 = paper_h1(wv)
         if model.speed_std is not None:
             level = speed_scale(aw, model.speed_std)
-            h1, h2, fv = h1 / level, h2 / level, fv / level
+            h1, h2, fv = paper_h1(wv) / level, h2 / level, fv / level
+        elif ar:
+            h1 = paper_h1(wv)
         if ar:
             h1, h2, fv = whiten(h1, ar), whiten(h2, ar), whiten(fv, ar)
     terms = _Terms(h1, h2, fv)
