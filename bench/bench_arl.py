@@ -140,10 +140,14 @@ def markdown(res: dict[str, Any]) -> str:
         '`bench/llr_arl.py`. Detector (default): AR prewhitening (order <= 3 by BIC on the '
         'first 801 samples); `dry_orbit` adds a sliding reference of '
         f'{cfg["reference_max"]} samples; `dry_orbit_temperature` a temperature column '
-        '(p = 3). Paper: white noise, growing reference. ARL = samples / alarms over all '
+        '(p = 3); `speed_noise` the noise level modelled against |w| '
+        '(`noise_speed_model`, docs/llr.md "Noise growing with speed"). Paper: white '
+        'noise, growing reference. ARL = samples / alarms over all '
         'runs (each alarm restarts the reference); lower 95 % bound from the Poisson '
         f'count. Seeds {SEED0} and up (chosen before the results; development on 1-99). '
-        f'Code commit `{res["commit"]}`.',
+        f'Code commit `{res["commit"]}`' + ''.join(
+            f'; cells of `{case}` (default detector) re-run at `{commit}`'
+            for case, commit in res.get('rerun', {}).items()) + '.',
         '',
         report.table(['noise', 'r', 'ARL', 'ARL 95 % low', 'alarms / samples',
                       'ARL >= 1/r', 'paper ARL', 'paper alarms / samples'], arl_rows),
@@ -224,3 +228,61 @@ def plot(out_dir: pathlib.Path, res: dict[str, Any]) -> None:
     with atomic_write(out_dir / 'arl.png', 'wb', encoding=None) as handle:
         fig.savefig(handle, format='png', dpi=110)
     plt.close(fig)
+
+
+def rerun_cases(cases: list[str], out_dir: pathlib.Path = report.RESULTS_DIR
+                ) -> dict[str, Any]:
+    """Re-run the default-detector cells of ``cases`` only; keep the other stored cells.
+
+    ``python -c "from bench import bench_arl; bench_arl.rerun_cases(['speed_noise'])"``:
+    for a change that affects only some cases (the paper detector and the other cases'
+    detectors are untouched), on a machine too loaded for the whole table. Same seeds and
+    budgets as :func:`run`; the section names the commit of each re-run case.
+    """
+    import json
+    import subprocess
+    s = _settings(False)
+    commit = subprocess.run(['git', 'rev-parse', '--short', 'HEAD'], capture_output=True,
+                            text=True, cwd=report.REPO).stdout.strip()
+    res = json.loads((out_dir / 'arl.json').read_text())
+    res.pop('machine', None)
+    for row in res['arl']:     # the JSON stores inf (no alarm) as null
+        row['arl'] = math.inf if row['arl'] is None else row['arl']
+    for row in res['detection']:
+        for key in ('median_delay', 'delay_ratio_vs_white'):
+            row[key] = math.nan if row[key] is None else row[key]
+    tasks = [t for t in _arl_tasks(s) + _detection_tasks(s)
+             if t['case'] in cases and t['variant'] == 'default']
+    with multiprocessing.get_context('fork').Pool(WORKERS) as pool:
+        results = list(pool.imap_unordered(_run, tasks))
+    new_arl = {(r['case'], r['rate']): r for r in
+               _summarise_arl([r for r in results if 'kind' not in r])
+               if r['variant'] == 'default' and r['runs']}
+    res['arl'] = [new_arl.get((r['case'], r['rate']), r) if r['variant'] == 'default'
+                  else r for r in res['arl']]
+    kept = [r for r in res['detection'] if not (r['case'] in cases
+                                                and r['variant'] == 'default')]
+    fresh = [r for r in results if 'kind' in r]
+    white = [r for r in res['detection'] if r['case'] == 'gaussian'
+             and r['variant'] == 'default']
+    rows = []
+    for case in cases:
+        for kind in STEPS:
+            sel = [r for r in fresh if (r['case'], r['kind']) == (case, kind)]
+            delays = [r['delay'] for r in sel if r['detected']]
+            ref = next(w for w in white if w['kind'] == kind)
+            detected = sum(r['detected'] for r in sel) / len(sel)
+            delay = float(np.median(delays)) if delays else math.nan
+            rows.append({'case': case, 'variant': 'default', 'kind': kind, 'runs': len(sel),
+                         'detected': detected, 'median_delay': delay,
+                         'early_alarms': sum(r['early_alarm'] for r in sel),
+                         'loss_vs_white': ref['detected'] - detected,
+                         'delay_ratio_vs_white': delay / ref['median_delay']})
+    res['detection'] = sorted(kept + rows, key=lambda r: (
+        llr_arl.NOISE_CASES.index(r['case']), r['variant'], r['kind']))
+    res['settings'] = s
+    res['rerun'] = dict(res.get('rerun', {}), **{case: commit for case in cases})
+    plot(out_dir, res)
+    report.write_json(out_dir, 'arl', res)
+    report.update_section('arl', markdown(res))
+    return res

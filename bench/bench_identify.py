@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 
 from bench.report import table, update_section, write_json
+from rwa_monitor.core.identify.differentiate import local_noise_std
 from rwa_monitor.core.identify.model import regressors_from_config, snippet
 from rwa_monitor.core.identify.select import identify
 from rwa_monitor.pipelines.identify import identify_wheel, prepare
@@ -49,6 +50,7 @@ BUS_SEEDS = (1103, 1117, 1129)   # chosen before any result on them was seen (de
 BUS_HOURS = 3.0
 STRIBECK_SPEED_BUS = 1.0          # rad/s, BusConfig.stribeck_speed
 NOT_A_FREE_COAST = ('Samplewheel_29',)   # SOURCE.md: decelerates ten times faster
+TORQUE_CUT_GOAL, SPEED_CUT_GOAL = 4.0, 5.0   # every drum run (issue 11)
 EXPECTED = {'none': '(none)', 'stribeck': 'stribeck', 'drag': 'drag',
             'temperature': 'aux:rw1_temperature:dry', 'drift': 'drift', 'periodic': 'periodic'}
 
@@ -69,6 +71,7 @@ def _measured(out_dir: pathlib.Path, quick: bool) -> dict[str, Any]:
             rep = write_outputs(sel, pathlib.Path(tmp) / f'{run}-{body}', f'{run} {body}',
                                 extra)
             params = {e['name']: e['parameters'] for e in rep['effects']}
+            speed_noise = float(np.median(local_noise_std(sel.data.time, sel.data.speed)))
             weights = snippet(sel)['friction_model']['weights']
             rows.append({'run': run.replace('__Separate__', ' ').replace('.csv', ''),
                          'body': body, 'samples': len(sel.data),
@@ -77,6 +80,10 @@ def _measured(out_dir: pathlib.Path, quick: bool) -> dict[str, Any]:
                          'jumps': len(sel.segments.starts) - 1,
                          'effects': [e['name'] for e in rep['effects']],
                          'speed_rmse': rep['speed_rmse'],
+                         'speed_noise': speed_noise,
+                         'torque_cut_limit': rep['rmse_before']['held_out']
+                         / rep['noise_floor'],
+                         'speed_cut_limit': rep['speed_rmse']['before'] / speed_noise,
                          'half_width': sel.data.half_width,
                          'dry': rep['baseline']['parameters']['dry'],
                          'viscous': rep['baseline']['parameters']['viscous'],
@@ -113,6 +120,31 @@ def _pooled(rows: list[dict]) -> dict[str, Any]:
             out[key] = {'median': float(med), 'q1': float(q1), 'q3': float(q3),
                         'n': len(values)}
     return out
+
+
+def _limits(runs: list[dict]) -> list[str]:
+    """Return the runs that miss a cut goal, with the largest cut their noise allows.
+
+    No model's held-out torque RMSE falls below the friction noise floor s_f (the
+    residual keeps the noise), so the torque cut is at most before / s_f; the integrated
+    speed cannot match the measured one closer than the speed noise s_w (local-quadratic
+    residuals, robust), so the speed cut is at most before / s_w.
+    """
+    lines = []
+    for r in runs:
+        torque = r['rmse_before']['held_out'] / r['rmse_after']['held_out']
+        speed = r['speed_rmse']['before'] / r['speed_rmse']['after']
+        if torque < TORQUE_CUT_GOAL or speed < SPEED_CUT_GOAL:
+            lines.append(f'- {r["run"]} ({r["body"]}): torque cut {torque:.1f}x, at most '
+                         f'{r["torque_cut_limit"]:.1f}x (before {r["rmse_before"]["held_out"]:.3g}'
+                         f' / floor {r["noise_floor"]:.3g} N m); speed cut {speed:.1f}x, at '
+                         f'most {r["speed_cut_limit"]:.0f}x (before '
+                         f'{r["speed_rmse"]["before"]:.3g} / speed noise '
+                         f'{r["speed_noise"]:.2g} rad/s); jumps {r["jumps"]}.')
+    if not lines:
+        return ['Every run meets both cut goals.', '']
+    return (['Runs below a goal (torque >= 4x, speed >= 5x), with the largest cut their noise '
+             'allows (docs/identify.md, "Limits"):', ''] + lines + [''])
 
 
 def _undeclared(quick: bool) -> list[dict]:
@@ -380,6 +412,7 @@ def _markdown(res: dict) -> str:
                   f'interleaved training blocks). h = differentiator half width chosen from '
                   f'the data (docs/identify.md). Before this issue (main 95c06df, h = 5): '
                   f'pooled torque RMSE 0.2175 -> 0.109 N m, per-run factors 2.0 to 17.1.', '',
+                  *_limits(m['runs']),
                   f'Pooled over {len(m["runs"])} runs (sample-weighted RMS): held out '
                   f'{p["rmse_before_held_out"]:.4g} -> {p["rmse_after_held_out"]:.4g}, in sample '
                   f'{p["rmse_before_in_sample"]:.4g} -> {p["rmse_after_in_sample"]:.4g}. '

@@ -354,7 +354,9 @@ def sizes_markdown(sizes: dict, paper: dict) -> list[str]:
               f'{", ".join(paper["calibrate_effects"]) or "none"}, '
               f'{paper["calibrate_warnings"]} warnings of friction changes: the FSS jumps); '
               '`model1` = the same contract with a model-(1) nominal (bench/fss_sizes.py '
-              '`model1_block`). Then through core/calibrate.py `diagnose_fss` with the '
+              '`model1_block`); `model1_3windows` = model (1) on three nominal windows of '
+              'the wheel end to end (6.7 h). Then through core/calibrate.py `diagnose_fss` '
+              'with the '
               f'shipped model, {paper["windows_per_case"]} windows per case, and the same '
               'windows without calibration. Named right: nominal with no flag, or only the '
               "right kind; estimates are medians relative to the calibration's reference "

@@ -56,7 +56,8 @@ def detector_config(case: str, rate: float, variant: str = 'default') -> dict[st
     """Return the detector keywords for ``case``.
 
     ``variant``: ``default`` (AR prewhitening; a sliding reference for ``dry_orbit``, the
-    temperature column for ``dry_orbit_temperature``), ``paper`` (white noise, growing
+    temperature column for ``dry_orbit_temperature``, the noise level modelled against
+    ``|w|`` for ``speed_noise``), ``paper`` (white noise, growing
     reference: the paper's Algorithm 1 with the studentised noise level), ``sliding``
     (default plus the sliding reference whatever the case).
     """
@@ -67,6 +68,8 @@ def detector_config(case: str, rate: float, variant: str = 'default') -> dict[st
         cfg['reference_max'] = REFERENCE_MAX
     if case == 'dry_orbit_temperature':
         cfg['regressors'] = temperature_model()
+    if case == 'speed_noise':
+        cfg['noise_speed_model'] = True
     return cfg
 
 

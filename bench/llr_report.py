@@ -208,7 +208,8 @@ def markdown(r: dict[str, Any]) -> str:
             f'({re_["false_per_wheel_hour"]:.3f} per wheel-hour). The paper shows this '
             'scenario as a plot only ("detects most anomalies").', '']
     out += ['### Throughput (realistic SI profile, w = 400, r = 1e-4, noise estimated; '
-            'one wheel)', '']
+            'one wheel; samples per CPU second of the process, so that a shared, loaded '
+            'machine does not count other work)', '']
     rows = [[row['n'], f'{row["stream_per_s"]:.0f}', f'{row["batch_per_s"]:.0f}',
              f'{row["stream_s"]:.2f}', f'{row["batch_s"]:.3f}',
              'yes' if row['same_events'] else '**no**',

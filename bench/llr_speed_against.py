@@ -3,7 +3,8 @@
 ``python -m bench.llr_speed_against OLD_CHECKOUT``: runs the throughput case of
 bench_llr (SI realistic profile, 300k samples, w = 400, r = 1e-4, noise estimated) in two
 interleaved rounds, in separate processes, for the other checkout and for this tree, and
-prints the samples/s of each. Absolute figures depend on the machine; the ratio is the
+prints the samples per CPU second of each (process time: a loaded shared machine changes
+the wall clock, not the work). Absolute figures depend on the machine; the ratio is the
 result (docs/results.md, "LLR speed of this round").
 """
 
@@ -23,15 +24,15 @@ params = {'window': 400, 'k_verif': 200, 'false_alarm_rate': 1e-4, 'noise_std': 
 n = 300000
 tele = simulate_friction(wheels=('rw1',), n_samples=n, rate_hz=10.0, seed=7)
 w = tele.wheels['rw1']
-start = time.perf_counter()
+start = time.process_time()
 detect_batch(tele.time, w.speed, w.friction, component='rw1', **params)
-batch = n / (time.perf_counter() - start)
+batch = n / (time.process_time() - start)
 det = LLRDetector('rw1', **params)
 rows = list(zip(tele.time.tolist(), w.speed.tolist(), w.friction.tolist()))
-start = time.perf_counter()
+start = time.process_time()
 for t, s, f in rows:
     det.update(t, s, f)
-print(n / (time.perf_counter() - start), batch)
+print(n / (time.process_time() - start), batch)
 '''
 
 

@@ -8,6 +8,7 @@ import ast
 import pathlib
 
 import numpy as np
+import pytest
 from scipy import stats
 
 from rwa_monitor.core.llr import detect_batch, LLRDetector
@@ -135,3 +136,82 @@ def test_no_import_cycle_between_streaming_and_batch():
     assert 'rwa_monitor.core.llr' not in names
     assert 'rwa_monitor.core.llr' not in {n.rsplit('.', 1)[0] for n in names
                                           if n.startswith('rwa_monitor.core.llr.')}
+
+
+# -- noise growing with speed (docs/llr.md "Noise growing with speed") --------------------
+def speed_noise_signal(n: int, seed: int, hold: int = 0, changes=()):
+    """Profile 0-300 rad/s with zero crossings; noise std 1 x (0.5 + |w| / 100).
+
+    ``hold``: samples at a constant 200 rad/s first (the fit must wait for the speed to
+    vary).
+    """
+    rng = np.random.default_rng(seed)
+    k = np.arange(n, dtype=float)
+    w = 150.0 * np.sin(2.0 * np.pi * k / 4000.0) + 120.0
+    w[:hold] = 200.0
+    fc = np.full(n, 1.0)
+    fv = np.full(n, 0.01)
+    for at, d_dry, d_visc in changes:
+        fc[at:] += d_dry
+        fv[at:] += d_visc
+    noise = (0.5 + np.abs(w) / 100.0) * rng.standard_normal(n)
+    return k * 0.1, w, -fc * np.sign(w) - fv * w + noise
+
+
+def test_speed_noise_level_is_recovered():
+    """|e| on (1, |w|): E|e| = sqrt(2/pi) (0.5 + |w| / 100), so b / a = 0.02.
+
+    With 4000 samples over 0-270 rad/s the relative standard error of b / a is a few
+    per cent; 25 % is > 5 standard errors. White noise: the slope's t value exceeds
+    3.29 with probability 5e-4 (one-sided), so no model on the fixed seed.
+    """
+    from rwa_monitor.core.llr_common import fit_speed_std
+    _, w, f = speed_noise_signal(4000, 21)
+    h = np.column_stack([-np.sign(w), -w])
+    a, b, floor = fit_speed_std(h, f, np.abs(w))
+    assert b / a == pytest.approx(0.02, rel=0.25)
+    assert floor == pytest.approx(a + b * np.abs(w).min())
+    rng = np.random.default_rng(22)
+    white = -np.sign(w) - 0.01 * w + rng.standard_normal(w.size)
+    assert fit_speed_std(h, white, np.abs(w)) is None
+
+
+def test_streaming_equals_batch_with_the_speed_noise_model():
+    # The hold makes the first fit wait for the speed to vary (speed_fit_ready), then
+    # retry (speed_fit_done) until the slope is significant: same schedule on both paths.
+    t, w, f = speed_noise_signal(16_000, 23, hold=3000, changes=((11_000, 1.0, 0.0),))
+    params = dict(window=300, noise_speed_model=True, false_alarm_rate=1e-5)
+    det = LLRDetector('rw1', **params)
+    streamed = [e for a, b, c in zip(t, w, f) for e in det.update(a, b, c)]
+    assert streamed == detect_batch(t, w, f, **params)
+    assert det.noise_model.speed_std is not None
+    assert any(abs(e.index - 11_000) <= 300 for e in streamed)
+
+
+def test_speed_noise_model_keeps_the_false_alarm_promise():
+    """Holds at 30 and 250 rad/s (noise std 0.8 and 3.0) alternating every 5000 samples.
+
+    Without the model the reference's pooled noise level is too small for a window at
+    250 rad/s after a long slow hold (alarms on every seed here). With it, union bound:
+    P(any alarm) <= n r = 4e4 x 1e-6 = 0.04 per run, so more than 1 alarm over 3 runs has
+    probability < 1e-2.
+    """
+    with_model = without = 0
+    for seed in (31, 32, 33):
+        t, w, f = speed_noise_signal(40_000, seed)
+        w = np.where((np.arange(w.size) // 5000) % 2 == 0, 30.0, 250.0)
+        rng = np.random.default_rng(seed)
+        f = -np.sign(w) - 0.01 * w + (0.5 + w / 100.0) * rng.standard_normal(w.size)
+        with_model += sum(e.revision == 0 for e in detect_batch(
+            t, w, f, window=300, false_alarm_rate=1e-6, noise_speed_model=True))
+        without += sum(e.revision == 0 for e in detect_batch(
+            t, w, f, window=300, false_alarm_rate=1e-6))
+    assert with_model <= 1
+    assert without >= 3
+
+
+def test_speed_noise_model_needs_an_estimated_noise_level():
+    with pytest.raises(ValueError, match='noise_speed_model'):
+        LLRDetector('rw1', noise_std=1.0, noise_speed_model=True)
+    with pytest.raises(ValueError, match='noise_speed_model'):
+        LLRDetector('rw1', noise_speed_model='yes')

@@ -24,6 +24,7 @@ from rwa_monitor.core.gchi2 import (gchi2_logsf_general, log_sf2, log_sf2_t,
 from rwa_monitor.core.llr_common import (candidate_log_p2, checkpoints, COUNTER_NAMES,
                                          declaration, fit_noise_model, make_event,
                                          NoiseModel, reference_base, revision_due,
+                                         speed_fit_done, speed_fit_ready, speed_scale,
                                          validate_parameters, window_statistics)
 from rwa_monitor.core.params import AUTO
 
@@ -49,7 +50,10 @@ class LLRDetector:
     and used to prewhiten the data; default 3 with an estimated noise level, 0 = white
     noise as in the paper), ``reference_max`` (None: the reference grows from its start as
     in the paper; else at most that many samples before the window: a sliding reference
-    that follows slow drifts of the nominal friction). Positions count accepted samples;
+    that follows slow drifts of the nominal friction), ``noise_speed_model`` (True: the
+    noise level is modelled against ``|w|`` on the fit segment, extended until the speed
+    varies, and used as weights; docs/llr.md "Noise growing with speed"). Positions count
+    accepted samples;
     events carry the row index (number of ``update`` calls before that sample since
     construction or reset). docs/llr.md "Noise beyond white" and "Slow drifts".
     """
@@ -61,14 +65,15 @@ class LLRDetector:
                  category_revisions: int = 3, refine_change: bool = True,
                  max_abs_speed: float = 1e5, max_abs_friction: float = 1e3,
                  noise_ar_max_order: int | str = AUTO, noise_fit_samples: int | str = AUTO,
-                 reference_max: int | None = 0) -> None:
+                 reference_max: int | None = 0, noise_speed_model: bool = False) -> None:
         self._cfg = validate_parameters(
             component, window=window, k_verif=k_verif, false_alarm_rate=false_alarm_rate,
             noise_std=noise_std, regressors=regressors, min_excitation=min_excitation,
             category_level=category_level, category_revisions=category_revisions,
             refine_change=refine_change, max_abs_speed=max_abs_speed,
             max_abs_friction=max_abs_friction, noise_ar_max_order=noise_ar_max_order,
-            noise_fit_samples=noise_fit_samples, reference_max=reference_max)
+            noise_fit_samples=noise_fit_samples, reference_max=reference_max,
+            noise_speed_model=noise_speed_model)
         cfg = self._cfg
         self._component = cfg['component']
         self._w = cfg['window']
@@ -84,6 +89,7 @@ class LLRDetector:
         self._L = 2 * self._w + self._kverif + 2 + (self._R or 0)
         self._ar_max = cfg['noise_ar_max_order']
         self._fit_n = cfg['noise_fit_samples']
+        self._speed_model = cfg['noise_speed_model']
         self._max_w = cfg['max_abs_speed']
         self._max_f = cfg['max_abs_friction']
         self.reset()
@@ -225,8 +231,12 @@ class LLRDetector:
         self._checkpoint = -1
         self._noise: NoiseModel | None = None
         self._ar: tuple[float, ...] = ()
+        self._speed_std: tuple[float, float, float] | None = None
+        self._wlow = math.inf
+        self._whigh = 0.0
+        self._next_fit: int | None = None
         self._lags: list[tuple[float, Any]] = []
-        self._fitting = self._ar_max > 0
+        self._fitting = self._ar_max > 0 or self._speed_model
         self._buffer: list[tuple[int, float, float, Any]] = []
         self._plain = self._default and not self._fitting
         self._last_event: AnomalyEvent | None = None
@@ -293,38 +303,65 @@ class LLRDetector:
             if h is None:
                 return []
         self._last_t = t
-        return self.ingest_row(row, t, f, h)
+        return self.ingest_row(row, t, f, h, w)
 
-    def ingest_row(self, row: int, t: float, f: float, h) -> list[AnomalyEvent]:
+    def ingest_row(self, row: int, t: float, f: float, h, speed: float) -> list[AnomalyEvent]:
         """Process an accepted sample whose regressor row ``h`` is already computed.
 
         For :func:`detect_batch` with a model other than eq. (1): the rows are computed
         once for the whole file and validated there (finite, increasing time). While the
         noise model is being fitted the sample is buffered; once fitted the buffer is
-        replayed, and every sample is prewhitened before it enters the sums.
+        replayed, and every sample is prewhitened (divided by the modelled noise level at
+        ``|speed|``, then AR-filtered) before it enters the sums.
         """
         if self._fitting:
-            self._buffer.append((row, t, f, h))
-            if len(self._buffer) < self._fit_n:
+            self._buffer.append((row, t, f, h, speed))
+            if self._speed_model:
+                aw = abs(speed)
+                self._wlow = min(self._wlow, aw)
+                self._whigh = max(self._whigh, aw)
+                if self._next_fit is None:
+                    if not speed_fit_ready(len(self._buffer), self._fit_n, self._wlow,
+                                           self._whigh):
+                        return []
+                elif len(self._buffer) < self._next_fit:
+                    return []
+            elif len(self._buffer) < self._fit_n:
                 return []
             return self._fit_and_replay()
-        return self._ingest_fitted(row, t, f, h)
+        return self._ingest_fitted(row, t, f, h, speed)
 
     def _fit_and_replay(self) -> list[AnomalyEvent]:
         """Fit the noise model on the buffered samples, then process them."""
-        buffer, self._buffer = self._buffer, []
-        self._fitting = False
+        buffer = self._buffer
         rows = np.array([np.asarray(item[3], dtype=float) for item in buffer])
-        model = fit_noise_model(rows, np.array([item[2] for item in buffer]), self._ar_max)
+        speeds = (np.abs(np.array([item[4] for item in buffer], dtype=float))
+                  if self._speed_model else None)
+        model = fit_noise_model(rows, np.array([item[2] for item in buffer]), self._ar_max,
+                                speeds)
+        if self._speed_model and not speed_fit_done(len(buffer), self._fit_n, model):
+            self._next_fit = len(buffer) + self._fit_n
+            return []
+        self._buffer = []
+        self._fitting = False
         self._noise = model
         self._ar = model.ar
-        self._plain = self._default and not self._ar
+        self._speed_std = model.speed_std
+        self._plain = self._default and not self._ar and self._speed_std is None
         events: list[AnomalyEvent] = []
-        for row, t, f, h in buffer:
-            events.extend(self._ingest_fitted(row, t, f, h))
+        for row, t, f, h, w in buffer:
+            events.extend(self._ingest_fitted(row, t, f, h, w))
         return events
 
-    def _ingest_fitted(self, row: int, t: float, f: float, h) -> list[AnomalyEvent]:
+    def _ingest_fitted(self, row: int, t: float, f: float, h, speed: float
+                       ) -> list[AnomalyEvent]:
+        if self._speed_std is not None:
+            level = speed_scale(abs(speed), self._speed_std)
+            f = f / level
+            if self._p == 2:
+                h = (float(h[0]) / level, float(h[1]) / level)
+            else:
+                h = np.asarray(h, dtype=float) / level
         if self._ar:
             f, h = self._whiten(f, h)
         if self._p == 2:
@@ -652,7 +689,7 @@ def _streamed(t: np.ndarray, w: np.ndarray, f: np.ndarray,
                                                np.all(np.isfinite(h), axis=1))
     events: list[AnomalyEvent] = []
     for i in np.flatnonzero(accepted):
-        events.extend(det.ingest_row(int(i), float(t[i]), float(f[i]), h[i]))
+        events.extend(det.ingest_row(int(i), float(t[i]), float(f[i]), h[i], float(w[i])))
     counters = det.counters
     for name, value in counts.items():
         counters[name] += value

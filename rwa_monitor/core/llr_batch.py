@@ -27,7 +27,8 @@ from rwa_monitor.core.events import AnomalyEvent
 from rwa_monitor.core.gchi2 import skip_threshold
 from rwa_monitor.core.llr_common import (candidate_log_p2, checkpoints, declaration,
                                          fit_noise_model, make_event, reference_base,
-                                         revision_due, whiten, window_statistics)
+                                         revision_due, speed_fit_done, speed_fit_length,
+                                         speed_scale, whiten, window_statistics)
 
 CHUNK = 1 << 13
 
@@ -209,14 +210,28 @@ def detect_paper_model(t: np.ndarray, w: np.ndarray, f: np.ndarray, cfg: Mapping
         tv, wv, fv = t[rows], w[rows], f[rows]
     counters = dict(counts, missing_aux=0, ill_conditioned=0)
     h1, h2 = -np.sign(wv), -wv
-    if cfg['noise_ar_max_order'] > 0:
-        m = cfg['noise_fit_samples']
-        if rows.size < m:
-            return [], counters
-        h_fit = np.column_stack([paper_h1(wv[:m]), -wv[:m]])
-        ar = fit_noise_model(h_fit, fv[:m], cfg['noise_ar_max_order']).ar
+    speed_model = cfg['noise_speed_model']
+    if cfg['noise_ar_max_order'] > 0 or speed_model:
+        aw = np.abs(wv) if speed_model else None
+        fit_n = cfg['noise_fit_samples']
+        m = speed_fit_length(aw, fit_n) if speed_model else fit_n
+        while True:   # the streaming detector's schedule of fits (llr.LLRDetector)
+            if m is None or m > rows.size:
+                return [], counters
+            h_fit = np.column_stack([paper_h1(wv[:m]), -wv[:m]])
+            model = fit_noise_model(h_fit, fv[:m], cfg['noise_ar_max_order'],
+                                    None if aw is None else aw[:m])
+            if not speed_model or speed_fit_done(m, fit_n, model):
+                break
+            m += fit_n
+        ar = model.ar
+        if model.speed_std is not None:
+            level = speed_scale(aw, model.speed_std)
+            h1, h2, fv = paper_h1(wv) / level, h2 / level, fv / level
+        elif ar:
+            h1 = paper_h1(wv)
         if ar:
-            h1, h2, fv = whiten(paper_h1(wv), ar), whiten(h2, ar), whiten(fv, ar)
+            h1, h2, fv = whiten(h1, ar), whiten(h2, ar), whiten(fv, ar)
     terms = _Terms(h1, h2, fv)
     n_total = rows.size
     win, kverif = cfg['window'], cfg['k_verif']

@@ -28,6 +28,15 @@ _PI_4 = math.pi / 4.0
 # Largest autoregressive order of the noise model (docs/llr.md, "Noise beyond white").
 AR_ORDER_LIMIT = 10
 DEFAULT_AR_ORDER = 3
+# Noise growing with speed (docs/llr.md "Noise growing with speed"): the fit segment is
+# extended until |w| spans at least this fraction of its largest value, or this many times
+# noise_fit_samples; the slope of the noise level is used only if its t value exceeds
+# SPEED_SLOPE_Z; the modelled level is floored at its value at the slowest fitted sample
+# and at SPEED_FLOOR x its value at the mean |w|.
+SPEED_SPREAD = 0.5
+SPEED_FIT_CAP = 20
+SPEED_SLOPE_Z = 3.2905267314918945
+SPEED_FLOOR = 0.1
 
 
 def validate_parameters(component: str = 'rw1', *, window: int = 500,
@@ -39,7 +48,8 @@ def validate_parameters(component: str = 'rw1', *, window: int = 500,
                         max_abs_speed: float = 1e5, max_abs_friction: float = 1e3,
                         noise_ar_max_order: int | str | None = AUTO,
                         noise_fit_samples: int | str | None = AUTO,
-                        reference_max: int | None = 0) -> dict[str, Any]:
+                        reference_max: int | None = 0,
+                        noise_speed_model: bool = False) -> dict[str, Any]:
     """Check the detector's keyword parameters; return them normalised (ValueError if bad).
 
     :data:`AUTO` (core/schema.py) or None: ``k_verif`` becomes ``window // 2``,
@@ -83,6 +93,11 @@ def validate_parameters(component: str = 'rw1', *, window: int = 500,
         noise_fit_samples = 2 * window + 1
     noise_fit_samples = check_int('noise_fit_samples', noise_fit_samples,
                                   max(p + 2 * noise_ar_max_order + 10, 20), 10**7)
+    if not isinstance(noise_speed_model, bool):
+        raise ValueError(f'noise_speed_model must be True or False, got {noise_speed_model!r}')
+    if noise_speed_model and noise_std is not None:
+        raise ValueError('noise_speed_model needs an estimated noise level (noise_std auto), '
+                         f'got noise_std={noise_std}')
     if reference_max == 0:
         reference_max = None
     if reference_max is not None:
@@ -93,7 +108,7 @@ def validate_parameters(component: str = 'rw1', *, window: int = 500,
                 category_revisions=category_revisions, refine_change=refine_change,
                 max_abs_speed=max_abs_speed, max_abs_friction=max_abs_friction,
                 noise_ar_max_order=noise_ar_max_order, noise_fit_samples=noise_fit_samples,
-                reference_max=reference_max)
+                reference_max=reference_max, noise_speed_model=noise_speed_model)
 
 
 def make_event(component: str, category: llr_stats.Category, rows: tuple[int, int, int],
@@ -288,15 +303,19 @@ class NoiseModel(NamedTuple):
     ``residual_std`` = std of ``e``, ``long_run_ratio`` = long-run variance of ``e`` over
     its variance (``sigma_u^2 / (1 - sum ar)^2 / sigma_e^2``; 1 for white noise): the factor
     by which the plain statistic would be too large for slowly varying regressors.
+    ``speed_std = (a, b, floor)``: the noise level is ``max(a + b |w|, floor)`` (relative
+    units; None: constant), each sample is divided by it before the AR filter.
     """
 
     ar: tuple[float, ...]
     innovation_std: float
     residual_std: float
     long_run_ratio: float
+    speed_std: tuple[float, float, float] | None = None
 
 
-def fit_noise_model(h: np.ndarray, f: np.ndarray, max_order: int) -> NoiseModel:
+def fit_noise_model(h: np.ndarray, f: np.ndarray, max_order: int,
+                    abs_speed: np.ndarray | None = None) -> NoiseModel:
     """Fit the friction model and an AR model of its residual; order by BIC.
 
     Not in the paper (whose Lemma 1 assumes white noise). ``h``: regressor rows ``(n,
@@ -305,11 +324,20 @@ def fit_noise_model(h: np.ndarray, f: np.ndarray, max_order: int) -> NoiseModel:
     ``e[Q:]`` on its ``q`` lags (common targets, ``Q = max_order``) and
     ``BIC_q = (n - Q) log(RSS_q / (n - Q)) + q log(n - Q)``; the order with the smallest
     BIC whose characteristic roots lie inside the unit circle is kept (0: white noise,
-    the paper's case). Deterministic for given arrays, so the streaming and the batch
-    path fit the same model.
+    the paper's case). With ``abs_speed`` (``|w|`` of the rows) the noise level is first
+    modelled against it (:func:`fit_speed_std`) and rows, friction and residual are divided
+    by that level (weighted least squares) before the AR fit. Deterministic for given
+    arrays, so the streaming and the batch path fit the same model.
     """
     h = np.asarray(h, dtype=float)
     f = np.asarray(f, dtype=float)
+    speed_std = None
+    if abs_speed is not None:
+        speed_std = fit_speed_std(h, f, np.asarray(abs_speed, dtype=float))
+        if speed_std is not None:
+            scale = speed_scale(np.asarray(abs_speed, dtype=float), speed_std)
+            h = h / scale[:, None]
+            f = f / scale
     pi = h.T @ h
     x = llr_stats.solve_scaled(pi, h.T @ f)
     e = f - h @ x
@@ -337,7 +365,81 @@ def fit_noise_model(h: np.ndarray, f: np.ndarray, max_order: int) -> NoiseModel:
     _, ar, s2u = best
     s2e = max(float(e @ e) / max(n - h.shape[1], 1), 1e-300)
     ratio = s2u / (1.0 - sum(ar)) ** 2 / s2e
-    return NoiseModel(ar, math.sqrt(s2u), math.sqrt(s2e), ratio)
+    return NoiseModel(ar, math.sqrt(s2u), math.sqrt(s2e), ratio, speed_std)
+
+
+def fit_speed_std(h: np.ndarray, f: np.ndarray, abs_speed: np.ndarray
+                  ) -> tuple[float, float, float] | None:
+    """Return ``(a, b, floor)`` of a noise level growing with speed, or None if constant.
+
+    Not in the paper. Least-squares residual ``e`` of the model, then ``|e|`` regressed on
+    ``(1, |w|)``: ``E|e| = sqrt(2 / pi) (a' + b' |w|)`` for Gaussian noise whose std is
+    linear in ``|w|``, so ``a + b |w|`` is proportional to the std (the scale is irrelevant:
+    the level itself is estimated by the detector). Kept only if ``b`` is significant
+    (``t > SPEED_SLOPE_Z``, one-sided 5e-4) and positive. ``floor``: the level at the
+    smallest ``|w|`` of the fit (no extrapolation towards rest, where the intercept is
+    least certain: slower samples are weighted as if at that speed, the conservative
+    side), at least ``SPEED_FLOOR (a + b mean|w|)`` (positive).
+    """
+    x = llr_stats.solve_scaled(h.T @ h, h.T @ f)
+    y = np.abs(f - h @ x)
+    design = np.column_stack([np.ones_like(abs_speed), abs_speed])
+    gram = design.T @ design
+    if not np.linalg.det(gram) > 1e-12 * gram[0, 0] * gram[1, 1]:
+        return None
+    coef = np.linalg.solve(gram, design.T @ y)
+    resid = y - design @ coef
+    dof = max(y.size - 2, 1)
+    s2 = float(resid @ resid) / dof
+    se_b = math.sqrt(s2 * float(np.linalg.inv(gram)[1, 1]))
+    a, b = float(coef[0]), float(coef[1])
+    if not (se_b > 0.0 and b / se_b > SPEED_SLOPE_Z):
+        return None
+    floor = max(a + b * float(np.min(abs_speed)),
+                SPEED_FLOOR * (a + b * float(np.mean(abs_speed))))
+    return a, b, floor
+
+
+def speed_scale(abs_speed, speed_std: tuple[float, float, float]):
+    """Return the modelled noise level ``max(a + b |w|, floor)`` (scalar or array)."""
+    a, b, floor = speed_std
+    if isinstance(abs_speed, np.ndarray):
+        return np.maximum(a + b * abs_speed, floor)
+    level = a + b * abs_speed
+    return level if level > floor else floor
+
+
+def speed_fit_ready(count: int, fit_n: int, low: float, high: float) -> bool:
+    """Return True when ``count`` buffered samples may fit a speed-dependent noise model.
+
+    At least ``fit_n`` samples, and ``|w|`` spanning ``[low, high]`` with ``high - low >=
+    SPEED_SPREAD high`` (a slope needs speeds), or ``SPEED_FIT_CAP fit_n`` samples.
+    """
+    return count >= fit_n and (high - low >= SPEED_SPREAD * high
+                               or count >= SPEED_FIT_CAP * fit_n)
+
+
+def speed_fit_done(count: int, fit_n: int, model: NoiseModel) -> bool:
+    """Return True if a fit on ``count`` samples is final (else retry ``fit_n`` later).
+
+    Final when the noise level was found to grow with speed, or at ``SPEED_FIT_CAP
+    fit_n`` samples (a constant level then, as without the speed model).
+    """
+    return model.speed_std is not None or count >= SPEED_FIT_CAP * fit_n
+
+
+def speed_fit_length(abs_speed: np.ndarray, fit_n: int) -> int | None:
+    """Return the sample count at which :func:`speed_fit_ready` first holds, or None."""
+    n = abs_speed.size
+    if n < fit_n:
+        return None
+    high = np.maximum.accumulate(abs_speed)
+    low = np.minimum.accumulate(abs_speed)
+    count = np.arange(1, n + 1)
+    ok = (count >= fit_n) & ((high - low >= SPEED_SPREAD * high)
+                             | (count >= SPEED_FIT_CAP * fit_n))
+    idx = np.flatnonzero(ok)
+    return int(idx[0]) + 1 if idx.size else None
 
 
 def whiten(values: np.ndarray, ar: tuple[float, ...]) -> np.ndarray:

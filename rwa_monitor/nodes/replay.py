@@ -210,8 +210,8 @@ class TelemetryReplay(Node):
             try:
                 pub.publish(msg)
             except RCLError:
-                if not self.context.ok():
-                    return False     # SIGINT/SIGTERM shut the context: not a full reader
+                if not self.context.ok():   # shut down by a signal: not back-pressure
+                    return False
                 self._back_off()
                 return False
             self._pending.pop(0)
