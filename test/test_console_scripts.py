@@ -115,8 +115,11 @@ def test_nodes_and_replay_stop_cleanly_on_signals(tmp_path, sig):
         assert _wait_for_text(procs['rwa-monitor-replay'][1], 'replaying', 180.0)
         # The wheel detectors log their first wheel once running: a signal before that
         # would land in the imports (the FSS node's are the slowest), not in the node.
-        for name in ('rwa-monitor-llr', 'rwa-monitor-fss'):
-            assert _wait_for_text(procs[name][1], 'monitoring wheel', 120.0), name
+        for name, text in (('rwa-monitor-llr', 'monitoring wheel'),
+                           ('rwa-monitor-fss', 'monitoring wheel'),
+                           ('rwa-monitor-record', 'recording'),
+                           ('rwa-monitor-foxglove', 'WebSocket server')):
+            assert _wait_for_text(procs[name][1], text, 120.0), name
         time.sleep(3.0)
         for proc, _ in procs.values():
             proc.send_signal(sig)
