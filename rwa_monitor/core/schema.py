@@ -290,6 +290,9 @@ LLR = Schema('llr_detector', (
     Param('reference_max', 0, 'Longest reference segment (sliding reference that follows '
           'slow drifts, docs/llr.md); 0 = growing reference (the paper).', low=0,
           high=10_000_000, unit='samples'),
+    Param('noise_speed_model', False, 'Model the noise level against |w| on the fit segment '
+          'and weight the samples by it (noise growing with speed, docs/llr.md); needs '
+          'noise_std auto.'),
     Param('friction_model_file', '', 'Refined friction model written by `rwa-monitor '
           'identify` (friction_model.yaml); empty = model (1).', scope='file'),
     CALIBRATION_FILE,
