@@ -73,19 +73,10 @@ def test_star_tracker_that_stops_makes_the_axes_stale_not_drift():
     # Healthy data; after 300 rows the star tracker goes silent while the gyro goes on:
     # the gyro samples wait (max_lag), then are held; no event; the axes turn STALE after
     # stale_timeout of steady time while the input itself is still alive.
-    from geometry_msgs.msg import QuaternionStamped
-    from sensor_msgs.msg import Imu
     tele = simulate_aocs(200.0, seed=22)
     with RosWorld() as world:
-        detector = _detector(world, stale_timeout=0.5, diagnostic_period=0.1, max_lag=5)
-        src = world.node(Node, 'source')
-        pubs = (src.create_publisher(Imu, 'telemetry/gyro', telemetry_qos()),
-                src.create_publisher(QuaternionStamped, 'telemetry/star_tracker',
-                                     telemetry_qos()))
-        diags = Collector(src, DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
-        events = Collector(src, DiagnosticArray, 'anomalies', EVENTS_QOS)
-        for pub in pubs:
-            world.wait_for_subscribers(pub)
+        detector, pubs, diags, events = _node_with_publishers(world, stale_timeout=0.5,
+                                                              max_lag=5)
         _publish_rows(world, pubs, tele, range(300))
         world.wait_until(lambda: detector.samples >= 300, 10.0, '300 paired samples')
         _publish_rows(world, pubs, tele, range(300, 400), with_star=False)
