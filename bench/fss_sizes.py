@@ -23,7 +23,8 @@ import numpy as np
 
 from rwa_monitor.core.fss.baseline import (baseline_flags, baseline_scores, KINDS,
                                            nominal_thresholds)
-from rwa_monitor.core.fss.classify import relative_features, relative_verdict, train_model
+from rwa_monitor.core.fss.classify import (noise_ratio_bound, relative_features,
+                                           relative_verdict, train_model)
 from rwa_monitor.core.fss.laws import describe, estimate_systems
 from rwa_monitor.core.fss.model import DEFAULT_SYSTEMS
 from rwa_monitor.core.fss.pipeline import extract, FssConfig
@@ -71,7 +72,8 @@ def learned_decisions(model, item: dict) -> tuple[dict[str, float], bool]:
     if not item['identifiable']:
         out['viscous'] = -np.inf
     status, _, _ = relative_verdict({k: v > 0 for k, v in out.items()},
-                                    item['stats']['sigma'], item['reference']['sigma'])
+                                    item['stats']['sigma'], item['reference']['sigma'],
+                                    noise_ratio_bound(model.spec.get('noise_ratio_spread')))
     return out, status == 'unknown'
 
 

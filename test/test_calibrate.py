@@ -217,10 +217,15 @@ def test_wheel_without_friction_is_not_calibrated():
 def test_fss_verdict_unknown_when_the_window_is_not_explained():
     from rwa_monitor.core.fss.classify import relative_verdict
     flags = {'dry': True, 'viscous': False}
-    status, out, reason = relative_verdict(flags, 2.0e-4, 1.0e-4)
+    from rwa_monitor.core.fss.classify import noise_ratio_bound
+    bound = noise_ratio_bound()   # one-sided normal quantile at level 1e-3 of log(ratio)
+    assert bound == pytest.approx(np.exp(3.0902 * 0.046), rel=1e-4)
+    assert noise_ratio_bound(0.02) == pytest.approx(np.exp(3.0902 * 0.02), rel=1e-4)
+    status, out, reason = relative_verdict(flags, 1.01 * bound * 1e-4, 1.0e-4)
     assert status == 'unknown' and not any(out.values()) and 'not explained' in reason
-    assert relative_verdict(flags, 1.2e-4, 1.0e-4)[:2] == ('anomalous', flags)
+    assert relative_verdict(flags, 0.99 * bound * 1e-4, 1.0e-4)[:2] == ('anomalous', flags)
     assert relative_verdict({'dry': False}, 1.0e-4, 1.0e-4)[0] == 'nominal'
+    assert relative_verdict(flags, 1.3e-4, 1.0e-4, bound=1.5)[0] == 'anomalous'
 
 
 def test_fss_diagnosis_relative_to_the_calibrated_nominal(stribeck_block):
@@ -322,3 +327,18 @@ def test_paper_example_pair_judged_against_a_one_window_calibration(paper_block)
     assert flags <= {'dry'}
     status, flags, dry, visc = judged('dry', 2.0)
     assert (status, flags) == ('anomalous', {'dry'})
+
+
+def test_paper_example_window_the_model_cannot_explain_is_unknown(paper_block):
+    from rwa_monitor.core.fss.pipeline import FssConfig
+    from rwa_monitor.telemetry.fss_model import load_model
+    block, _ = paper_block
+    t, w, f = _paper_window('nominal', None, seed=15)
+    model, config = load_model(), FssConfig()
+    assert core.diagnose_fss(block, t, w, f, model, config)['status'] != 'unknown'
+    # A torque oscillating every 20 samples, neither model (1) nor an FSS: 1.5 x the
+    # noise in amplitude, the residual std grows by sqrt(1 + 1.5^2 / 2) = 1.46.
+    wobble = 1.5 * 0.025 * 2.0e-4 * np.sin(2 * np.pi * np.arange(w.size) / 20.0)
+    res = core.diagnose_fss(block, t, w, f + wobble, model, config)
+    assert res['status'] == 'unknown' and not any(res['anomalies'].values())
+    assert 'not explained' in res['unknown_reason']

@@ -532,17 +532,20 @@ def diagnose_fss(block: Mapping[str, Any], time: np.ndarray, speed: np.ndarray,
     :func:`fss_inputs` (nominal's non-model-(1) part removed, band and out-of-range
     samples skipped, scales from the reference), the four stages (core/fss/pipeline.py
     ``diagnose``), then core/fss/classify.py ``relative_verdict`` (``status``: nominal,
-    anomalous or unknown, with ``unknown_reason``).
+    anomalous or unknown, with ``unknown_reason``) with the classifier's noise-ratio
+    bound (``noise_ratio_bound`` of its spec's ``noise_ratio_spread``).
     """
     from dataclasses import replace
 
-    from rwa_monitor.core.fss.classify import relative_verdict
+    from rwa_monitor.core.fss.classify import noise_ratio_bound, relative_verdict
     from rwa_monitor.core.fss.pipeline import diagnose
     given, scales = fss_inputs(block, speed, friction)
     result = diagnose(speed, given, time, classifier, replace(config, **scales))
+    spec = getattr(classifier, 'spec', None) or {}
+    bound = noise_ratio_bound(spec.get('noise_ratio_spread'))
     status, flags, reason = relative_verdict(result['anomalies'],
                                              result['estimates']['noise_std_nm'],
-                                             block['fss']['noise_std_nm'])
+                                             block['fss']['noise_std_nm'], bound)
     result['anomalies'] = flags
     result['status'] = status
     if reason:
