@@ -461,6 +461,9 @@ IDENTIFY = Schema('identify', (
     Param('alpha', 1.0e-3, 'Family-wise level of the effect and jump tests.', low=0.0,
           high=0.5, low_open=True, scope='file'),
     Param('jumps', True, 'Segment friction jumps before fitting.', scope='file'),
+    Param('identical_wheels', True, 'With --wheel all: the wheels are of one design, so '
+          'effects are selected on their pooled evidence and a wheel is flagged when its '
+          'own data contradict its siblings; false = each wheel alone.', scope='file'),
     Param('inertia', AUTO, 'Wheel inertia J: friction = J dw/dt - K_T I (eq. 1b) when the '
           'file has no friction column; auto = none (the coast-down folder: its pendulum).',
           low=0.0, low_open=True, auto=True, kind=float, unit='kg m^2', scope='file'),
