@@ -120,7 +120,10 @@ def test_streaming_residual_is_the_batch_residual_and_the_model(stribeck_block):
     nominal = core.NominalWheel(block)
     rng = np.random.default_rng(3)
     lo, hi = block['speed_range_rad_s']
-    speed = np.concatenate([rng.uniform(lo - 1.0, hi + 1.0, 3000), [0.0, lo, hi, np.nan]])
+    grid = np.concatenate([nominal._tables[1.0][0], -nominal._tables[-1.0][0]])
+    on_grid = np.concatenate([grid, np.nextafter(grid, -np.inf), np.nextafter(grid, np.inf)])
+    speed = np.concatenate([rng.uniform(lo - 1.0, hi + 1.0, 3000), [0.0, lo, hi, np.nan],
+                            on_grid])
     friction = rng.normal(0.0, 1e-4, speed.size)
     time = np.arange(speed.size, dtype=float)
     batch, counts = nominal.residual(time, speed, friction)

@@ -47,6 +47,7 @@ MIN_EXCESS = 1.1
 SPEED_KINDS = ('stribeck', 'asymmetric_coulomb', 'drag', 'smooth_speed')
 # Speed step (rad/s) of the nominal model's table (NominalWheel); knots are added to it.
 TABLE_STEP_RAD_S = 0.01
+_INF = math.inf
 # Relative singular-value cut-off of the refit outside the low-speed band.
 REFIT_RCOND = 1.0e-9
 # Speeds above this fraction of the largest |speed| seen form the reference region.
@@ -441,7 +442,8 @@ class NominalWheel:
         knots = [float(k) for e in self.friction_model.get('effects') or []
                  for k in (e.get('params') or {}).get('knots_rad_s', [])]
         self._tables = {side: self._table(side, knots) for side in (1.0, -1.0)}
-        self._lists = {side: tuple(map(list, table)) for side, table in self._tables.items()}
+        self._above = _lookup(*self._tables[1.0])
+        self._below = _lookup(*self._tables[-1.0])
         self.at_zero = float(nominal_prediction(self.friction_model, np.zeros(1))[0])
 
     def _table(self, side: float, knots: list[float]
@@ -506,23 +508,40 @@ class NominalWheel:
                      ) -> tuple[float, str | None]:
         """Return (friction - nominal, reason not tested or None) of one sample.
 
-        The same arithmetic as :meth:`residual` on one sample, in plain floats.
+        The same arithmetic as :meth:`residual` on one sample, in plain floats (a node's
+        per-sample call: a bisection in a list, no numpy).
         """
-        if not (math.isfinite(speed) and math.isfinite(friction) and math.isfinite(time)):
+        if not (-_INF < speed < _INF and -_INF < friction < _INF and -_INF < time < _INF):
             return math.nan, None
-        if abs(speed) < self.band_rad_s:
+        mag = abs(speed)
+        if mag < self.band_rad_s:
             return math.nan, 'low_speed_band'
-        if speed < self.speed_range[0] or speed > self.speed_range[1]:
+        lo, hi = self.speed_range
+        if speed < lo or speed > hi:
             return math.nan, 'outside_calibrated_range'
         if speed == 0.0:
             return friction - self.at_zero, None
-        side = 1.0 if speed > 0 else -1.0
-        grid, values, slope = self._lists[side]
-        mag = speed * side
+        grid, values, slope, first, scale = self._above if speed > 0.0 else self._below
         if mag < grid[0] or mag > grid[-1]:
             return math.nan, None
-        j = min(bisect.bisect_right(grid, mag) - 1, len(grid) - 1)
+        b = int((mag - grid[0]) * scale)
+        j = bisect.bisect_right(grid, mag, first[b], first[b + 3]) - 1
         return friction - (values[j] + (mag - grid[j]) * slope[j]), None
+
+
+def _lookup(grid: np.ndarray, values: np.ndarray, slope: np.ndarray) -> tuple:
+    """Return one side's table as Python lists with a bucket index for the bisection.
+
+    ``first[b]`` counts the grid points at or below ``grid[0] + (b - 1) h`` (``h`` =
+    TABLE_STEP_RAD_S); a speed ``m`` on the table falls in bucket ``b = int((m - grid[0]) /
+    h)`` (within one bucket after rounding), so its interval lies between ``first[b]`` and
+    ``first[b + 3]``: the bisection sees a few points, with the answer of a full one.
+    """
+    count = int((grid[-1] - grid[0]) / TABLE_STEP_RAD_S) + 6   # b + 3 < count on the table
+    edges = grid[0] + (np.arange(count) - 1.0) * TABLE_STEP_RAD_S
+    first = np.searchsorted(grid, edges, side='right')
+    return (grid.tolist(), values.tolist(), slope.tolist(), first.tolist(),
+            1.0 / TABLE_STEP_RAD_S)
 
 
 def diagnose_fss(block: Mapping[str, Any], time: np.ndarray, speed: np.ndarray,
