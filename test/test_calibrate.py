@@ -222,8 +222,9 @@ def test_fss_verdict_unknown_when_the_window_is_not_explained():
     flags = {'dry': True, 'viscous': False}
     from rwa_monitor.core.fss.classify import noise_ratio_bound
     bound = noise_ratio_bound()   # one-sided normal quantile at level 1e-3 of log(ratio)
-    assert bound == pytest.approx(np.exp(3.0902 * 0.046), rel=1e-4)
-    assert noise_ratio_bound(0.02) == pytest.approx(np.exp(3.0902 * 0.02), rel=1e-4)
+    assert bound == pytest.approx(np.exp(0.0618 + 3.0902 * 0.0645), rel=1e-4)   # fss1's
+    assert noise_ratio_bound({'a': (0.0, 0.02), 'b': (0.01, 0.01)}) == pytest.approx(
+        np.exp(3.0902 * 0.02), rel=1e-4)
     status, out, reason = relative_verdict(flags, 1.01 * bound * 1e-4, 1.0e-4)
     assert status == 'unknown' and not any(out.values()) and 'not explained' in reason
     assert relative_verdict(flags, 0.99 * bound * 1e-4, 1.0e-4)[:2] == ('anomalous', flags)
