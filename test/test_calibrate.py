@@ -346,3 +346,24 @@ def test_paper_example_window_the_model_cannot_explain_is_unknown(paper_block):
     res = core.diagnose_fss(block, t, w, f + wobble, model, config)
     assert res['status'] == 'unknown' and not any(res['anomalies'].values())
     assert 'not explained' in res['unknown_reason']
+
+
+def test_a_viscous_flag_needs_a_significant_change(paper_block):
+    from rwa_monitor.core.fss.classify import viscous_significant, viscous_z
+    from rwa_monitor.core.fss.pipeline import FssConfig
+    from rwa_monitor.telemetry.fss_model import load_model
+    assert viscous_z(1.1, 0.03, 1.0, 0.04) == pytest.approx(2.0)
+    assert viscous_z(1.1, 0.03, 1.0, float('nan')) == pytest.approx(0.1 / 0.03)
+    assert viscous_significant(3.2) and not viscous_significant(3.0)   # z(1e-3) = 3.09
+    assert viscous_significant(float('nan'))
+    block, (t, w, f) = paper_block
+    model, config = load_model(), FssConfig()
+    # A reference 15 % low: the window reads 1.18 x it, above the classifier's x1.14.
+    low = {**block, 'fss': {**block['fss'], 'viscous_nms': 0.85 * block['fss']['viscous_nms']}}
+    res = core.diagnose_fss(low, t, w, f, model, config)
+    assert res['anomalies']['viscous'] and res['calibration']['viscous_z'] > 10
+    # The same reference known to +-10 % only: the difference is not significant.
+    vague = {**low, 'fss': {**low['fss'], 'viscous_se_nms': 0.1 * low['fss']['viscous_nms']}}
+    res = core.diagnose_fss(vague, t, w, f, model, config)
+    assert not res['anomalies']['viscous'] and res['viscous_not_significant']
+    assert 1.0 < res['calibration']['viscous_z'] < 3.09
