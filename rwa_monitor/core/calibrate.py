@@ -584,5 +584,6 @@ def diagnose_fss(block: Mapping[str, Any], time: np.ndarray, speed: np.ndarray,
     if reason:
         result['unknown_reason'] = reason
     skipped = int(np.sum(~np.isfinite(given) & np.isfinite(np.asarray(friction, float))))
-    result['calibration'] = {**scales, 'samples_not_tested': skipped, 'viscous_z': z}
+    result['calibration'] = {**scales, 'samples_not_tested': skipped,
+                             'viscous_z': z if np.isfinite(z) else None}
     return result
