@@ -84,10 +84,11 @@ class _Terms:
     def __init__(self, h1: np.ndarray, h2: np.ndarray, f: np.ndarray):
         self.h1, self.h2, self.f = h1, h2, f
 
-    def block(self, first: int, last: int) -> np.ndarray:
-        """Return the terms of positions ``first..last - 1``, shape ``(6, n)``."""
+    def block(self, first: int, last: int, out: np.ndarray | None = None) -> np.ndarray:
+        """Return the terms of positions ``first..last - 1``, shape ``(6, n)`` (into ``out``)."""
         h1, h2, f = self.h1[first:last], self.h2[first:last], self.f[first:last]
-        out = np.empty((6, h1.size))
+        if out is None:
+            out = np.empty((6, h1.size))
         np.multiply(h1, h1, out=out[0])
         np.multiply(h1, h2, out=out[1])
         np.multiply(h2, h2, out=out[2])
@@ -98,31 +99,56 @@ class _Terms:
 
 
 class _Reference:
-    """Prefix sums (shape ``(6, m)``) of one reference segment, extended chunk by chunk."""
+    """Prefix sums (shape ``(6, m)``) of one reference segment, extended chunk by chunk.
+
+    The prefixes live in a buffer that grows by doubling: a chunk's terms are written in
+    place after the last held prefix and summed there (``numpy.cumsum`` in place, the same
+    sequential additions as a sum of the concatenation); trimming moves the start only, and
+    the held part is moved to the front when the buffer is full.
+    """
 
     def __init__(self, terms: _Terms, c: int):
         self.terms = terms
         self.c = c
         self.pos0 = c
-        self.rows = np.zeros((6, 1))
+        self._buf = np.zeros((6, 2 * CHUNK))
+        self._lo = 0     # buffer column of position pos0
+        self._n = 1      # prefixes held: positions pos0 .. pos0 + _n - 1
+
+    @property
+    def rows(self) -> np.ndarray:
+        """Held prefixes, a ``(6, m)`` view valid until the next :meth:`extend`."""
+        return self._buf[:, self._lo:self._lo + self._n]
 
     @property
     def end(self) -> int:
         """Last position whose prefix is held."""
-        return self.pos0 + self.rows.shape[1] - 1
+        return self.pos0 + self._n - 1
 
     def extend(self, last: int) -> None:
         """Hold prefixes up to position ``last`` (sequential continuation of the sums)."""
-        if last <= self.end:
+        m = last - self.end
+        if m <= 0:
             return
-        block = np.concatenate([self.rows[:, -1:], self.terms.block(self.end, last)], axis=1)
-        self.rows = np.concatenate([self.rows, np.cumsum(block, axis=1)[:, 1:]], axis=1)
+        n = self._n
+        if self._lo + n + m > self._buf.shape[1]:
+            buf = self._buf
+            if n + m > buf.shape[1]:
+                buf = np.empty((6, max(2 * buf.shape[1], n + m)))
+            buf[:, :n] = self._buf[:, self._lo:self._lo + n]
+            self._buf, self._lo = buf, 0
+        lo = self._lo
+        self.terms.block(self.end, last, out=self._buf[:, lo + n:lo + n + m])
+        run = self._buf[:, lo + n - 1:lo + n + m]
+        np.cumsum(run, axis=1, out=run)
+        self._n = n + m
 
     def trim(self, first: int) -> None:
         """Drop prefixes of positions before ``first``."""
         cut = first - self.pos0
         if cut > 0:
-            self.rows = self.rows[:, cut:]
+            self._lo += cut
+            self._n -= cut
             self.pos0 = first
 
     def span(self, first: int, last: int) -> np.ndarray:
