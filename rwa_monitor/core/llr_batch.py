@@ -34,6 +34,7 @@ CHUNK = 1 << 13
 # A candidate's exact p_k is computed only if its lower bound is within this relative
 # margin above the running minimum (candidate_log_p2 tests 1e-9; rounding is ~1e-15).
 _SKIP_REL = 1e-7
+_LOWER_AT_0 = math.log(2.0 / math.sqrt(math.pi)) - math.log(2.0)
 
 
 def as_arrays(time, speed, friction) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -180,28 +181,54 @@ def _scan(ref: _Reference, k0: int, k1: int, state: dict, cfg: Mapping[str, Any]
     pp, pt = ref.span(k0, k1), ref.span(k0 + w, k1 + w)
     if cfg['reference_max'] is not None:
         pp, pt = pp - base, pt - base
-    ok, testable, y, tr, dm, upper, lower = window_statistics(pp, pt, n_p, cfg)
+    ok, testable, y, tr, dm, _, _ = window_statistics(pp, pt, n_p, cfg, bounds=False)
+    dof = None if cfg['noise_std'] is not None else n_p - 2.0
+    upper, lower = _rough_bounds(y, tr, dm, dof)
+    upper[~testable] = 0.0
     bound = np.minimum.accumulate(np.concatenate([[state['bound']], upper]))
     state['bound'] = float(bound[-1])
-    prev = bound[:-1]
-    margin = 1e-6 * (1.0 + np.abs(prev))
-    cand = np.flatnonzero(testable & (lower <= prev + margin))
-    dof = None if cfg['noise_std'] is not None else n_p - 2.0
-    declared = _candidates(ks, cand, y, tr, dm, dof, state, kverif, logr)
+    limit = bound[:-1]
+    limit += 1e-6 * (1.0 + np.abs(limit))
+    cand = np.flatnonzero(testable & (lower <= limit))
+    declared = _candidates(ks, cand, y, tr, dm, dof, state, kverif, logr, limit)
     last = k1 if declared is None else declared
     state['ill'] += int(np.count_nonzero(~ok[:last - k0 + 1]))
     return declared
 
 
-def _candidates(ks, cand, y, tr, dm, dof, state: dict, kverif: int, logr: float
-                ) -> int | None:
+def _rough_bounds(y: np.ndarray, tr: np.ndarray, dm: np.ndarray, dof: np.ndarray | None
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """Return cheap upper and lower bounds of log p_k (no logarithm), for the scan.
+
+    With ``b``, ``rho``, ``a`` as in :func:`candidate_log_p2`: upper ``-b`` (the tail of
+    ``l1 chi2_2``), studentised ``-b dof / (dof + 2 b)`` (``log1p(x) >= x / (1 + x)`` in the
+    tail at ``psi = 0``, :func:`gchi2.log_sf2_t`); lower ``-1.5 a + log(2 / sqrt(pi)) -
+    log 2 - b rho``, below the Gaussian bound of :func:`gchi2.log_lower_bound` (``log(sqrt
+    a + sqrt(a + 2)) <= log(a + 2) <= log 2 + a / 2``), which holds for both tails. Only
+    their use matters: the running minimum of the upper bounds stays at or above p_min, and
+    a test whose lower bound is above it cannot be a new minimum.
+    """
+    with np.errstate(all='ignore'):
+        half = 0.5 * tr
+        lam1 = half + np.sqrt(np.maximum(half * half - dm, 0.0))
+        b = y / (2.0 * lam1)
+        b_rho = b * (np.maximum(dm / lam1, 0.0) / lam1)
+        a = np.maximum(b - b_rho, 0.0)
+        upper = -b if dof is None else -b * dof / (dof + 2.0 * b)
+        lower = _LOWER_AT_0 - 1.5 * a - b_rho
+    return upper, lower
+
+
+def _candidates(ks, cand, y, tr, dm, dof, state: dict, kverif: int, logr: float,
+                limit: np.ndarray) -> int | None:
     """Algorithm 1 lines 11-18 over the candidate tests of a chunk (exact p_k).
 
-    The candidates' values are taken as Python floats once; :func:`_lower_bounds` (the
-    bound of :func:`candidate_log_p2`, vectorised) skips the call for a candidate that
-    cannot beat the running minimum by more than rounding: that call would return None or
-    a p_k above the minimum, so the records, hence the events, are those of the streaming
-    path (the declaration position depends on the records only).
+    :func:`_lower_bounds` (the bound of :func:`candidate_log_p2`, vectorised) drops the
+    candidates whose bound is above ``limit`` (the running minimum of the upper bounds,
+    plus a margin), and skips the call for one that cannot beat the running minimum by
+    more than rounding: that call would return None or a p_k above the minimum, so the
+    records, hence the events, are those of the streaming path (the declaration position
+    depends on the records only). The loop runs on Python floats.
     """
     k1 = int(ks[-1])
     logp, kmin, ystar = state['logp'], state['kmin'], state['ystar']
@@ -209,7 +236,12 @@ def _candidates(ks, cand, y, tr, dm, dof, state: dict, kverif: int, logr: float
     if cand.size:
         yc, trc, dmc = y[cand], tr[cand], dm[cand]
         dofc = None if dof is None else dof[cand]
-        lows = _lower_bounds(yc, trc, dmc, dofc).tolist()
+        lows = _lower_bounds(yc, trc, dmc, dofc)
+        keep = lows <= limit[cand]
+        if not keep.all():
+            cand, yc, trc, dmc, lows = cand[keep], yc[keep], trc[keep], dmc[keep], lows[keep]
+            dofc = None if dofc is None else dofc[keep]
+        lows = lows.tolist()
         dofs = [None] * cand.size if dofc is None else dofc.tolist()
         for k, yv, trv, dmv, dfv, low in zip(ks[cand].tolist(), yc.tolist(), trc.tolist(),
                                              dmc.tolist(), dofs, lows):
