@@ -30,6 +30,8 @@ from rwa_monitor.core.llr_common import (candidate_log_p2, checkpoints, COUNTER_
 from rwa_monitor.core.params import AUTO
 
 _INF = math.inf
+_FLOOR_ABS = llr_stats.NOISE_FLOOR_ABS
+_FLOOR_REL = llr_stats.NOISE_FLOOR_REL
 
 __all__ = ['candidate_log_p2', 'COUNTER_NAMES', 'detect_batch', 'detect_batch_with_counters',
            'LLRDetector', 'NoiseModel', 'validate_parameters']
@@ -219,11 +221,13 @@ class LLRDetector:
         self._c = 0
         self._c_row = -1
         self._pref = zero
-        self._rterm = [None] * self._L
-        self._rpref = [None] * self._L
-        self._rpref[0] = zero
+        # Rings of the last L accepted samples: (h1, h2, f) for p = 2 (a restart recomputes
+        # the same products from them) or the terms for p > 2; row index; time.
+        self._rterm: list[Any] = [None] * self._L
         self._rrow = [0] * self._L
         self._rtime = [0.0] * self._L
+        self._rpref = [None] * self._L
+        self._rpref[0] = zero
         self._logpmin = 0.0
         self._kmin = 0
         self._ystar = 0.0
@@ -285,14 +289,9 @@ class LLRDetector:
                 if len(lags) > self._ar_order:
                     lags.pop()
                 f, h1, h2 = fw, g1, g2
-            ta = h1 * h1
-            tb = h1 * h2
-            tc = h2 * h2
-            tu = h1 * f
-            tv = h2 * f
-            te = f * f
             P = self._pref
-            P = (P[0] + ta, P[1] + tb, P[2] + tc, P[3] + tu, P[4] + tv, P[5] + te)
+            P = (P[0] + h1 * h1, P[1] + h1 * h2, P[2] + h2 * h2, P[3] + h1 * f, P[4] + h2 * f,
+                 P[5] + f * f)
             self._pref = P
             j = self._pos
             self._pos = j + 1
@@ -300,7 +299,7 @@ class LLRDetector:
                 self._c_row = row
             L = self._L
             s = j % L
-            self._rterm[s] = (ta, tb, tc, tu, tv, te)
+            self._rterm[s] = (h1, h2, f)
             self._rrow[s] = row
             self._rtime[s] = t
             self._rpref[(j + 1) % L] = P
@@ -424,14 +423,9 @@ class LLRDetector:
     def _add2(self, row: int, t: float, f: float, h1: float, h2: float
               ) -> list[AnomalyEvent]:
         """Add one accepted sample to the sums and ring, then test (p = 2)."""
-        ta = h1 * h1
-        tb = h1 * h2
-        tc = h2 * h2
-        tu = h1 * f
-        tv = h2 * f
-        te = f * f
         P = self._pref
-        P = (P[0] + ta, P[1] + tb, P[2] + tc, P[3] + tu, P[4] + tv, P[5] + te)
+        P = (P[0] + h1 * h1, P[1] + h1 * h2, P[2] + h2 * h2, P[3] + h1 * f, P[4] + h2 * f,
+             P[5] + f * f)
         self._pref = P
         j = self._pos
         self._pos = j + 1
@@ -439,7 +433,7 @@ class LLRDetector:
             self._c_row = row
         L = self._L
         s = j % L
-        self._rterm[s] = (ta, tb, tc, tu, tv, te)
+        self._rterm[s] = (h1, h2, f)
         self._rrow[s] = row
         self._rtime[s] = t
         self._rpref[(j + 1) % L] = P
@@ -474,15 +468,15 @@ class LLRDetector:
         if det > self._min_exc * ac and dett > 0.0:
             x1 = (C * U - B * V) / det
             x2 = (A * V - B * U) / det
-            if self._noise_var is None:
-                dof = float(n_p - 2)
-                s2 = (E - (x1 * U + x2 * V)) / dof
-                floor = llr_stats.NOISE_FLOOR_REL * E / n_p + llr_stats.NOISE_FLOOR_ABS
+            s2 = self._noise_var
+            dof = None
+            if s2 is None:
+                # Dividing by the int n_p - 2 gives the quotient by float(n_p - 2).
+                s2 = (E - (x1 * U + x2 * V)) / (n_p - 2)
+                floor = _FLOOR_REL * E / n_p + _FLOOR_ABS
                 if not s2 > floor:
                     s2 = floor
-            else:
-                s2 = self._noise_var
-                dof = None
+                dof = n_p - 2
             Aw = At - A
             Bw = Bt - B
             Cw = Ct - C
@@ -494,7 +488,8 @@ class LLRDetector:
             tr = (Ct * Aw - 2.0 * Bt * Bw + At * Cw) / dett
             if tr > 0.0 and y > 0.0 and not y / tr < self._ystar:
                 dm = (Aw * Cw - Bw * Bw) / dett
-                logp = candidate_log_p2(y, tr, dm, self._logpmin, dof)
+                logp = candidate_log_p2(y, tr, dm, self._logpmin,
+                                        None if dof is None else float(dof))
                 if logp is not None and logp < self._logpmin:
                     self._record(k, logp)
         else:
@@ -583,12 +578,12 @@ class LLRDetector:
         P = self._zero
         self._rpref[c % L] = P
         for j in range(c, n + 1):
-            t = self._rterm[j % L]
             if self._p == 2:
-                P = (P[0] + t[0], P[1] + t[1], P[2] + t[2], P[3] + t[3], P[4] + t[4],
-                     P[5] + t[5])
+                h1, h2, f = self._rterm[j % L]
+                P = (P[0] + h1 * h1, P[1] + h1 * h2, P[2] + h2 * h2, P[3] + h1 * f,
+                     P[4] + h2 * f, P[5] + f * f)
             else:
-                P = P + t
+                P = P + self._rterm[j % L]
             self._rpref[(j + 1) % L] = P
         self._pref = P
         self._logpmin = 0.0
