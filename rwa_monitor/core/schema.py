@@ -17,7 +17,7 @@ the shipped parameters file.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 import difflib
 import math
 import textwrap
@@ -372,8 +372,11 @@ VSADC = Schema('vsadc_detector', (
     Param('feature', 'residual', 'residual: gyro minus star-tracker rate, the true rate '
           'cancels (works under guidance); paper: the two residuals of Algorithm 1 '
           '(docs/vsadc.md).', choices=('residual', 'paper')),
-    Param('calibration_file', '', 'calibration.yaml whose gyro block sets the residual '
-          'thresholds; empty = defaults.', read_only=True),
+    # The shared calibration file; here a detector keyword (its gyro block sets the
+    # residual thresholds), so the same parameter with the detector's scope.
+    replace(CALIBRATION_FILE, scope='all', description=CALIBRATION_FILE.description.replace(
+        'wheels are judged against their nominal', 'its gyro block sets the residual '
+        'thresholds')),
     Param('saturation_rad_s', 0.35, 'A gyro rate at or above this is saturated: held and '
           'reported, never diagnosed.', low=0.0, low_open=True, unit='rad/s'),
     Param('residual_block', gc.DEFAULT_BLOCK, 'Residual steps per block mean (the '

@@ -95,3 +95,47 @@ def fit_intervals(y: np.ndarray, x: np.ndarray, changepoints: np.ndarray, *,
     return IntervalFit(changepoints=cps, dry=dry, viscous=viscous, hth=a,
                        rejection_cost=np.nan_to_num(cost), sigma2=rss / dof,
                        rmse=float(np.sqrt(rss / max(count, 1))), identifiable=identifiable)
+
+
+def fit_extra_columns(y: np.ndarray, x: np.ndarray, changepoints: np.ndarray,
+                      columns: np.ndarray, *, dk_error: int = 10, min_samples: int = 3,
+                      rcond: float = 1.0e-9) -> tuple[np.ndarray, np.ndarray]:
+    """Fit eq. (14) with extra regressor columns beside it; return their fitted part.
+
+    Least squares of ``y`` on one dry coefficient per interval (times sign(x)), one
+    viscous coefficient (times x) and ``columns`` (n, p), on the samples stage 2 uses
+    (finite, at least ``dk_error`` from a changepoint). Before the fit the columns lose
+    their projection on sign(x) and x over those samples, so that what model (1) can
+    hold stays with the dry and viscous coefficients; columns are scaled to unit RMS and
+    directions the samples cannot tell apart are cut (relative singular values below
+    ``rcond``). Return (coefficients of ``columns``, coefficients of [sign(x), x]) such
+    that ``columns @ c + [sign(x), x] @ d`` is the fitted extra part (zero mean
+    projection on sign(x) and x). This is how a calibration learns what a wheel's
+    nominal holds beyond model (1) without taking the FSS jumps for effects of speed
+    (docs/fss.md, "Calibrated").
+    """
+    y = np.asarray(y, dtype=float)
+    x = np.asarray(x, dtype=float)
+    columns = np.asarray(columns, dtype=float).reshape(y.size, -1)
+    n, p = columns.shape
+    cps = np.unique(np.asarray(changepoints, dtype=int))
+    cps = cps[(cps > 0) & (cps < n)]
+    label = _labels(n, cps, check_int('dk_error', dk_error, 0),
+                    check_int('min_samples', min_samples, 1))
+    use = np.isfinite(y) & np.isfinite(x) & np.all(np.isfinite(columns), axis=1)
+    use &= (label >= 0) & (x != 0.0)
+    if p == 0 or np.count_nonzero(use) < 2 * (p + cps.size + 2):
+        return np.zeros(p), np.zeros(2)
+    s, xu, yu, e = np.sign(x[use]), x[use], y[use], columns[use]
+    model1 = np.column_stack([s, xu])
+    proj = np.linalg.lstsq(model1, e, rcond=None)[0]
+    perp = e - model1 @ proj
+    scale = np.sqrt(np.mean(perp ** 2, axis=0))
+    keep = scale > 1e-12 * max(float(np.max(scale)), 1e-300)
+    intervals = np.unique(label[use])
+    dummies = (label[use][:, None] == intervals[None, :]) * s[:, None]
+    design = np.column_stack([dummies, xu, perp[:, keep] / scale[keep]])
+    coef = np.linalg.lstsq(design, yu, rcond=rcond)[0]
+    c = np.zeros(p)
+    c[keep] = coef[intervals.size + 1:] / scale[keep]
+    return c, -proj @ c
