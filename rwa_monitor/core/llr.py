@@ -567,6 +567,9 @@ class LLRDetector:
         """Return :func:`llr_stats.ramp_sums` of positions ``first..last`` (in the ring)."""
         L = self._L
         terms = np.asarray([self._rterm[j % L] for j in range(first, last + 1)], dtype=float)
+        if self._p == 2:   # the ring holds (h1, h2, f): the products of the prefix sums
+            h1, h2, f = terms.T
+            terms = np.column_stack((h1 * h1, h1 * h2, h2 * h2, h1 * f, h2 * f, f * f))
         times = np.asarray([self._rtime[j % L] for j in range(first, last + 1)], dtype=float)
         return llr_stats.ramp_sums(terms, times - t0)
 
