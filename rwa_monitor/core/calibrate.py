@@ -492,19 +492,32 @@ class NominalWheel:
 
     def residual(self, time: np.ndarray, speed: np.ndarray, friction: np.ndarray
                  ) -> tuple[np.ndarray, dict[str, int]]:
-        """Return (friction - nominal, NaN where not tested) and the counts by reason."""
+        """Return (friction - nominal, NaN where not tested) and the counts by reason.
+
+        Each side's table is evaluated by ``numpy.interp`` (NaN off the table), which forms
+        ``slope_j (|w| - grid_j) + nominal_j`` with the slope computed as in the table: the
+        floats of :meth:`residual_one` (test_calibrate checks it point by point); few
+        temporaries, as fresh large arrays cost page faults.
+        """
         speed = np.asarray(speed, dtype=float)
         friction = np.asarray(friction, dtype=float)
         time = np.asarray(time, dtype=float)
-        valid = np.isfinite(speed) & np.isfinite(friction) & np.isfinite(time)
+        finite = np.isfinite(speed)
+        valid = finite & np.isfinite(friction) & np.isfinite(time)
+        mag = np.abs(speed)
         with np.errstate(invalid='ignore'):
-            low = valid & (np.abs(speed) < self.band_rad_s)
+            low = valid & (mag < self.band_rad_s)
             outside = valid & ((speed < self.speed_range[0]) | (speed > self.speed_range[1]))
-        out = friction - self.nominal(speed)
-        out[low | outside] = np.nan
-        out[~np.isfinite(speed)] = np.nan
-        return out, {'low_speed_band': int(np.sum(low)),
-                     'outside_calibrated_range': int(np.sum(outside & ~low))}
+        (grid, values, _), (grid_below, values_below, _) = (self._tables[1.0],
+                                                            self._tables[-1.0])
+        out = np.interp(mag, grid, values, np.nan, np.nan)
+        np.copyto(out, np.interp(mag, grid_below, values_below, np.nan, np.nan),
+                  where=~(speed > 0.0))
+        out[speed == 0.0] = self.at_zero
+        np.subtract(friction, out, out=out)
+        out[low | outside | ~finite] = np.nan
+        return out, {'low_speed_band': int(np.count_nonzero(low)),
+                     'outside_calibrated_range': int(np.count_nonzero(outside & ~low))}
 
     def residual_one(self, time: float, speed: float, friction: float
                      ) -> tuple[float, str | None]:

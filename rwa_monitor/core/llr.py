@@ -23,12 +23,15 @@ from rwa_monitor.core.gchi2 import (gchi2_logsf_general, log_sf2, log_sf2_t,
                                     skip_threshold)
 from rwa_monitor.core.llr_common import (candidate_log_p2, checkpoints, COUNTER_NAMES,
                                          declaration, fit_noise_model, make_event,
-                                         NoiseModel, reference_base, revision_due,
-                                         speed_fit_done, speed_fit_ready, speed_scale,
-                                         validate_parameters, window_statistics)
+                                         NoiseModel, ramp_points, reference_base,
+                                         revision_due, speed_fit_done, speed_fit_ready,
+                                         speed_scale, validate_parameters,
+                                         window_statistics)
 from rwa_monitor.core.params import AUTO
 
 _INF = math.inf
+_FLOOR_ABS = llr_stats.NOISE_FLOOR_ABS
+_FLOOR_REL = llr_stats.NOISE_FLOOR_REL
 
 __all__ = ['candidate_log_p2', 'COUNTER_NAMES', 'detect_batch', 'detect_batch_with_counters',
            'LLRDetector', 'NoiseModel', 'validate_parameters']
@@ -218,11 +221,13 @@ class LLRDetector:
         self._c = 0
         self._c_row = -1
         self._pref = zero
-        self._rterm = [None] * self._L
-        self._rpref = [None] * self._L
-        self._rpref[0] = zero
+        # Rings of the last L accepted samples: (h1, h2, f) for p = 2 (a restart recomputes
+        # the same products from them) or the terms for p > 2; row index; time.
+        self._rterm: list[Any] = [None] * self._L
         self._rrow = [0] * self._L
         self._rtime = [0.0] * self._L
+        self._rpref = [None] * self._L
+        self._rpref[0] = zero
         self._logpmin = 0.0
         self._kmin = 0
         self._ystar = 0.0
@@ -284,14 +289,9 @@ class LLRDetector:
                 if len(lags) > self._ar_order:
                     lags.pop()
                 f, h1, h2 = fw, g1, g2
-            ta = h1 * h1
-            tb = h1 * h2
-            tc = h2 * h2
-            tu = h1 * f
-            tv = h2 * f
-            te = f * f
             P = self._pref
-            P = (P[0] + ta, P[1] + tb, P[2] + tc, P[3] + tu, P[4] + tv, P[5] + te)
+            P = (P[0] + h1 * h1, P[1] + h1 * h2, P[2] + h2 * h2, P[3] + h1 * f, P[4] + h2 * f,
+                 P[5] + f * f)
             self._pref = P
             j = self._pos
             self._pos = j + 1
@@ -299,7 +299,7 @@ class LLRDetector:
                 self._c_row = row
             L = self._L
             s = j % L
-            self._rterm[s] = (ta, tb, tc, tu, tv, te)
+            self._rterm[s] = (h1, h2, f)
             self._rrow[s] = row
             self._rtime[s] = t
             self._rpref[(j + 1) % L] = P
@@ -423,14 +423,9 @@ class LLRDetector:
     def _add2(self, row: int, t: float, f: float, h1: float, h2: float
               ) -> list[AnomalyEvent]:
         """Add one accepted sample to the sums and ring, then test (p = 2)."""
-        ta = h1 * h1
-        tb = h1 * h2
-        tc = h2 * h2
-        tu = h1 * f
-        tv = h2 * f
-        te = f * f
         P = self._pref
-        P = (P[0] + ta, P[1] + tb, P[2] + tc, P[3] + tu, P[4] + tv, P[5] + te)
+        P = (P[0] + h1 * h1, P[1] + h1 * h2, P[2] + h2 * h2, P[3] + h1 * f, P[4] + h2 * f,
+             P[5] + f * f)
         self._pref = P
         j = self._pos
         self._pos = j + 1
@@ -438,7 +433,7 @@ class LLRDetector:
             self._c_row = row
         L = self._L
         s = j % L
-        self._rterm[s] = (ta, tb, tc, tu, tv, te)
+        self._rterm[s] = (h1, h2, f)
         self._rrow[s] = row
         self._rtime[s] = t
         self._rpref[(j + 1) % L] = P
@@ -473,15 +468,15 @@ class LLRDetector:
         if det > self._min_exc * ac and dett > 0.0:
             x1 = (C * U - B * V) / det
             x2 = (A * V - B * U) / det
-            if self._noise_var is None:
-                dof = float(n_p - 2)
-                s2 = (E - (x1 * U + x2 * V)) / dof
-                floor = llr_stats.NOISE_FLOOR_REL * E / n_p + llr_stats.NOISE_FLOOR_ABS
+            s2 = self._noise_var
+            dof = None
+            if s2 is None:
+                # Dividing by the int n_p - 2 gives the quotient by float(n_p - 2).
+                s2 = (E - (x1 * U + x2 * V)) / (n_p - 2)
+                floor = _FLOOR_REL * E / n_p + _FLOOR_ABS
                 if not s2 > floor:
                     s2 = floor
-            else:
-                s2 = self._noise_var
-                dof = None
+                dof = n_p - 2
             Aw = At - A
             Bw = Bt - B
             Cw = Ct - C
@@ -493,7 +488,8 @@ class LLRDetector:
             tr = (Ct * Aw - 2.0 * Bt * Bw + At * Cw) / dett
             if tr > 0.0 and y > 0.0 and not y / tr < self._ystar:
                 dm = (Aw * Cw - Bw * Bw) / dett
-                logp = candidate_log_p2(y, tr, dm, self._logpmin, dof)
+                logp = candidate_log_p2(y, tr, dm, self._logpmin,
+                                        None if dof is None else float(dof))
                 if logp is not None and logp < self._logpmin:
                     self._record(k, logp)
         else:
@@ -539,16 +535,25 @@ class LLRDetector:
         prefix = self._prefix_block(first, n + 1)
         if base != c:
             prefix = prefix - np.asarray(self._rpref[base % L], dtype=float)
-        tau, start, cat = declaration(prefix, first, base, k_min, n, self._cfg, self._z_thr)
+        ramps: dict[int, np.ndarray] = {}
+
+        def ramp_of(tau: int) -> np.ndarray:
+            ramps[tau] = self._ramp_block(tau, n, self._rtime[tau % L])
+            return ramps[tau]
+
+        tau, start, cat = declaration(prefix, first, base, k_min, n, self._cfg, self._z_thr,
+                                      ramp_of)
         rows = (self._rrow[tau % L], self._rrow[k_min % L], self._rrow[n % L])
         times = (self._rtime[tau % L], self._rtime[n % L])
         event = make_event(self._component, cat, rows, times, self._logpmin, 0)
         self._last_event = event
+        checks = checkpoints(tau, n, self._cfg['category_revisions'], self._w)
         self._cat = dict(before=prefix[tau - first].copy(), n_before=tau - base,
                          kind=cat.kind, guess=cat.guess, confirmed=cat.confirmed,
                          revision=0, rows=rows, time=times[0], log_p=self._logpmin, start=tau,
-                         gap=prefix[start - first] - prefix[tau - first])
-        self._checks = checkpoints(tau, n, self._cfg['category_revisions'], self._w)
+                         gap=prefix[start - first] - prefix[tau - first], checks=set(checks),
+                         ramp=[ramps[tau]], ramp_end=n, ramp_t0=times[0])
+        self._checks = ramp_points(n, checks, self._w)
         self._checkpoint = self._checks.pop(0) if self._checks else -1
         self._restart(start, n)
         events = [event]
@@ -558,6 +563,16 @@ class LLRDetector:
                 events.extend(self._declare(n))
         return events
 
+    def _ramp_block(self, first: int, last: int, t0: float) -> np.ndarray:
+        """Return :func:`llr_stats.ramp_sums` of positions ``first..last`` (in the ring)."""
+        L = self._L
+        terms = np.asarray([self._rterm[j % L] for j in range(first, last + 1)], dtype=float)
+        if self._p == 2:   # the ring holds (h1, h2, f): the products of the prefix sums
+            h1, h2, f = terms.T
+            terms = np.column_stack((h1 * h1, h1 * h2, h2 * h2, h1 * f, h2 * f, f * f))
+        times = np.asarray([self._rtime[j % L] for j in range(first, last + 1)], dtype=float)
+        return llr_stats.ramp_sums(terms, times - t0)
+
     def _restart(self, c: int, n: int) -> None:
         """Start the new reference at position ``c`` and rebuild its prefix sums."""
         L = self._L
@@ -566,12 +581,12 @@ class LLRDetector:
         P = self._zero
         self._rpref[c % L] = P
         for j in range(c, n + 1):
-            t = self._rterm[j % L]
             if self._p == 2:
-                P = (P[0] + t[0], P[1] + t[1], P[2] + t[2], P[3] + t[3], P[4] + t[4],
-                     P[5] + t[5])
+                h1, h2, f = self._rterm[j % L]
+                P = (P[0] + h1 * h1, P[1] + h1 * h2, P[2] + h2 * h2, P[3] + h1 * f,
+                     P[4] + h2 * f, P[5] + f * f)
             else:
-                P = P + t
+                P = P + self._rterm[j % L]
             self._rpref[(j + 1) % L] = P
         self._pref = P
         self._logpmin = 0.0
@@ -579,12 +594,20 @@ class LLRDetector:
         self._ystar = 0.0
 
     def _revise(self, j: int) -> list[AnomalyEvent]:
-        """Re-check the kind of the last declared change at a checkpoint."""
+        """Take the new samples into the ramp sums; re-check the kind at a checkpoint.
+
+        ``j`` is a point of :func:`llr_common.ramp_points`; the kind is re-checked only at
+        the points of :func:`llr_common.checkpoints`.
+        """
         cat = self._cat
         self._checkpoint = self._checks.pop(0) if self._checks else -1
+        cat['ramp'].append(self._ramp_block(cat['ramp_end'] + 1, j, cat['ramp_t0']))
+        cat['ramp_end'] = j
+        if j not in cat['checks']:
+            return []
         after = cat['gap'] + np.asarray(self._pref, dtype=float)
         new = llr_stats.categorise(cat['before'], cat['n_before'], after, self._p,
-                                   self._noise_var, self._z_thr)
+                                   self._noise_var, self._z_thr, np.asarray(cat['ramp']))
         if not revision_due(cat['kind'], cat['guess'], cat['confirmed'], new):
             return []
         cat['kind'] = new.kind
