@@ -241,6 +241,10 @@ def _flag_text(flag: dict | None) -> str:
     return 'FLAG: ' + '; '.join(p for p in parts if p)
 
 
+def _met(ok: bool) -> str:
+    return 'met' if ok else 'NOT met'
+
+
 def _same_set(f: dict) -> bool:
     """Return whether every wheel of a bus file has the same effect names (as sets)."""
     return len({frozenset(sibling_name(n, w) for n in v['effects'])
@@ -284,12 +288,15 @@ def _bus_markdown(b: dict) -> list[str]:
             table(['seed', 'wheel', 'noise floor', 'held-out before / floor',
                    'after / floor', 'Stribeck speed (rad/s)', 'zero passages', 'jumps',
                    'effects', 'vs siblings'], rows), '',
-            f'Worst wheel {worst:.3f} x noise floor held out (goal <= 1.05); fallback used '
-            f'on {fallback} of {len(wheels)} wheels (goal 0); the same named effects on all '
-            f'four wheels, no wheel flagged, in {same} of {len(b["files"])} files '
-            f'({flagged} wheels flagged by their own data); Stribeck speed error at most '
-            f'{100 * err:.1f} % (goal <= 25 %). Joint identification of the four wheels '
-            f'(43,200 samples each): {min(cpu):.0f}-{max(cpu):.0f} s CPU per file. Before '
+            f'Worst wheel {worst:.3f} x noise floor held out (goal <= 1.05: '
+            f'{_met(worst <= 1.05)}); fallback used on {fallback} of {len(wheels)} wheels '
+            f'(goal 0: {_met(fallback == 0)}); the same named effects on all four wheels, no '
+            f'wheel flagged, in {same} of {len(b["files"])} files ({flagged} wheels flagged '
+            f'by their own data; goal all: {_met(same == len(b["files"]))}); Stribeck speed '
+            f'error at most {100 * err:.1f} % (goal <= 25 %: {_met(err <= 0.25)}); what '
+            f'keeps a wheel above the floor: docs/identify.md, section 5b. Joint '
+            f'identification of the four wheels (43,200 samples each): '
+            f'{min(cpu):.0f}-{max(cpu):.0f} s CPU per file. Before '
             f'(one wheel at a time, seeds 1103, 1117, 1129): worst 1.049 x floor, the same '
             f'effects on all four wheels in 0 of 3 files (a third `stribeck` term on some '
             f'wheels, effect order differing); before issue 11 (main 95c06df, seed 101): '

@@ -17,11 +17,11 @@ from rwa_monitor.telemetry import Telemetry, Wheel, write_telemetry
 N = 4000
 
 
-def _bus(effects: list[str], seed: int = 30) -> Telemetry:
+def _bus(effects: list[str], seed: int = 30, n: int = N) -> Telemetry:
     """Return one record with a wheel per entry of ``effects`` (own noise each)."""
     wheels, aux = {}, {}
     for i, effect in enumerate(effects, start=1):
-        tele = simulate_undeclared(effect, n=N, seed=seed + i, wheel=f'rw{i}')
+        tele = simulate_undeclared(effect, n=n, seed=seed + i, wheel=f'rw{i}')
         wheels.update(tele.wheels)
         aux.update(tele.aux)
     return Telemetry(time=tele.time, wheels=wheels, aux=aux)
@@ -107,9 +107,9 @@ def test_effects_are_compared_as_sets_in_the_vocabulary_order():
     assert c['flagged'] == {'rw3': {'missing': [], 'extra': ['aux:<wheel>_motor_torque:dry']}}
 
 
-def test_cli_wheel_all_is_joint_and_single_wheel_is_unchanged(tmp_path):
+def test_cli_wheel_all_is_joint_unless_separately(tmp_path):
     path = tmp_path / 'bus.csv'
-    write_telemetry(path, _bus(['drag', 'drag']))
+    write_telemetry(path, _bus(['drag', 'drag'], n=1500))
     assert main(['identify', str(path), '-o', str(tmp_path / 'all'), '--wheel', 'all']) == 0
     summary = json.loads((tmp_path / 'all' / 'wheels.json').read_text())
     assert summary['consistency']['rule'] == 'joint'
@@ -121,6 +121,31 @@ def test_cli_wheel_all_is_joint_and_single_wheel_is_unchanged(tmp_path):
                  '--separately']) == 0
     summary = json.loads((tmp_path / 'sep' / 'wheels.json').read_text())
     assert summary['consistency']['rule'] == 'majority'
-    assert main(['identify', str(path), '-o', str(tmp_path / 'one'), '--wheel', 'rw1']) == 0
-    one = json.loads((tmp_path / 'one' / 'report.json').read_text())
-    assert [e['name'] for e in one['effects']] == ['drag']
+    assert summary['consistency']['reference'] == ['drag']
+
+
+def test_an_effect_a_wheel_cannot_show_is_noted_not_flagged():
+    """Hysteresis on two reversing wheels; the third never comes near zero speed."""
+    from rwa_monitor.core.identify.data import speed_history
+    from rwa_monitor.core.identify.effects import stribeck_shape
+    n, dt = 6000, 0.25
+    t = np.arange(n) * dt
+    wheels = {}
+    for i, offset in enumerate((0.0, 0.0, 30.0), start=1):
+        w = offset + 6.0 * np.sin(2 * np.pi * t / 300.0) + 2.0 * np.sin(
+            2 * np.pi * t / 71.0 + 1.0)
+        left = speed_history(t, w).left_zero
+        f = (-5e-4 * np.sign(w) - 2e-6 * w
+             - 3e-4 * np.sign(w) * stribeck_shape(w, 1.0, 'peak') * left
+             + 5e-5 * np.random.default_rng(80 + i).standard_normal(n))
+        wheels[f'rw{i}'] = Wheel(speed=w, friction=f)
+    tele = Telemetry(time=t, wheels=wheels)
+    joint = identify_joint([prepare(tele, w) for w in tele.wheels])
+    assert joint.effects[:1] == ['stribeck_hysteresis']
+    c = joint.consistency
+    assert 'stribeck_hysteresis' in c['not_testable']['rw3']
+    assert 'rw3' not in c['flagged']
+    assert 'stribeck_hysteresis' not in [e.name for e in joint.selections['rw3'].effects]
+    for w in ('rw1', 'rw2'):
+        sel = joint.selections[w]
+        assert sel.effects[0].params['velocity_rad_s'] == pytest.approx(1.0, rel=0.25)

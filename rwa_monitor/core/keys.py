@@ -38,6 +38,7 @@ KIND_CONFIRMED = 'kind_confirmed'   # False: the data cannot tell dry from visco
 ARGMIN_INDEX = 'argmin_index'
 LOG10_P_VALUE = 'log10_p_value'
 KIND_GUESS = 'kind_guess'           # better single kind when kind is 'undecided'
+KIND_SHAPE = 'kind_shape'           # 'step', or 'ramp' when a ramp model named the kind
 DETECTABLE_DRY = 'detectable_dry_nm'          # dry step found with 90 % power after
 DETECTABLE_VISCOUS = 'detectable_viscous_nms'  # the change (inf: not separable)
 

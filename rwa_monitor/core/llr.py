@@ -23,9 +23,10 @@ from rwa_monitor.core.gchi2 import (gchi2_logsf_general, log_sf2, log_sf2_t,
                                     skip_threshold)
 from rwa_monitor.core.llr_common import (candidate_log_p2, checkpoints, COUNTER_NAMES,
                                          declaration, fit_noise_model, make_event,
-                                         NoiseModel, reference_base, revision_due,
-                                         speed_fit_done, speed_fit_ready, speed_scale,
-                                         validate_parameters, window_statistics)
+                                         NoiseModel, ramp_points, reference_base,
+                                         revision_due, speed_fit_done, speed_fit_ready,
+                                         speed_scale, validate_parameters,
+                                         window_statistics)
 from rwa_monitor.core.params import AUTO
 
 _INF = math.inf
@@ -534,16 +535,25 @@ class LLRDetector:
         prefix = self._prefix_block(first, n + 1)
         if base != c:
             prefix = prefix - np.asarray(self._rpref[base % L], dtype=float)
-        tau, start, cat = declaration(prefix, first, base, k_min, n, self._cfg, self._z_thr)
+        ramps: dict[int, np.ndarray] = {}
+
+        def ramp_of(tau: int) -> np.ndarray:
+            ramps[tau] = self._ramp_block(tau, n, self._rtime[tau % L])
+            return ramps[tau]
+
+        tau, start, cat = declaration(prefix, first, base, k_min, n, self._cfg, self._z_thr,
+                                      ramp_of)
         rows = (self._rrow[tau % L], self._rrow[k_min % L], self._rrow[n % L])
         times = (self._rtime[tau % L], self._rtime[n % L])
         event = make_event(self._component, cat, rows, times, self._logpmin, 0)
         self._last_event = event
+        checks = checkpoints(tau, n, self._cfg['category_revisions'], self._w)
         self._cat = dict(before=prefix[tau - first].copy(), n_before=tau - base,
                          kind=cat.kind, guess=cat.guess, confirmed=cat.confirmed,
                          revision=0, rows=rows, time=times[0], log_p=self._logpmin, start=tau,
-                         gap=prefix[start - first] - prefix[tau - first])
-        self._checks = checkpoints(tau, n, self._cfg['category_revisions'], self._w)
+                         gap=prefix[start - first] - prefix[tau - first], checks=set(checks),
+                         ramp=[ramps[tau]], ramp_end=n, ramp_t0=times[0])
+        self._checks = ramp_points(n, checks, self._w)
         self._checkpoint = self._checks.pop(0) if self._checks else -1
         self._restart(start, n)
         events = [event]
@@ -552,6 +562,16 @@ class LLRDetector:
             if test(k, self._rpref[(k + self._w) % L]):
                 events.extend(self._declare(n))
         return events
+
+    def _ramp_block(self, first: int, last: int, t0: float) -> np.ndarray:
+        """Return :func:`llr_stats.ramp_sums` of positions ``first..last`` (in the ring)."""
+        L = self._L
+        terms = np.asarray([self._rterm[j % L] for j in range(first, last + 1)], dtype=float)
+        if self._p == 2:   # the ring holds (h1, h2, f): the products of the prefix sums
+            h1, h2, f = terms.T
+            terms = np.column_stack((h1 * h1, h1 * h2, h2 * h2, h1 * f, h2 * f, f * f))
+        times = np.asarray([self._rtime[j % L] for j in range(first, last + 1)], dtype=float)
+        return llr_stats.ramp_sums(terms, times - t0)
 
     def _restart(self, c: int, n: int) -> None:
         """Start the new reference at position ``c`` and rebuild its prefix sums."""
@@ -574,12 +594,20 @@ class LLRDetector:
         self._ystar = 0.0
 
     def _revise(self, j: int) -> list[AnomalyEvent]:
-        """Re-check the kind of the last declared change at a checkpoint."""
+        """Take the new samples into the ramp sums; re-check the kind at a checkpoint.
+
+        ``j`` is a point of :func:`llr_common.ramp_points`; the kind is re-checked only at
+        the points of :func:`llr_common.checkpoints`.
+        """
         cat = self._cat
         self._checkpoint = self._checks.pop(0) if self._checks else -1
+        cat['ramp'].append(self._ramp_block(cat['ramp_end'] + 1, j, cat['ramp_t0']))
+        cat['ramp_end'] = j
+        if j not in cat['checks']:
+            return []
         after = cat['gap'] + np.asarray(self._pref, dtype=float)
         new = llr_stats.categorise(cat['before'], cat['n_before'], after, self._p,
-                                   self._noise_var, self._z_thr)
+                                   self._noise_var, self._z_thr, np.asarray(cat['ramp']))
         if not revision_due(cat['kind'], cat['guess'], cat['confirmed'], new):
             return []
         cat['kind'] = new.kind

@@ -26,9 +26,10 @@ from rwa_monitor.core import llr_stats
 from rwa_monitor.core.events import AnomalyEvent
 from rwa_monitor.core.gchi2 import log_lower_bound_array, skip_threshold
 from rwa_monitor.core.llr_common import (candidate_log_p2, checkpoints, declaration,
-                                         fit_noise_model, make_event, reference_base,
-                                         revision_due, speed_fit_done, speed_fit_length,
-                                         speed_scale, whiten, window_statistics)
+                                         fit_noise_model, make_event, ramp_points,
+                                         reference_base, revision_due, speed_fit_done,
+                                         speed_fit_length, speed_scale, whiten,
+                                         window_statistics)
 
 CHUNK = 1 << 13
 # A candidate's exact p_k is computed only if its lower bound is within this relative
@@ -345,13 +346,20 @@ def detect_paper_model(t: np.ndarray, w: np.ndarray, f: np.ndarray, cfg: Mapping
     cat: dict[str, Any] | None = None
     checks: list[int] = []
 
+    def ramp_block(first: int, last: int, t0: float) -> np.ndarray:
+        return llr_stats.ramp_sums(terms.block(first, last + 1).T, tv[first:last + 1] - t0)
+
     def revise(ref: _Reference, upto: int) -> None:
         while checks and checks[0] <= upto:
             j = checks.pop(0)
+            cat['ramp'].append(ramp_block(cat['ramp_end'] + 1, j, cat['ramp_t0']))
+            cat['ramp_end'] = j
+            if j not in cat['checks']:
+                continue
             ref.extend(j + 1)
             after = cat['gap'] + ref.at(j + 1)
             new = llr_stats.categorise(cat['before'], cat['n_before'], after, 2, noise_var,
-                                       z_thr)
+                                       z_thr, np.asarray(cat['ramp']))
             if revision_due(cat['kind'], cat['guess'], cat['confirmed'], new):
                 cat['kind'] = new.kind
                 cat['guess'] = new.guess
@@ -386,16 +394,25 @@ def detect_paper_model(t: np.ndarray, w: np.ndarray, f: np.ndarray, cfg: Mapping
         prefix = ref.at(np.arange(first, n + 2))
         if base != c:
             prefix = prefix - ref.at(base)
-        tau, start, category = declaration(prefix, first, base, k_min, n, cfg, z_thr)
+        ramps: dict[int, np.ndarray] = {}
+
+        def ramp_of(tau: int) -> np.ndarray:
+            ramps[tau] = ramp_block(tau, n, float(tv[tau]))
+            return ramps[tau]
+
+        tau, start, category = declaration(prefix, first, base, k_min, n, cfg, z_thr,
+                                           ramp_of)
         ev_rows = (int(rows[tau]), int(rows[k_min]), int(rows[n]))
         times = (float(tv[tau]), float(tv[n]))
         events.append(make_event(component, category, ev_rows, times, state['logp'], 0))
+        revisions = checkpoints(tau, n, cfg['category_revisions'], win)
         cat = dict(before=prefix[tau - first].copy(), n_before=tau - base,
                    kind=category.kind, guess=category.guess,
                    confirmed=category.confirmed, revision=0,
                    rows=ev_rows, time=times[0], log_p=state['logp'], start=tau,
-                   gap=prefix[start - first] - prefix[tau - first])
-        checks = checkpoints(tau, n, cfg['category_revisions'], win)
+                   gap=prefix[start - first] - prefix[tau - first], checks=set(revisions),
+                   ramp=[ramps[tau]], ramp_end=n, ramp_t0=times[0])
+        checks = ramp_points(n, revisions, win)
         c = start
     counters['ill_conditioned'] = state['ill']
     return events, counters

@@ -11,7 +11,7 @@ other.
 from __future__ import annotations
 
 import math
-from typing import Any, Mapping, NamedTuple
+from typing import Any, Callable, Mapping, NamedTuple
 
 import numpy as np
 
@@ -124,6 +124,7 @@ def make_event(component: str, category: llr_stats.Category, rows: tuple[int, in
                keys.Z_VISCOUS: z[1], keys.KIND_CONFIRMED: bool(category.confirmed),
                keys.ARGMIN_INDEX: rows[1], keys.LOG10_P_VALUE: log_p / _LN10,
                keys.KIND_GUESS: category.guess,
+               keys.KIND_SHAPE: category.shape,
                keys.DETECTABLE_DRY: category.detectable[0],
                keys.DETECTABLE_VISCOUS: category.detectable[1]}
     return AnomalyEvent(detector='llr', component=component, kind=category.kind,
@@ -141,7 +142,8 @@ class Declaration(NamedTuple):
 
 
 def declaration(prefix: np.ndarray, first: int, c: int, k_min: int, n: int,
-                cfg: Mapping[str, Any], z_thr: float) -> Declaration:
+                cfg: Mapping[str, Any], z_thr: float,
+                ramp_of: Callable[[int], np.ndarray] | None = None) -> Declaration:
     """Return the change position, restart position and category at a declaration.
 
     ``prefix[i]`` is the prefix-sum row (reference start ``c``) at position ``first + i``,
@@ -153,6 +155,8 @@ def declaration(prefix: np.ndarray, first: int, c: int, k_min: int, n: int,
     falls before the true change does not put pre-change samples in it (they would be
     declared as the same change again). With a sliding reference (``reference_max``) the
     caller passes ``c`` = the start of the reference window and rows relative to it.
+    ``ramp_of(tau)``: the :func:`llr_stats.ramp_sums` of ``[tau, n]`` (the kind of a
+    growing change, docs/llr.md "Kinds on ramps"); None: steps only.
     """
     p = cfg['regressors'].p
     noise_var = None if cfg['noise_std'] is None else cfg['noise_std'] ** 2
@@ -163,7 +167,8 @@ def declaration(prefix: np.ndarray, first: int, c: int, k_min: int, n: int,
                                       noise_var, z_thr, k_min)
     before = prefix[tau - first]
     after = prefix[n + 1 - first] - before
-    category = llr_stats.categorise(before, tau - c, after, p, noise_var, z_thr)
+    ramp = None if ramp_of is None else ramp_of(tau)
+    category = llr_stats.categorise(before, tau - c, after, p, noise_var, z_thr, ramp)
     return Declaration(tau, max(tau, k_min), category)
 
 
@@ -189,6 +194,20 @@ def reference_base(c: int, first: int, reference_max: int | None) -> int:
     as the tests saw it.
     """
     return c if reference_max is None else max(c, first - reference_max)
+
+
+def ramp_points(n: int, checks: list[int], window: int) -> list[int]:
+    """Return where the ramp sums of a change declared at ``n`` take in new samples.
+
+    Every ``window`` samples after ``n`` up to the last re-check, and at each re-check
+    (:func:`checkpoints`): the streaming detector holds the per-sample terms of the last
+    ``2 window + k_verif + 2`` samples only, so it adds them to the time-weighted sums
+    (:func:`llr_stats.ramp_sums`) block by block; the batch path takes the same blocks so
+    that both sum the same floats in the same order.
+    """
+    if not checks:
+        return []
+    return sorted(set(range(n + window, checks[-1], window)) | set(checks))
 
 
 def checkpoints(start: int, n: int, count: int, window: int) -> list[int]:

@@ -32,6 +32,10 @@ UNDECIDED = 'undecided'
 # even at 5 % (two-sided): between this and the category level the data are ambiguous.
 Z_ABSENT = 1.959963984540054
 POWER_Z = 1.2815515655446004   # one-sided normal quantile of 0.9 (detectable steps)
+# A kind named from the ramp models (:func:`ramp_fits`) needs its own single-direction
+# ramp not rejected even at this level (the ramp analogue of Z_ABSENT).
+RAMP_ABSENT_LEVEL = 0.05
+SHAPES = ('step', 'ramp')
 
 
 def width(p: int) -> int:
@@ -148,6 +152,8 @@ class Category(NamedTuple):
     the single-component kind that fits better (else ``guess == kind``); ``dx`` is the
     estimate under ``guess``. ``detectable`` = smallest dry step (N m) and viscous step
     (N m s) the after segment would reveal with 90 % power at the category level.
+    ``shape``: ``ramp`` when the kind was named by the ramp models (:func:`ramp_fits`),
+    else ``step``.
     """
 
     kind: str
@@ -157,6 +163,7 @@ class Category(NamedTuple):
     confirmed: bool
     guess: str = ''
     detectable: tuple[float, float] = (math.inf, math.inf)
+    shape: str = SHAPES[0]
 
 
 def component_information(before: np.ndarray, after: np.ndarray, p: int
@@ -200,7 +207,8 @@ def detectable_steps(info: tuple[float, float], noise_var: float, z_threshold: f
 
 
 def categorise(before: np.ndarray, n_before: int, after: np.ndarray, p: int,
-               noise_var: float | None, z_threshold: float) -> Category:
+               noise_var: float | None, z_threshold: float,
+               ramp: np.ndarray | None = None) -> Category:
     """Return the :class:`Category` (kind, dx, z, sigma^2, confirmed) of one change.
 
     Not in the paper (which promises a categorisation but gives none); the design and its
@@ -219,6 +227,15 @@ def categorise(before: np.ndarray, n_before: int, after: np.ndarray, p: int,
     that fits better. ``dx`` is always the estimate of the hypothesis of ``guess``
     (constrained fit for a single component), never the free fit of an unidentifiable
     segment.
+
+    ``ramp``: the block rows (:func:`ramp_sums`) of the after segment. Given, the ramp
+    models (:func:`ramp_kind` on the best time shape of each hypothesis,
+    :func:`ramp_shapes`; docs/llr.md "Kinds on ramps") may name a single kind; if it
+    differs from the step outcome and the other kind's step would be found beside that
+    ramp (:func:`ramp_information`, the guard of :func:`separable`), it replaces it, with
+    ``shape`` ``ramp`` and the step estimate ``dx`` of that kind. Each ramp model nests
+    the step of its kind, so a true single step is named the other kind by it only
+    through a rejection of its own ramp at the category level.
     """
     before = np.asarray(before, dtype=float)
     after = np.asarray(after, dtype=float)
@@ -239,26 +256,217 @@ def categorise(before: np.ndarray, n_before: int, after: np.ndarray, p: int,
     no_viscous_only = chi_d > limit
     info = component_information(before, after, p)
     detectable = detectable_steps(info, s2, z_threshold)
+    pi_a = unpack(after, p)[0]
+    mean_speed = float(pi_a[0, 1] / pi_a[0, 0]) if pi_a[0, 0] > 0.0 else 0.0
     if no_dry_only and no_viscous_only:
-        return Category(KINDS[2], dx[2].copy(), (z_d, z_v), s2, True, KINDS[2], detectable)
-    if no_dry_only or no_viscous_only:
-        h = 1 if no_dry_only else 0
-        other = 1 - h
-        z_other = (z_d, z_v)[other]
-        pi_a = unpack(after, p)[0]
-        mean_speed = float(pi_a[0, 1] / pi_a[0, 0]) if pi_a[0, 0] > 0.0 else 0.0
-        # Torque of the change under the single-kind fit, and the smallest step of the
-        # other kind its test finds with 90 % power, both at the post-change mean speed (a
-        # dry step a = a viscous step a / |w|_a there): the speed variation separates the
-        # two directions for a change of this size.
-        scale = (1.0, mean_speed)
-        torque = abs(float(dx[h, h])) * scale[h]
-        if abs(z_other) <= Z_ABSENT and detectable[other] * scale[other] <= torque:
-            return Category(KINDS[h], dx[h].copy(), (z_d, z_v), s2, True, KINDS[h],
-                            detectable)
+        step = Category(KINDS[2], dx[2].copy(), (z_d, z_v), s2, True, KINDS[2], detectable)
     else:
-        h = 0 if explained[0] >= explained[1] else 1
-    return Category(UNDECIDED, dx[h].copy(), (z_d, z_v), s2, False, KINDS[h], detectable)
+        if no_dry_only or no_viscous_only:
+            h = 1 if no_dry_only else 0
+            absent = abs((z_d, z_v)[1 - h]) <= Z_ABSENT
+            confirmed = absent and separable(dx, h, detectable, mean_speed)
+            kind = KINDS[h] if confirmed else UNDECIDED
+        else:
+            h = 0 if explained[0] >= explained[1] else 1
+            confirmed, kind = False, UNDECIDED
+        step = Category(kind, dx[h].copy(), (z_d, z_v), s2, confirmed, KINDS[h], detectable)
+    if ramp is None:
+        return step
+    shapes = ramp_shapes(ramp, p)
+    fits = np.array([ramp_fits(before, after, row, p) for row in shapes])
+    best = fits.max(axis=0)
+    named = ramp_kind(best, s2, p, z_threshold)
+    if named is None:
+        return refuted(step, ramp_statistics(best, s2), ramp_limits(p, z_threshold)[0], dx)
+    if step.kind == KINDS[named]:
+        return step
+    info = ramp_information(before, after, shapes[int(np.argmax(fits[:, 1 + named]))], p)
+    if not separable(dx, named, detectable_steps(info, s2, z_threshold), mean_speed):
+        return step
+    return Category(KINDS[named], dx[named].copy(), (z_d, z_v), s2, True, KINDS[named],
+                    detectable, SHAPES[1])
+
+
+def refuted(step: Category, chi: tuple[float, float], reject: float, dx: np.ndarray
+            ) -> Category:
+    """Return the step category, unless the ramp tests refute its single kind.
+
+    Not in the paper (docs/llr.md "Kinds on ramps"). The ramp of a kind nests its step:
+    when it is rejected at the category level (``chi > reject``), a confirmed step of
+    that kind alone is refuted. Then ``both`` (confirmed) if the other kind's ramp is
+    rejected too, else ``undecided`` with the other kind as guess.
+    """
+    if not step.confirmed or step.kind not in KINDS[:2]:
+        return step
+    h = KINDS.index(step.kind)
+    if chi[h] <= reject:
+        return step
+    if chi[1 - h] > reject:
+        return step._replace(kind=KINDS[2], dx=dx[2].copy(), guess=KINDS[2],
+                             shape=SHAPES[1])
+    return step._replace(kind=UNDECIDED, dx=dx[1 - h].copy(), confirmed=False,
+                         guess=KINDS[1 - h], shape=SHAPES[1])
+
+
+def separable(dx: np.ndarray, h: int, detectable: tuple[float, float], mean_speed: float
+              ) -> bool:
+    """Return True if a change of kind ``h`` (0 dry, 1 viscous) of this size is separable.
+
+    Not in the paper (docs/llr.md "Categorisation", condition 1): the torque of the
+    change under the single-kind fit ``dx[h]`` is at least the smallest step of the other
+    kind its test finds with 90 % power (:func:`detectable_steps`), both at the
+    post-change mean speed ``mean_speed`` (a dry step ``a`` = a viscous step ``a / |w|_a``
+    there).
+    """
+    scale = (1.0, mean_speed)
+    return detectable[1 - h] * scale[1 - h] <= abs(float(dx[h, h])) * scale[h]
+
+
+def ramp_sums(terms: np.ndarray, offsets: np.ndarray) -> np.ndarray:
+    """Return one block row ``(u_last, sum t, sum u t, sum u^2 t)`` over samples.
+
+    ``terms``: the per-sample prefix-sum terms ``(n, width(p))`` (module docstring) of
+    consecutive samples; ``offsets``: ``u`` = time since the estimated change (s) of each.
+    ``u_last`` = the last offset (the knot candidate of :func:`ramp_shapes`). Summed in
+    sample order along axis 0 of C-contiguous arrays, so that the streaming and the batch
+    path, which pass the same blocks, get the same floats.
+    """
+    plain = np.ascontiguousarray(terms, dtype=float)
+    u = np.ascontiguousarray(offsets, dtype=float)[:, None]
+    first = plain * u
+    second = first * u
+    return np.concatenate([u[-1], plain.sum(axis=0), first.sum(axis=0), second.sum(axis=0)])
+
+
+def ramp_shapes(blocks: np.ndarray, p: int) -> np.ndarray:
+    """Return the sums ``(sum r t, sum r^2 t)`` of each candidate time shape ``r(u)``.
+
+    Not in the paper (docs/llr.md "Kinds on ramps"). ``blocks``: the :func:`ramp_sums`
+    rows of consecutive blocks of the after segment, in time order. Candidate ``i``: a
+    ramp that stops growing at the end of block ``i``, ``r(u) = min(u, u_i)`` (the last
+    candidate grows to the end: a straight ramp); so a ramp that ended during the after
+    segment is fitted as such. Row ``i``: ``2 width(p)`` floats for :func:`ramp_fits`.
+    """
+    blocks = np.atleast_2d(np.asarray(blocks, dtype=float))
+    n = width(p)
+    knots = blocks[:, 0]
+    plain, first, second = (blocks[:, 1 + i * n:1 + (i + 1) * n] for i in range(3))
+    rows = np.empty((blocks.shape[0], 2 * n))
+    for i, u in enumerate(knots):
+        rest = plain[i + 1:].sum(axis=0)
+        rows[i, :n] = first[:i + 1].sum(axis=0) + u * rest
+        rows[i, n:] = second[:i + 1].sum(axis=0) + (u * u) * rest
+    return rows
+
+
+def ramp_fits(before: np.ndarray, after: np.ndarray, ramp: np.ndarray, p: int
+              ) -> np.ndarray:
+    """Return ``explained`` of the ramp hypotheses ``(full, dry ramp, viscous ramp)``.
+
+    Not in the paper (docs/llr.md "Kinds on ramps"). Joint fit of the before segment
+    (``x``) and the after segment, where the change may grow with the time ``u`` since the
+    estimated change: after = ``h (x + dx) + u (g_d h_dry + g_v h_viscous)``. ``full``:
+    ``dx`` and ``(g_d, g_v)`` free (``p + 2`` change parameters: the before and after
+    segments fitted apart, the after one on ``(h, u h_dry, u h_viscous)``); ``dry ramp``:
+    ``dx = a e_dry``, ``g = (b, 0)``; ``viscous ramp``: ``dx = a e_viscous``, ``g = (0,
+    b)`` (2 parameters each). As in :func:`change_fits`, ``RSS_h = E_before + E_after -
+    explained_h``. ``ramp``: one row of :func:`ramp_shapes` (``u`` replaced by the time
+    shape ``r(u)``).
+    """
+    pi_b, q_b, _ = unpack(before, p)
+    pi_a, q_a, _ = unpack(after, p)
+    gram, rhs = _ramp_after(after, ramp, p)
+    explained = np.empty(3)
+    explained[0] = (float(solve_scaled(pi_b, q_b) @ q_b)
+                    + float(solve_scaled(gram, rhs) @ rhs))
+    m = np.empty((p + 2, p + 2))
+    m[:p, :p] = pi_b + pi_a
+    for i in (0, 1):
+        cols = [i, p + i]
+        m[:p, p:] = gram[:p, cols]
+        m[p:, :p] = gram[cols, :p]
+        m[p:, p:] = gram[np.ix_(cols, cols)]
+        r = np.concatenate([q_b + q_a, rhs[cols]])
+        explained[1 + i] = float(solve_scaled(m, r) @ r)
+    return explained
+
+
+def _ramp_after(after: np.ndarray, ramp: np.ndarray, p: int
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """Return the Gram matrix and right-hand side of the after rows ``(h, u h_0, u h_1)``."""
+    pi_a, q_a, _ = unpack(after, p)
+    n = width(p)
+    u1, uq, _ = unpack(ramp[:n], p)
+    u2 = unpack(ramp[n:], p)[0]
+    gram = np.empty((p + 2, p + 2))
+    gram[:p, :p] = pi_a
+    gram[:p, p:] = u1[:, :2]
+    gram[p:, :p] = u1[:2, :]
+    gram[p:, p:] = u2[:2, :2]
+    return gram, np.concatenate([q_a, uq[:2]])
+
+
+def ramp_information(before: np.ndarray, after: np.ndarray, ramp: np.ndarray, p: int
+                     ) -> tuple[float, float]:
+    """Return the information on a step of the other kind beside each single-kind ramp.
+
+    Not in the paper (docs/llr.md "Kinds on ramps"). ``(I_viscous, I_dry)``-like pair
+    indexed like the kinds: entry 1 is the information on a viscous step ``dx_v`` added to
+    the dry-ramp model (``x``, ``dx_d``, ``g_d`` free), entry 0 that on a dry step added to
+    the viscous-ramp model; ``var = sigma^2 / I`` as in :func:`component_information`, 0
+    when the ramp of one kind and the step of the other cannot be told apart (e.g. ``|w|``
+    linear in time over the after segment, no sign change).
+    """
+    pi_b = unpack(before, p)[0]
+    gram, _ = _ramp_after(after, ramp, p)
+    m = np.zeros((p + 3, p + 3))
+    m[:p, :p] = pi_b + gram[:p, :p]
+    out = [0.0, 0.0]
+    for h in (0, 1):
+        cols = [h, p + h, 1 - h]
+        m[:p, p:] = gram[:p, cols]
+        m[p:, :p] = gram[cols, :p]
+        m[p:, p:] = gram[np.ix_(cols, cols)]
+        s_ll = float(m[-1, -1])
+        s_lr = m[-1, :-1]
+        info = s_ll - float(s_lr @ solve_scaled(m[:-1, :-1], s_lr))
+        out[1 - h] = info if info > 1e-9 * max(s_ll, 1e-300) else 0.0
+    return out[0], out[1]
+
+
+def ramp_limits(p: int, z_threshold: float) -> tuple[float, float]:
+    """Return the chi-square limits ``(reject, absent)`` of the ramp tests (``p`` dof).
+
+    ``reject``: the upper quantile at the category level (the level whose two-sided normal
+    quantile is ``z_threshold``); ``absent``: at :data:`RAMP_ABSENT_LEVEL`.
+    """
+    from scipy import special
+    level = math.erfc(z_threshold / math.sqrt(2.0))
+    return float(special.chdtri(p, level)), float(special.chdtri(p, RAMP_ABSENT_LEVEL))
+
+
+def ramp_statistics(explained: np.ndarray, noise_var: float) -> tuple[float, float]:
+    """Return ``(chi_dry_ramp, chi_viscous_ramp)``: ``(RSS_h - RSS_full) / sigma^2``."""
+    return (max(float(explained[0] - explained[1]), 0.0) / noise_var,
+            max(float(explained[0] - explained[2]), 0.0) / noise_var)
+
+
+def ramp_kind(explained: np.ndarray, noise_var: float, p: int, z_threshold: float
+              ) -> int | None:
+    """Return the kind (0 dry, 1 viscous) the ramp models name, or None.
+
+    Not in the paper (docs/llr.md "Kinds on ramps"). Nested likelihood-ratio tests of
+    each single-direction ramp against the full model (:func:`ramp_fits`), ``p`` degrees
+    of freedom each: a direction is named when its own ramp is not rejected even at
+    :data:`RAMP_ABSENT_LEVEL` and the other direction's ramp is rejected at the category
+    level (:func:`ramp_limits`); None when neither or both are.
+    """
+    chi = ramp_statistics(explained, noise_var)
+    reject, absent = ramp_limits(p, z_threshold)
+    for h in (0, 1):
+        if chi[h] <= absent and chi[1 - h] > reject:
+            return h
+    return None
 
 
 def refine_change(prefix: np.ndarray, first: int, c: int, n: int, lo: int, hi: int, p: int,

@@ -97,6 +97,11 @@ def fit_intervals(y: np.ndarray, x: np.ndarray, changepoints: np.ndarray, *,
                        rmse=float(np.sqrt(rss / max(count, 1))), identifiable=identifiable)
 
 
+# fit_extra_columns: least usable samples, and least part of a column beyond model (1).
+MIN_EXTRA_SAMPLES = 100
+MIN_EXTRA_PART = 1.0e-3
+
+
 def fit_extra_columns(y: np.ndarray, x: np.ndarray, changepoints: np.ndarray,
                       columns: np.ndarray, *, dk_error: int = 10, min_samples: int = 3,
                       rcond: float = 1.0e-9) -> tuple[np.ndarray, np.ndarray]:
@@ -106,13 +111,15 @@ def fit_extra_columns(y: np.ndarray, x: np.ndarray, changepoints: np.ndarray,
     viscous coefficient (times x) and ``columns`` (n, p), on the samples stage 2 uses
     (finite, at least ``dk_error`` from a changepoint). Before the fit the columns lose
     their projection on sign(x) and x over those samples, so that what model (1) can
-    hold stays with the dry and viscous coefficients; columns are scaled to unit RMS and
-    directions the samples cannot tell apart are cut (relative singular values below
-    ``rcond``). Return (coefficients of ``columns``, coefficients of [sign(x), x]) such
-    that ``columns @ c + [sign(x), x] @ d`` is the fitted extra part (zero mean
-    projection on sign(x) and x). This is how a calibration learns what a wheel's
-    nominal holds beyond model (1) without taking the FSS jumps for effects of speed
-    (docs/fss.md, "Calibrated").
+    hold stays with the dry and viscous coefficients; a column left with less than
+    MIN_EXTRA_PART of its RMS is model (1) on these samples and gets 0; columns are
+    scaled to unit RMS and directions the samples cannot tell apart are cut (relative
+    singular values below ``rcond``). Fewer than MIN_EXTRA_SAMPLES usable samples (or
+    four per coefficient): nothing is fitted. Return (coefficients of ``columns``,
+    coefficients of [sign(x), x]) such that ``columns @ c + [sign(x), x] @ d`` is the
+    fitted extra part (zero projection on sign(x) and x). This is how a calibration
+    learns what a wheel's nominal holds beyond model (1) without taking the FSS jumps
+    for effects of speed (docs/fss.md, "Calibrated").
     """
     y = np.asarray(y, dtype=float)
     x = np.asarray(x, dtype=float)
@@ -124,14 +131,14 @@ def fit_extra_columns(y: np.ndarray, x: np.ndarray, changepoints: np.ndarray,
                     check_int('min_samples', min_samples, 1))
     use = np.isfinite(y) & np.isfinite(x) & np.all(np.isfinite(columns), axis=1)
     use &= (label >= 0) & (x != 0.0)
-    if p == 0 or np.count_nonzero(use) < 2 * (p + cps.size + 2):
+    if p == 0 or np.count_nonzero(use) < max(MIN_EXTRA_SAMPLES, 4 * (p + cps.size + 2)):
         return np.zeros(p), np.zeros(2)
     s, xu, yu, e = np.sign(x[use]), x[use], y[use], columns[use]
     model1 = np.column_stack([s, xu])
     proj = np.linalg.lstsq(model1, e, rcond=None)[0]
     perp = e - model1 @ proj
     scale = np.sqrt(np.mean(perp ** 2, axis=0))
-    keep = scale > 1e-12 * max(float(np.max(scale)), 1e-300)
+    keep = scale > MIN_EXTRA_PART * np.sqrt(np.mean(e ** 2, axis=0))
     intervals = np.unique(label[use])
     dummies = (label[use][:, None] == intervals[None, :]) * s[:, None]
     design = np.column_stack([dummies, xu, perp[:, keep] / scale[keep]])
