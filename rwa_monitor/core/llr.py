@@ -504,7 +504,10 @@ class LLRDetector:
         change position), so that the new reference holds post-change samples only. The
         kind is re-checked on ``[tau, j]`` (the gap ``[tau, start)`` is kept as one
         prefix-sum row). Tests of the new reference whose window is already complete run
-        at once (never, since the start is at or after ``k_min``; kept for safety).
+        at once (never, since the start is at or after ``k_min``; kept for safety). Not in
+        the paper: a declaration that the previous change's growth explains
+        (:meth:`_continues`, docs/llr.md "Kinds on ramps") is no new change: its kind is
+        re-checked instead and the reference restarts as after any declaration.
         """
         L = self._L
         c, k_min = self._c, self._kmin
