@@ -338,3 +338,33 @@ def goals(results: dict) -> dict:
                                          'met': t['changepoints']['median'] <= 0.05},
             'assignment_cpu_max_s': {'value': t['assignment']['max'], 'goal': 0.1,
                                      'met': t['assignment']['max'] <= 0.1}}
+
+
+def rerun(parts: list[str], out_dir: pathlib.Path = report.RESULTS_DIR) -> dict:
+    """Re-measure only ``parts`` ('sizes', 'paper') on their scoring seeds; rewrite the doc.
+
+    The other results are read back from ``out_dir/fss.json`` (the last full run), and
+    the fss section of docs/results.md is written from them all through
+    report.update_section, as :func:`run` does.
+    """
+    import json
+
+    from bench import fss_report, fss_sizes
+    from rwa_monitor.telemetry.fss_model import load_model
+    results = json.loads((out_dir / 'fss.json').read_text())
+    started = time.perf_counter()
+    if 'sizes' in parts:
+        results['sizes'] = fss_sizes.run_sizes(False)
+        fss_report.sizes_plots(out_dir, results['sizes'])
+    if 'paper' in parts:
+        results['paper_examples'] = fss_sizes.paper_examples(load_model(), False)
+    results.setdefault('reruns', []).append(
+        {'parts': parts, 'seconds': time.perf_counter() - started})
+    report.write_json(out_dir, 'fss', results)
+    report.update_section('fss', fss_report.markdown(results))
+    return results
+
+
+if __name__ == '__main__':
+    import sys
+    rerun(sys.argv[1:] or ['paper'])

@@ -8,6 +8,12 @@
 4. Closing demonstration: identify on a nominal file with undeclared drag, then run the
    LLR detector with the baseline and the refined model on files with the same drag and
    one injected dry-friction step: false alarms, and whether the step is detected.
+5. Bus: fault-free Basilisk files (optional .venv-bsk), the four identical wheels
+   identified jointly as ``identify FILE --wheel all`` does.
+
+``python -m bench identify`` runs every part; ``python -m bench.bench_identify PART ...``
+reruns only some (PARTS) and writes the section from their new numbers and the others'
+saved ones (bench/results/identify.json).
 """
 
 from __future__ import annotations
@@ -23,11 +29,12 @@ from typing import Any
 
 import numpy as np
 
-from bench.report import table, update_section, write_json
+from bench.report import RESULTS_DIR, table, update_section, write_json
+from rwa_monitor.core.identify.consistency import sibling_name
 from rwa_monitor.core.identify.differentiate import local_noise_std
 from rwa_monitor.core.identify.model import regressors_from_config, snippet
 from rwa_monitor.core.identify.select import identify
-from rwa_monitor.pipelines.identify import identify_wheel, prepare
+from rwa_monitor.pipelines.identify import identify_wheel, identify_wheels, prepare
 from rwa_monitor.pipelines.identify_report import plot_residuals
 from rwa_monitor.pipelines.identify_report import side_by_side, write_outputs
 from rwa_monitor.sim.undeclared import EFFECTS, simulate_undeclared
@@ -46,7 +53,7 @@ def _measured_folder() -> pathlib.Path:
 
 
 MEASURED = _measured_folder()
-BUS_SEEDS = (1103, 1117, 1129)   # chosen before any result on them was seen (dev: 1-99)
+BUS_SEEDS = (1201, 1213, 1237)   # fixed before any result on them was seen (dev: 7, 13)
 BUS_HOURS = 3.0
 STRIBECK_SPEED_BUS = 1.0          # rad/s, BusConfig.stribeck_speed
 NOT_A_FREE_COAST = ('Samplewheel_29',)   # SOURCE.md: decelerates ten times faster
@@ -165,11 +172,13 @@ def _undeclared(quick: bool) -> list[dict]:
 
 
 def _basilisk(out_dir: pathlib.Path, quick: bool, pool=None) -> dict[str, Any]:
-    """Identify every wheel of fault-free bus files (default guidance, null speed 10 rad/s).
+    """Identify the four wheels of fault-free bus files jointly (default guidance, null speed).
 
     Seeds BUS_SEEDS were fixed before any result on them was seen; development used
-    seeds 1-99. Goals: every wheel <= 1.05 x noise floor held out, the same named effects
-    on the four identical wheels, no fallback, Stribeck speed within 25 % of 1 rad/s.
+    seeds below 100. Goals: every wheel <= 1.05 x noise floor held out, the same named
+    effects on the four identical wheels with no wheel flagged by its own data, no
+    fallback, Stribeck speed within 25 % of 1 rad/s. The wheels are identified as
+    ``rwa-monitor identify FILE --wheel all`` does (declared identical: joint selection).
     One process per seed when a pool is given.
     """
     exe = pathlib.Path(__file__).resolve().parents[1] / '.venv-bsk' / 'bin' / 'rwa-monitor'
@@ -180,34 +189,36 @@ def _basilisk(out_dir: pathlib.Path, quick: bool, pool=None) -> dict[str, Any]:
     args = [(out_dir, exe, seed, hours, seed == seeds[0]) for seed in seeds]
     jobs = [pool.submit(_bus_seed, *a) if pool else None for a in args]
     files = {str(a[2]): job.result() if job else _bus_seed(*a) for a, job in zip(args, jobs)}
-    return {'hours': hours, 'seeds': list(seeds), 'files': files}
+    return {'hours': hours, 'seeds': list(seeds), 'files': files, 'rule': 'joint'}
 
 
 def _bus_seed(out_dir: pathlib.Path, exe: pathlib.Path, seed: int, hours: float,
               plot: bool) -> dict[str, Any]:
-    """Simulate one fault-free bus file and identify its four wheels."""
+    """Simulate one fault-free bus file and identify its four wheels jointly."""
     with tempfile.TemporaryDirectory() as tmp:
         path = pathlib.Path(tmp) / f'bus{seed}.csv'
         subprocess.run([str(exe), 'simulate', 'basilisk', '--hours', str(hours), '--seed',
                         str(seed), '-o', str(path)], check=True, capture_output=True)
         tele = read_telemetry(path)
+        wall, cpu = time.perf_counter(), time.process_time()
+        found, agreement = identify_wheels(tele, list(tele.wheels))
+        wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
         wheels, reports = {}, {}
-        for wheel in tele.wheels:
-            start = time.perf_counter()
-            sel, _ = identify_wheel(tele, wheel)
-            seconds = time.perf_counter() - start
+        for wheel, (sel, extra) in found.items():
             reports[wheel] = write_outputs(sel, pathlib.Path(tmp) / f'{seed}-{wheel}',
-                                           f'bus seed {seed} {wheel}')
+                                           f'bus seed {seed} {wheel}', extra)
             hyst = [e for e in sel.effects if e.name == 'stribeck_hysteresis']
             wheels[wheel] = {
-                'samples': len(sel.data), 'seconds': seconds,
+                'samples': len(sel.data),
                 'noise_floor': sel.data.noise_floor,
                 'held_out_before': sel.baseline_fit.rmse_held_out,
                 'held_out_after': sel.final_fit.rmse_held_out,
                 'ratio_after': sel.final_fit.rmse_held_out / sel.data.noise_floor,
-                'effects': [e.name for e in sel.effects],
+                'effects': [e['name'] for e in reports[wheel]['effects']],
                 'parameters': {e.name: {k: v for k, v in e.params.items()
                                         if not isinstance(v, list)} for e in sel.effects},
+                'own_p_value': {e.name: e.evidence.get('own', {}).get('p_value')
+                                for e in sel.effects},
                 'stribeck_speed': hyst[0].params['velocity_rad_s'] if hyst else None,
                 'fallback': any(e.name == 'smooth_speed' for e in sel.effects),
                 'zero_passages': sel.data.past.passages,
@@ -216,7 +227,82 @@ def _bus_seed(out_dir: pathlib.Path, exe: pathlib.Path, seed: int, hours: float,
             if plot and wheel == 'rw1':
                 plot_residuals(sel, out_dir / 'identify_bus_before.png', 'before')
                 plot_residuals(sel, out_dir / 'identify_bus_after.png', 'after')
-    return {'wheels': wheels, 'consistency': side_by_side(reports)['consistency']}
+    out = {'wheels': wheels, 'seconds': wall, 'cpu_seconds': cpu,
+           'consistency': side_by_side(reports, agreement)['consistency']}
+    out['same_set'] = _same_set(out)
+    return out
+
+
+def _flag_text(flag: dict | None) -> str:
+    if flag is None:
+        return 'same'
+    parts = [f'missing {", ".join(flag["missing"])}' if flag['missing'] else '',
+             f'extra {", ".join(flag["extra"])}' if flag['extra'] else '']
+    return 'FLAG: ' + '; '.join(p for p in parts if p)
+
+
+def _met(ok: bool) -> str:
+    return 'met' if ok else 'NOT met'
+
+
+def _same_set(f: dict) -> bool:
+    """Return whether every wheel of a bus file has the same effect names (as sets)."""
+    return len({frozenset(sibling_name(n, w) for n in v['effects'])
+                for w, v in f['wheels'].items()}) == 1
+
+
+def _bus_markdown(b: dict) -> list[str]:
+    """Return the lines of the bus part (joint identification of the four wheels)."""
+    if 'files' not in b:
+        return [f'Basilisk telemetry: {b["skipped"]}.', '']
+    rows, speeds = [], []
+    for seed, f in b['files'].items():
+        for w, v in f['wheels'].items():
+            rows.append([seed, w, v['noise_floor'], v['held_out_before'] / v['noise_floor'],
+                         v['ratio_after'], v['stribeck_speed'], v['zero_passages'],
+                         v['jumps'], ', '.join(v['effects']) or '(none)',
+                         _flag_text(f['consistency']['flagged'].get(w))])
+            if v['stribeck_speed'] is not None:
+                speeds.append(v['stribeck_speed'])
+    wheels = [v for f in b['files'].values() for v in f['wheels'].values()]
+    worst = max(v['ratio_after'] for v in wheels)
+    fallback = sum(v['fallback'] for v in wheels)
+    same = sum(_same_set(f) and f['consistency']['consistent'] for f in b['files'].values())
+    flagged = sum(len(f['consistency']['flagged']) for f in b['files'].values())
+    err = max((abs(x - STRIBECK_SPEED_BUS) / STRIBECK_SPEED_BUS for x in speeds),
+              default=float('nan'))
+    cpu = [f.get('cpu_seconds', float('nan')) for f in b['files'].values()]
+    how = ('The four wheels are identified as `identify FILE --wheel all` does: declared '
+           'identical, effects selected on their pooled evidence, each wheel refitted with '
+           'the common set, a wheel flagged when its own data contradict its siblings '
+           '(docs/identify.md, "Identical wheels"). Effects in the vocabulary\'s order.'
+           if b.get('rule') == 'joint' else 'Each wheel identified alone.')
+    return ['### Basilisk bus telemetry (friction with hysteresis, not declared)', '',
+            f'`rwa-monitor simulate basilisk --hours {b["hours"]:g} --seed S`, default '
+            f'guidance and null speed (wheels cross zero), seeds '
+            f'{", ".join(map(str, b["seeds"]))} fixed before looking (development on seeds '
+            f'7 and 13). Truth: Coulomb 5e-4 N m, Stribeck excess 3e-4 N m peaking at the '
+            f'Stribeck speed 1 rad/s on the branch that leaves zero only, a linear band of '
+            f'+-0.1 rad/s around zero, noise 5e-5 N m (docs/basilisk.md). {how}',
+            '',
+            table(['seed', 'wheel', 'noise floor', 'held-out before / floor',
+                   'after / floor', 'Stribeck speed (rad/s)', 'zero passages', 'jumps',
+                   'effects', 'vs siblings'], rows), '',
+            f'Worst wheel {worst:.3f} x noise floor held out (goal <= 1.05: '
+            f'{_met(worst <= 1.05)}); fallback used on {fallback} of {len(wheels)} wheels '
+            f'(goal 0: {_met(fallback == 0)}); the same named effects on all four wheels, no '
+            f'wheel flagged, in {same} of {len(b["files"])} files ({flagged} wheels flagged '
+            f'by their own data; goal all: {_met(same == len(b["files"]))}); Stribeck speed '
+            f'error at most {100 * err:.1f} % (goal <= 25 %: {_met(err <= 0.25)}); what '
+            f'keeps a wheel above the floor: docs/identify.md, section 5b. Joint '
+            f'identification of the four wheels (43,200 samples each): '
+            f'{min(cpu):.0f}-{max(cpu):.0f} s CPU per file. Before '
+            f'(one wheel at a time, seeds 1103, 1117, 1129): worst 1.049 x floor, the same '
+            f'effects on all four wheels in 0 of 3 files (a third `stribeck` term on some '
+            f'wheels, effect order differing); before issue 11 (main 95c06df, seed 101): '
+            f'1.10 to 1.46 x floor, four different stories, splines.', '',
+            '![bus before](../bench/results/identify_bus_before.png)', '',
+            '![bus after](../bench/results/identify_bus_after.png)', '']
 
 
 def stress_case(n: int = 100000, dt: float = 0.1, seed: int = 5):
@@ -352,29 +438,64 @@ def _plot_measured(out_dir: pathlib.Path, rows: list[dict]) -> None:
     plt.close(fig)
 
 
-def run(out_dir: pathlib.Path, quick: bool) -> dict:
-    """Run the benchmark; write JSON, plots and the identify section of docs/results.md."""
+PARTS = ('measured', 'undeclared', 'demo', 'basilisk', 'stress', 'speed', 'example')
+
+
+def run(out_dir: pathlib.Path, quick: bool, parts: tuple[str, ...] = PARTS) -> dict:
+    """Run the benchmark; write JSON, plots and the identify section of docs/results.md.
+
+    ``parts`` (default all) reruns only those parts: the others' numbers are read from
+    the previous out_dir/identify.json and the section is written from both, so that
+    one part can be measured again without touching the others.
+    """
     out_dir.mkdir(parents=True, exist_ok=True)
+    parts = tuple(parts)
+    unknown = sorted(set(parts) - set(PARTS))
+    if unknown:
+        raise ValueError(f'unknown part(s) {", ".join(unknown)}; parts: {", ".join(PARTS)}')
     results: dict[str, Any] = {'quick': quick}
+    if set(parts) != set(PARTS):
+        previous = out_dir / 'identify.json'
+        if not previous.exists():
+            raise FileNotFoundError(f'{previous} is needed to rerun only some parts')
+        results = json.loads(previous.read_text())
+        results.pop('machine', None)
+        results['quick'] = bool(results.get('quick')) or quick
     # The accuracy parts run in parallel processes; the timing parts afterwards, alone.
     with concurrent.futures.ProcessPoolExecutor(max_workers=6) as pool:
-        measured = pool.submit(_measured, out_dir, quick)
-        undeclared = pool.submit(_undeclared, quick)
-        demo = pool.submit(_demo, out_dir, quick)
-        results['basilisk'] = _basilisk(out_dir, quick, pool)
-        results['measured'] = measured.result()
-        results['undeclared'] = undeclared.result()
-        results['demo'] = demo.result()
-    if 'runs' in results['measured']:
+        jobs = {name: pool.submit(fn, *a) for name, fn, a in (
+            ('measured', _measured, (out_dir, quick)), ('undeclared', _undeclared, (quick,)),
+            ('demo', _demo, (out_dir, quick))) if name in parts}
+        if 'basilisk' in parts:
+            results['basilisk'] = _basilisk(out_dir, quick, pool)
+        results.update({name: job.result() for name, job in jobs.items()})
+    if 'measured' in parts and 'runs' in results['measured']:
         results['measured']['pooled'] = _pooled(results['measured']['runs'])
         _plot_measured(out_dir, results['measured']['runs'])
-    results['stress'] = _stress(quick)
-    results['speed'] = _speed(quick)
-    write_outputs(identify(prepare(simulate_undeclared('drag', seed=1))),
-                  out_dir / 'identify_example_drag', 'simulated drag (undeclared)')
+    if 'stress' in parts:
+        results['stress'] = _stress(quick)
+    if 'speed' in parts:
+        results['speed'] = _speed(quick)
+    if 'example' in parts:
+        write_outputs(identify(prepare(simulate_undeclared('drag', seed=1))),
+                      out_dir / 'identify_example_drag', 'simulated drag (undeclared)')
     write_json(out_dir, 'identify', results)
     update_section('identify', _markdown(results))
     return results
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m bench.bench_identify [PART ...]``: rerun some parts of this bench."""
+    import argparse
+    parser = argparse.ArgumentParser(prog='python -m bench.bench_identify',
+                                     description=run.__doc__.splitlines()[0])
+    parser.add_argument('parts', nargs='*', choices=PARTS, metavar='PART',
+                        help=f'parts to rerun (default all): {", ".join(PARTS)}')
+    parser.add_argument('--out', type=pathlib.Path, default=RESULTS_DIR)
+    parser.add_argument('--quick', action='store_true')
+    args = parser.parse_args(argv)
+    run(args.out, args.quick, tuple(args.parts) or PARTS)
+    return 0
 
 
 def _markdown(res: dict) -> str:
@@ -443,43 +564,7 @@ def _markdown(res: dict) -> str:
                      'false jumps'], rows), '',
               'Goal: found, held-out RMSE after <= 1.10 x noise floor; the no-effect file '
               'keeps the baseline.', '']
-    b = res['basilisk']
-    if 'files' in b:
-        rows, speeds = [], []
-        for seed, f in b['files'].items():
-            for w, v in f['wheels'].items():
-                rows.append([seed, w, v['noise_floor'], v['held_out_before'] / v['noise_floor'],
-                             v['ratio_after'], v['stribeck_speed'], v['zero_passages'],
-                             v['jumps'], ', '.join(v['effects']) or '(none)',
-                             'FLAG' if w in f['consistency']['flagged'] else 'same'])
-                if v['stribeck_speed'] is not None:
-                    speeds.append(v['stribeck_speed'])
-        wheels = [v for f in b['files'].values() for v in f['wheels'].values()]
-        worst = max(v['ratio_after'] for v in wheels)
-        fallback = sum(v['fallback'] for v in wheels)
-        consistent = sum(f['consistency']['consistent'] for f in b['files'].values())
-        err = max((abs(x - STRIBECK_SPEED_BUS) / STRIBECK_SPEED_BUS for x in speeds),
-                  default=float('nan'))
-        lines += ['### Basilisk bus telemetry (friction with hysteresis, not declared)', '',
-                  f'`rwa-monitor simulate basilisk --hours {b["hours"]:g} --seed S`, default '
-                  f'guidance and null speed (wheels cross zero), seeds '
-                  f'{", ".join(map(str, b["seeds"]))} fixed before looking (development on '
-                  f'seeds 1-99). Truth: Coulomb 5e-4 N m, Stribeck excess 3e-4 N m peaking at '
-                  f'the Stribeck speed 1 rad/s on the branch that leaves zero only, a linear '
-                  f'band of +-0.1 rad/s around zero, noise 5e-5 N m (docs/basilisk.md).', '',
-                  table(['seed', 'wheel', 'noise floor', 'held-out before / floor',
-                         'after / floor', 'Stribeck speed (rad/s)', 'zero passages', 'jumps',
-                         'effects (in order)', 'vs siblings'], rows), '',
-                  f'Worst wheel {worst:.3f} x noise floor held out (goal <= 1.05); fallback '
-                  f'used on {fallback} of {len(wheels)} wheels (goal 0); same effects on all '
-                  f'four wheels in {consistent} of {len(b["files"])} files; Stribeck speed '
-                  f'error at most {100 * err:.1f} % (goal <= 25 %). Before this issue (main '
-                  f'95c06df, seed 101): 1.10 to 1.46 x floor, four different stories, '
-                  f'splines.', '',
-                  '![bus before](../bench/results/identify_bus_before.png)', '',
-                  '![bus after](../bench/results/identify_bus_after.png)', '']
-    else:
-        lines += [f'Basilisk telemetry: {b["skipped"]}.', '']
+    lines += _bus_markdown(res['basilisk'])
     st = res['stress']
     lines += ['### High-reversal timing case and the held-aside joint data', '',
               f'Synthetic record (bench_identify.stress_case): {st["samples"]} samples, '
@@ -512,3 +597,7 @@ def _markdown(res: dict) -> str:
                       d['rate'], f'{v["detected"]}/{v["files"]}'] for k, v in s.items()]), '',
               '![demo](../bench/results/identify_demo.png)', '']
     return '\n'.join(lines)
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())

@@ -113,7 +113,10 @@ def markdown(results: dict) -> str:
     paper_cls = results['classification_paper_levels']
     lines = ['## FSS window diagnoser (physics-informed FSS paper, section V)', '',
              f'`python -m bench fss`, {results["bench_seconds"]:.0f} s on the shared '
-             'machine.', '']
+             'machine.' + (' Re-measured since, alone: ' + '; '.join(
+                 f'{" and ".join(r["parts"])} (`python -m bench.bench_fss '
+                 f'{" ".join(r["parts"])}`, {r["seconds"]:.0f} s)'
+                 for r in results['reruns']) + '.' if results.get('reruns') else ''), '']
     lines += sizes_markdown(results['sizes'], results['paper_examples'])
     lines += ['### Legacy magnitudes: the figures of the paper reproduced', '',
               'The anomalies of the first bench, 2.5-3x away from nominal (`rwa-monitor fss '
@@ -352,7 +355,10 @@ def sizes_markdown(sizes: dict, paper: dict) -> list[str]:
               'nominal window: `calibrate` = core/calibrate.py `calibrate_wheel` as '
               '`rwa-monitor calibrate` runs it (identification kept effects '
               f'{", ".join(paper["calibrate_effects"]) or "none"}, '
-              f'{paper["calibrate_warnings"]} warnings of friction changes: the FSS jumps); '
+              f'{paper["calibrate_warnings"]} warnings of friction changes: the FSS jumps; '
+              'the FSS reference refits those effects together with the FSS jumps, in the '
+              "diagnoser's stage 2, so the reference is the extraction's own, docs/fss.md "
+              '"Calibrated"); '
               '`model1` = the same contract with a model-(1) nominal (bench/fss_sizes.py '
               '`model1_block`); `model1_3windows` = model (1) on three nominal windows of '
               'the wheel end to end (6.7 h). Then through core/calibrate.py `diagnose_fss` '
@@ -360,16 +366,24 @@ def sizes_markdown(sizes: dict, paper: dict) -> list[str]:
               f'shipped model, {paper["windows_per_case"]} windows per case, and the same '
               'windows without calibration. Named right: nominal with no flag, or only the '
               "right kind; estimates are medians relative to the calibration's reference "
-              '(uncalibrated: in the default scales).', '']
+              "(uncalibrated: in the default scales). Unknown: the window's residual noise "
+              'above the bound of core/fss/classify.py `noise_ratio_bound` (level 1e-3).', '']
     rows = []
     for label, per in paper['cases'].items():
         for name, v in per.items():
             rows.append([label, name, f'{v["right"]}/{v["windows"]}', v['missed'], v['wrong'],
                          v['unknown'], f'{v["base_dry_median"]:.2f}',
+                         f'{v.get("base_dry_std", float("nan")):.2f}',
                          f'{v["viscous_median"]:.2f}'])
     lines += [table(['window', 'calibration', 'named right', 'missed', 'wrong class',
-                     'unknown', 'base dry', 'viscous'], rows), '',
-              'References (N m, N m s/rad): ' + '; '.join(
+                     'unknown', 'base dry', 'base dry std', 'viscous'], rows), '']
+    if 'model_thresholds' in paper:
+        th = paper['model_thresholds']
+        lines += ['The shipped model flags dry above a base dry of '
+                  f'{th["dry"]:.2f} x the reference and viscous above {th["viscous"]:.2f} x '
+                  '(its SVMs on one number each); "base dry std": the scatter of the '
+                  'one-window base-dry estimate over the windows of the case.', '']
+    lines += ['References (N m, N m s/rad): ' + '; '.join(
                   f'{k}: base dry {r["base_dry_nm"]:.3g}, viscous {r["viscous_nms"]:.3g}, '
                   f'noise {r["noise_std_nm"]:.3g}' for k, r in refs.items()) + '.', '']
     return lines

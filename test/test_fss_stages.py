@@ -10,7 +10,7 @@ from rwa_monitor.core.fss.assign import (assign_bruteforce, assign_changepoints,
                                          friction_levels, score_assignment)
 from rwa_monitor.core.fss.classify import histogram, WindowClassifier
 from rwa_monitor.core.fss.model import EXAMPLE_1, EXAMPLE_2, LOG_FLOOR, SwitchingSystem
-from rwa_monitor.core.fss.segments import fit_intervals
+from rwa_monitor.core.fss.segments import fit_extra_columns, fit_intervals
 from rwa_monitor.core.fss.wglr import detect_changepoints, run_maxima, wglr
 from rwa_monitor.telemetry.fss_model import load_model, save_model
 
@@ -261,3 +261,44 @@ def test_an_fss_without_jumps_is_not_judged():
     quiet = {'base_dry': 1.0, 'viscous': 1.0, 'levels': [[0.0], [0.0]]}
     assert model.predict(quiet) == {'dry': False, 'viscous': False, 'fss1': False,
                                     'fss2': False}
+
+
+def test_extra_columns_fitted_beside_the_interval_jumps():
+    # Speed crossing zero; dry jumps at known changepoints; an extra effect of speed
+    # (exp(-|x| / 0.3) sign(x), a Stribeck-like bump) that model (1) cannot hold.
+    n = 12000
+    x = 1.2 * np.sin(np.arange(n) / 900.0) + 0.1
+    bump = np.exp(-np.abs(x) / 0.3) * np.sign(x)
+    cps = np.array([3000, 7000])
+    x_free, y_jumps = _signal(n, [(3000, 0.4), (7000, -0.25)], 0.02, seed=3, speed=x)
+    y = y_jumps + 0.5 * bump
+    columns = np.column_stack([bump, x ** 2])   # a column with no effect in the data
+    c, d = fit_extra_columns(y, x, cps, columns)
+    fitted = columns @ c + d[0] * np.sign(x) + d[1] * x
+    truth = 0.5 * bump
+    s = np.column_stack([np.sign(x), x])
+    truth -= s @ np.linalg.lstsq(s, truth, rcond=None)[0]   # its non-model-(1) part
+    assert np.max(np.abs(fitted - truth)) < 0.02
+    assert c[0] == pytest.approx(0.5, abs=0.02) and abs(c[1]) < 0.01
+    # Without the changepoints the jumps leak into the columns.
+    c0, d0 = fit_extra_columns(y, x, np.array([], dtype=int), columns)
+    assert np.max(np.abs(columns @ c0 + d0[0] * np.sign(x) + d0[1] * x - truth)) > 0.05
+    # No columns, or too few samples: nothing fitted.
+    assert fit_extra_columns(y, x, cps, np.zeros((n, 0)))[0].size == 0
+    assert not np.any(fit_extra_columns(y[:10], x[:10], cps[:0], columns[:10])[0])
+
+
+def test_viscous_standard_error_is_the_scatter_of_the_estimate():
+    # 400 noise draws on one speed profile with two dry jumps: the std of the viscous
+    # estimates is the reported standard error, within 4 sigma of a std from 400 draws
+    # (sqrt(1 / (2 * 399)) = 3.5 %).
+    n, sigma = 3000, 0.05
+    x = 0.8 + 0.3 * np.sin(np.arange(n) / 300.0)
+    clean = np.where(np.arange(n) < 1000, 1.0, 1.3) * np.sign(x) + 1.0 * x
+    rng = np.random.default_rng(5)
+    fits = [fit_intervals(clean + rng.normal(0.0, sigma, n), x, np.array([1000, 2000]))
+            for _ in range(400)]
+    scatter = np.std([f.viscous for f in fits], ddof=1)
+    reported = np.mean([f.viscous_se for f in fits])
+    assert scatter == pytest.approx(reported, rel=0.14)
+    assert fit_intervals(clean, np.full(n, 0.5), np.array([1000])).viscous_se == np.inf

@@ -215,3 +215,25 @@ def test_speed_noise_model_needs_an_estimated_noise_level():
         LLRDetector('rw1', noise_std=1.0, noise_speed_model=True)
     with pytest.raises(ValueError, match='noise_speed_model'):
         LLRDetector('rw1', noise_speed_model='yes')
+
+
+def test_inline_whitened_path_equals_the_generic_two_column_path():
+    # The paper's model with an AR noise model is whitened inline in update(); the same
+    # columns as another RegressorSet take _ingest_fitted / _whiten / _add2: same events.
+    from rwa_monitor.core.friction import dry_column, RegressorSet, viscous_column
+    reg = RegressorSet(('dry', 'viscous'), (lambda w, t, a: dry_column(w),
+                                            lambda w, t, a: viscous_column(w)))
+    rng = np.random.default_rng(36)
+    n = 9000
+    t, w, f = crossing_signal(n, ar1(n, 0.7, rng), ((3000, 0.8, 0.0), (6500, 0.0, 0.05)))
+    f[[100, 2000, 5000]] = np.nan
+    t[4000] = t[3999]
+    runs = []
+    for extra in ({}, {'regressors': reg}):
+        det = LLRDetector('rw1', window=300, **extra)
+        events = []
+        for a, b, c in zip(t.tolist(), w.tolist(), f.tolist()):
+            events.extend(det.update(a, b, c))
+        assert det.noise_model is not None and len(det.noise_model.ar) >= 1
+        runs.append(([e.to_json() for e in events], det.counters))
+    assert runs[0] == runs[1] and len(runs[0][0]) >= 2

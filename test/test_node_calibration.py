@@ -3,6 +3,7 @@
 import hashlib
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+import numpy as np
 import pytest
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -116,3 +117,51 @@ def test_node_refuses_to_start_on_a_bad_calibration(tmp_path):
         with pytest.raises(ConfigError, match='missing.yaml: cannot read'):
             world.node(LLRDetectorNode, parameter_overrides=[
                 Parameter('calibration_file', value=str(tmp_path / 'missing.yaml'))])
+
+
+def _wheel_and_gyro_calibration(tmp_path):
+    """Return a calibration file with wheels (simulated friction) and a gyro block."""
+    from rwa_monitor.core import gyro_calibration as gc
+    nominal, _ = simulate_friction_with_truth(wheels=['rw1'], n_samples=2000, rate_hz=10.0,
+                                              seed=7)
+    document, _, arrays = calibrated.commission([nominal])
+    cal = calibrated.write(document, arrays, tmp_path / 'cal')[0]
+    rng = np.random.default_rng(3)
+    t = 0.25 * np.arange(1, 4801)
+    gyro = rng.normal(0.0, 1e-5, (len(t), 3))
+    q = np.tile([0.0, 0.0, 0.0, 1.0], (len(t), 1))
+    data = yaml.safe_load(cal.read_text())
+    data['calibration']['gyro'] = gc.calibrate_gyro(t, gyro, q)
+    cal.write_text(yaml.safe_dump(data))
+    return cal
+
+
+@pytest.mark.parametrize('name', ['fss', 'vsadc'])
+def test_fss_and_vsadc_nodes_announce_a_calibration_change(tmp_path, name):
+    from rwa_monitor.nodes.fss_diagnoser import FssDiagnoserNode
+    from rwa_monitor.nodes.vsadc_detector import VsadcDetectorNode
+    node_class = {'fss': FssDiagnoserNode, 'vsadc': VsadcDetectorNode}[name]
+    cal = _wheel_and_gyro_calibration(tmp_path)
+    other = tmp_path / 'other.yaml'
+    other.write_text(cal.read_text() + '\n# second copy\n')
+    with RosWorld(f'calibration_{name}') as world:
+        node = world.node(node_class, parameter_overrides=[
+            Parameter('calibration_file', value=str(cal))])
+        sink = world.node(Node, 'sink')
+        anomalies = Collector(sink, DiagnosticArray, 'anomalies', EVENTS_QOS)
+        world.spin_for(0.3)
+        bad = tmp_path / 'bad.yaml'
+        bad.write_text('calibration: {version: 1}\n')
+        result = node.set_parameters([Parameter('calibration_file', value=str(bad))])[0]
+        assert not result.successful and str(bad) in result.reason
+        assert node.calibration.path == str(cal)
+        assert node.set_parameters([Parameter('calibration_file',
+                                              value=str(other))])[0].successful
+        world.wait_until(lambda: _changes(anomalies), 10.0, 'calibration event')
+        world.spin_for(0.3)
+        assert len(_changes(anomalies)) == 1
+        event = messages.status_event(_changes(anomalies)[0])
+        assert (event.detector, event.component) == (name, 'calibration')
+        assert event.details[keys.CALIBRATION_FILE] == str(other)
+        assert event.details[keys.PREVIOUS_CALIBRATION] == str(cal)
+        assert node.calibration.path == str(other)

@@ -4,7 +4,9 @@ Writes DIR/report.json (DESIGN.md contract), DIR/selection.json (every step and 
 DIR/report.md, DIR/residuals_before.png, DIR/residuals_after.png and
 DIR/friction_model.yaml (the refined model as a configuration snippet for the detectors);
 with ``--wheel all`` one such folder per wheel and DIR/wheels.md, DIR/wheels.json (the
-effects side by side, wheels whose effects differ from their siblings' flagged).
+effects side by side, wheels whose effects differ from their siblings' flagged). The
+wheels of one file are taken as identical (one design): effects are selected on their
+pooled evidence (core/identify/joint.py); ``--separately`` identifies each wheel alone.
 
 ``--format coastdown`` reads the measured coast-down folder's per-revolution file
 (``derived/coast_per_rev.csv``: run, body, direction, t_s, omega_rad_s) in place, one run
@@ -24,7 +26,7 @@ import pathlib
 from rwa_monitor.cli.options import add_topics, INPUT_HELP
 from rwa_monitor.core.schema import AUTO, default_text, help_text, IDENTIFY, Param
 from rwa_monitor.exceptions import RwaMonitorError
-from rwa_monitor.pipelines.identify import identify_wheel
+from rwa_monitor.pipelines.identify import identify_wheel, identify_wheels
 from rwa_monitor.pipelines.identify_report import side_by_side, wheels_markdown, write_outputs
 from rwa_monitor.telemetry import read_telemetry
 from rwa_monitor.telemetry.atomic import write_text_atomic
@@ -57,6 +59,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     jumps = IDENTIFY['jumps']
     p.add_argument('--no-jumps', dest='jumps', action='store_false', default=jumps.default,
                    help=f'do not: {jumps.description[0].lower()}{jumps.description[1:]}')
+    same = IDENTIFY['identical_wheels']
+    p.add_argument('--separately', dest='identical_wheels', action='store_false',
+                   default=same.default,
+                   help=f'identify each wheel alone; default: {same.description}')
     p.set_defaults(func=run)
 
 
@@ -106,16 +112,22 @@ def run(args: argparse.Namespace) -> int:
             _fail('the file has no <id>_speed column: nothing to identify')
     title = str(args.file) + (f' [{args.run}]' if args.run else '')
     results = {}
-    for wheel in wheels:
-        out = args.out / wheel if len(wheels) > 1 else args.out
-        try:
-            selection, extra = identify_wheel(tele, wheel, inertia,
+    try:
+        if len(wheels) > 1:
+            found, agreement = identify_wheels(tele, wheels, args.identical_wheels, inertia,
+                                               _given(args.torque_constant), args.half_width,
+                                               args.alpha, args.jumps)
+        else:
+            selection, extra = identify_wheel(tele, wheels[0], inertia,
                                               _given(args.torque_constant), args.half_width,
                                               args.alpha, args.jumps)
-        except ValueError as err:
-            if isinstance(err, RwaMonitorError):
-                raise
-            raise RwaMonitorError(str(err)) from None
+            found = {selection.data.wheel: (selection, extra)}
+    except ValueError as err:
+        if isinstance(err, RwaMonitorError):
+            raise
+        raise RwaMonitorError(str(err)) from None
+    for wheel, (selection, extra) in found.items():
+        out = args.out / wheel if len(wheels) > 1 else args.out
         result = write_outputs(selection, out, title=title, extra=extra)
         results[selection.data.wheel] = result
         speed = result.get('speed_rmse')
@@ -126,7 +138,7 @@ def run(args: argparse.Namespace) -> int:
               + (f'; speed RMSE {speed["before"]:.4g} -> {speed["after"]:.4g} rad/s'
                  if speed else '') + f'; report in {out}')
     if len(wheels) > 1:
-        summary = side_by_side(results)
+        summary = side_by_side(results, agreement)
         write_text_atomic(args.out / 'wheels.json', json.dumps(summary, indent=2) + '\n')
         write_text_atomic(args.out / 'wheels.md', wheels_markdown(summary))
         print(wheels_markdown(summary))

@@ -47,6 +47,7 @@ MIN_EXCESS = 1.1
 SPEED_KINDS = ('stribeck', 'asymmetric_coulomb', 'drag', 'smooth_speed')
 # Speed step (rad/s) of the nominal model's table (NominalWheel); knots are added to it.
 TABLE_STEP_RAD_S = 0.01
+_INF = math.inf
 # Relative singular-value cut-off of the refit outside the low-speed band.
 REFIT_RCOND = 1.0e-9
 # Speeds above this fraction of the largest |speed| seen form the reference region.
@@ -167,7 +168,7 @@ def calibrate_wheel(wheel: str, time: np.ndarray, speed: np.ndarray, friction: n
         'friction_model': model,
         'noise': noise_model,
         'speed_range_rad_s': [float(np.min(w)), float(np.max(w))],
-        'fss': fss_reference(w, f, model, noise_model),
+        'fss': {},   # filled once the low-speed band is final
         'samples': int(len(t)),
         'dropped_effects': dropped,
     }
@@ -227,49 +228,96 @@ def fss_reference(speed: np.ndarray, friction: np.ndarray, friction_model: Mappi
                   noise: Mapping[str, Any]) -> dict[str, Any]:
     """Return the window diagnoser's nominal reference of one wheel.
 
-    ``model1_*``: the least-squares fit of model (1) outside the low-speed band (the
-    diagnoser knows dry and viscous friction only, the FSS paper's eq. (4)).
-    ``base_dry_nm``, ``viscous_nms``, ``noise_std_nm``: what the diagnoser's own
-    extraction (core/fss/pipeline.py, stages 1-3) reports on the calibration data given
-    as in :func:`fss_inputs`, so that a nominal window is judged against the same
-    estimator's nominal values.
+    The diagnoser knows model (1) and the FSSs (the FSS paper's eq. (4)); what the wheel's
+    nominal holds beyond model (1) is removed from its friction first. That part is not
+    the nominal model's own extra columns as identification fitted them: identification
+    knows no FSS, and on a wheel with FSS jumps it takes them for effects of speed (on
+    the paper's Examples 1-2: drag and smooth_speed, a reference base dry 1.6 x the true
+    one). So the extra columns are refitted together with the FSS jumps, in the
+    diagnoser's own stage 2 (eq. 14: one dry coefficient per interval between the
+    changepoints of stages 1-3, one viscous coefficient) plus the columns
+    (core/fss/segments.py ``fit_extra_columns``), twice: the changepoints are found
+    again once the first fit's extra part is removed. ``extra_weights``: that part as
+    weights of the nominal model's columns (``nominal_prediction`` with them is what
+    :func:`fss_inputs` removes). ``base_dry_nm``, ``viscous_nms``, ``noise_std_nm``:
+    what the diagnoser's extraction (core/fss/pipeline.py, stages 1-3) reports on the
+    calibration data given as :func:`fss_inputs` gives a window, so that a nominal window
+    is judged against the same estimator's nominal values. ``model1_*``: the plain
+    least-squares fit of model (1) outside the low-speed band (for reading only).
     """
     from rwa_monitor.core.fss.pipeline import extract, FssConfig, normalise
+    from rwa_monitor.core.fss.segments import fit_extra_columns
+    from rwa_monitor.core.identify.model import regressors_from_config
+    speed = np.asarray(speed, dtype=float)
+    friction = np.asarray(friction, dtype=float)
     band = float(noise['low_speed_band']['speed_abs_below_rad_s'])
-    out = np.abs(speed) >= band
+    with np.errstate(invalid='ignore'):
+        out = np.isfinite(speed) & np.isfinite(friction) & (np.abs(speed) >= band)
     h = -np.column_stack([np.sign(speed[out]), speed[out]])
     dry, viscous = np.linalg.lstsq(h, friction[out], rcond=None)[0]
     ref = {'model1_dry_nm': float(dry), 'model1_viscous_nms': float(viscous),
            'speed_abs_below_rad_s': band}
-    model1 = -dry * np.sign(speed) - viscous * speed
-    given = friction - (nominal_prediction(friction_model, speed) - model1)
-    given[~out] = np.nan
+    block = friction_model.get('friction_model', friction_model)
+    regs = regressors_from_config(block)
+    names = list(regs.names)
+    extra = [i for i, n in enumerate(names) if n not in ('dry', 'viscous')]
     config = FssConfig()
+    weights = dict.fromkeys(names, 0.0)
+    safe = np.where(out, speed, 0.0)
+    columns = regs.matrix(safe)[:, extra] if extra else np.zeros((speed.size, 0))
+    given = np.where(out, friction, np.nan)
+    for _ in range(2 if extra else 0):
+        ext = extract(*normalise(speed, given, config), config)
+        c, d = fit_extra_columns(friction, np.where(out, speed, np.nan), ext.accepted,
+                                 columns, dk_error=config.dk_error)
+        # columns @ c + d[0] sign(w) + d[1] w; model (1)'s columns are -sign(w), -w.
+        weights = dict.fromkeys(names, 0.0)
+        weights.update({names[i]: float(v) for i, v in zip(extra, c)})
+        weights['dry'], weights['viscous'] = float(-d[0]), float(-d[1])
+        given = np.where(out, friction - nominal_prediction(
+            {'effects': block.get('effects') or [], 'weights': weights}, safe), np.nan)
     ext = extract(*normalise(speed, given, config), config)
     tq = config.torque_scale_nm
     ref.update(base_dry_nm=float(ext.base_dry * tq),
                viscous_nms=float(ext.viscous * tq / config.speed_scale_rad_s),
-               noise_std_nm=float(ext.sigma * tq))
+               viscous_se_nms=float(ext.viscous_se * tq / config.speed_scale_rad_s)
+               if np.isfinite(ext.viscous_se) else float('nan'),
+               noise_std_nm=float(ext.sigma * tq), extra_weights=weights,
+               samples=int(np.count_nonzero(out)))
     return ref
+
+
+def fss_extra(block: Mapping[str, Any], speed: np.ndarray) -> np.ndarray:
+    """Return what the wheel's nominal holds beyond model (1), as the FSS reference fitted.
+
+    ``fss.extra_weights`` on the nominal model's columns (:func:`fss_reference`); a
+    calibration written before they existed gives the nominal model minus the
+    reference's model-(1) fit.
+    """
+    ref = block['fss']
+    model = block['friction_model']
+    if 'extra_weights' in ref:
+        return nominal_prediction({'effects': model.get('effects') or [],
+                                   'weights': ref['extra_weights']}, speed)
+    model1 = -ref['model1_dry_nm'] * np.sign(speed) - ref['model1_viscous_nms'] * speed
+    return nominal_prediction(model, speed) - model1
 
 
 def fss_inputs(block: Mapping[str, Any], speed: np.ndarray, friction: np.ndarray
                ) -> tuple[np.ndarray, dict[str, float]]:
     """Return (friction for the diagnoser, its scales) relative to the wheel's nominal.
 
-    The friction loses what the nominal model holds beyond model (1) (nominal minus the
-    reference's model-(1) fit), samples inside the low-speed band or outside the
-    calibrated speed range become NaN (the stages skip them), and the normalising scales
-    are the reference's base dry friction and base dry / viscous, so that the nominal
-    wheel is (1, 1) in the diagnoser's units, where its classifier was trained
-    (docs/fss.md, "Calibrated").
+    The friction loses what the nominal holds beyond model (1) (:func:`fss_extra`),
+    samples inside the low-speed band or outside the calibrated speed range become NaN
+    (the stages skip them), and the normalising scales are the reference's base dry
+    friction and base dry / viscous, so that the nominal wheel is (1, 1) in the
+    diagnoser's units, where its classifier was trained (docs/fss.md, "Calibrated").
     """
     speed = np.asarray(speed, dtype=float)
     friction = np.asarray(friction, dtype=float)
     ref = block['fss']
     safe = np.where(np.isfinite(speed), speed, 0.0)
-    model1 = -ref['model1_dry_nm'] * np.sign(safe) - ref['model1_viscous_nms'] * safe
-    out = friction - (nominal_prediction(block['friction_model'], safe) - model1)
+    out = friction - fss_extra(block, safe)
     lo, hi = block['speed_range_rad_s']
     with np.errstate(invalid='ignore'):
         skip = (np.abs(speed) < ref['speed_abs_below_rad_s']) | (speed < lo) | (speed > hi)
@@ -396,7 +444,8 @@ class NominalWheel:
         knots = [float(k) for e in self.friction_model.get('effects') or []
                  for k in (e.get('params') or {}).get('knots_rad_s', [])]
         self._tables = {side: self._table(side, knots) for side in (1.0, -1.0)}
-        self._lists = {side: tuple(map(list, table)) for side, table in self._tables.items()}
+        self._above = _lookup(*self._tables[1.0])
+        self._below = _lookup(*self._tables[-1.0])
         self.at_zero = float(nominal_prediction(self.friction_model, np.zeros(1))[0])
 
     def _table(self, side: float, knots: list[float]
@@ -443,41 +492,71 @@ class NominalWheel:
 
     def residual(self, time: np.ndarray, speed: np.ndarray, friction: np.ndarray
                  ) -> tuple[np.ndarray, dict[str, int]]:
-        """Return (friction - nominal, NaN where not tested) and the counts by reason."""
+        """Return (friction - nominal, NaN where not tested) and the counts by reason.
+
+        Each side's table is evaluated by ``numpy.interp`` (NaN off the table), which forms
+        ``slope_j (|w| - grid_j) + nominal_j`` with the slope computed as in the table: the
+        floats of :meth:`residual_one` (test_calibrate checks it point by point); few
+        temporaries, as fresh large arrays cost page faults.
+        """
         speed = np.asarray(speed, dtype=float)
         friction = np.asarray(friction, dtype=float)
         time = np.asarray(time, dtype=float)
-        valid = np.isfinite(speed) & np.isfinite(friction) & np.isfinite(time)
+        finite = np.isfinite(speed)
+        valid = finite & np.isfinite(friction) & np.isfinite(time)
+        mag = np.abs(speed)
         with np.errstate(invalid='ignore'):
-            low = valid & (np.abs(speed) < self.band_rad_s)
+            low = valid & (mag < self.band_rad_s)
             outside = valid & ((speed < self.speed_range[0]) | (speed > self.speed_range[1]))
-        out = friction - self.nominal(speed)
-        out[low | outside] = np.nan
-        out[~np.isfinite(speed)] = np.nan
-        return out, {'low_speed_band': int(np.sum(low)),
-                     'outside_calibrated_range': int(np.sum(outside & ~low))}
+        (grid, values, _), (grid_below, values_below, _) = (self._tables[1.0],
+                                                            self._tables[-1.0])
+        out = np.interp(mag, grid, values, np.nan, np.nan)
+        np.copyto(out, np.interp(mag, grid_below, values_below, np.nan, np.nan),
+                  where=~(speed > 0.0))
+        out[speed == 0.0] = self.at_zero
+        np.subtract(friction, out, out=out)
+        out[low | outside | ~finite] = np.nan
+        return out, {'low_speed_band': int(np.count_nonzero(low)),
+                     'outside_calibrated_range': int(np.count_nonzero(outside & ~low))}
 
     def residual_one(self, time: float, speed: float, friction: float
                      ) -> tuple[float, str | None]:
         """Return (friction - nominal, reason not tested or None) of one sample.
 
-        The same arithmetic as :meth:`residual` on one sample, in plain floats.
+        The same arithmetic as :meth:`residual` on one sample, in plain floats (a node's
+        per-sample call: a bisection in a list, no numpy).
         """
-        if not (math.isfinite(speed) and math.isfinite(friction) and math.isfinite(time)):
+        if not (-_INF < speed < _INF and -_INF < friction < _INF and -_INF < time < _INF):
             return math.nan, None
-        if abs(speed) < self.band_rad_s:
+        mag = abs(speed)
+        if mag < self.band_rad_s:
             return math.nan, 'low_speed_band'
-        if speed < self.speed_range[0] or speed > self.speed_range[1]:
+        lo, hi = self.speed_range
+        if speed < lo or speed > hi:
             return math.nan, 'outside_calibrated_range'
         if speed == 0.0:
             return friction - self.at_zero, None
-        side = 1.0 if speed > 0 else -1.0
-        grid, values, slope = self._lists[side]
-        mag = speed * side
+        grid, values, slope, first, scale = self._above if speed > 0.0 else self._below
         if mag < grid[0] or mag > grid[-1]:
             return math.nan, None
-        j = min(bisect.bisect_right(grid, mag) - 1, len(grid) - 1)
+        b = int((mag - grid[0]) * scale)
+        j = bisect.bisect_right(grid, mag, first[b], first[b + 3]) - 1
         return friction - (values[j] + (mag - grid[j]) * slope[j]), None
+
+
+def _lookup(grid: np.ndarray, values: np.ndarray, slope: np.ndarray) -> tuple:
+    """Return one side's table as Python lists with a bucket index for the bisection.
+
+    ``first[b]`` counts the grid points at or below ``grid[0] + (b - 1) h`` (``h`` =
+    TABLE_STEP_RAD_S); a speed ``m`` on the table falls in bucket ``b = int((m - grid[0]) /
+    h)`` (within one bucket after rounding), so its interval lies between ``first[b]`` and
+    ``first[b + 3]``: the bisection sees a few points, with the answer of a full one.
+    """
+    count = int((grid[-1] - grid[0]) / TABLE_STEP_RAD_S) + 6   # b + 3 < count on the table
+    edges = grid[0] + (np.arange(count) - 1.0) * TABLE_STEP_RAD_S
+    first = np.searchsorted(grid, edges, side='right')
+    return (grid.tolist(), values.tolist(), slope.tolist(), first.tolist(),
+            1.0 / TABLE_STEP_RAD_S)
 
 
 def diagnose_fss(block: Mapping[str, Any], time: np.ndarray, speed: np.ndarray,
@@ -487,21 +566,37 @@ def diagnose_fss(block: Mapping[str, Any], time: np.ndarray, speed: np.ndarray,
     :func:`fss_inputs` (nominal's non-model-(1) part removed, band and out-of-range
     samples skipped, scales from the reference), the four stages (core/fss/pipeline.py
     ``diagnose``), then core/fss/classify.py ``relative_verdict`` (``status``: nominal,
-    anomalous or unknown, with ``unknown_reason``).
+    anomalous or unknown, with ``unknown_reason``) with the classifier's noise-ratio
+    bound (``noise_ratio_bound`` of its spec's ``noise_ratio``). A viscous flag stands only
+    when the window's viscous coefficient is also significantly above the reference's
+    (``viscous_z`` > the one-sided quantile at VISCOUS_LEVEL, both standard errors of
+    least squares): the classifier's threshold is a size (x1.14 on the shipped model),
+    learned where the estimate is ten times more precise than on a 3-hour bus record;
+    ``calibration.viscous_z`` keeps the value.
     """
     from dataclasses import replace
 
-    from rwa_monitor.core.fss.classify import relative_verdict
+    from rwa_monitor.core.fss.classify import (noise_ratio_bound, relative_verdict,
+                                               viscous_significant, viscous_z)
     from rwa_monitor.core.fss.pipeline import diagnose
     given, scales = fss_inputs(block, speed, friction)
     result = diagnose(speed, given, time, classifier, replace(config, **scales))
-    status, flags, reason = relative_verdict(result['anomalies'],
-                                             result['estimates']['noise_std_nm'],
-                                             block['fss']['noise_std_nm'])
+    spec = getattr(classifier, 'spec', None) or {}
+    bound = noise_ratio_bound(spec.get('noise_ratio'))
+    est, ref = result['estimates'], block['fss']
+    se = est.get('viscous_se_nms')
+    z = viscous_z(est['viscous_nms'], float('inf') if se is None else se,
+                  ref['viscous_nms'], ref.get('viscous_se_nms', float('nan')))
+    if result['anomalies'].get('viscous') and not viscous_significant(z):
+        result['anomalies']['viscous'] = False
+        result['viscous_not_significant'] = True
+    status, flags, reason = relative_verdict(result['anomalies'], est['noise_std_nm'],
+                                             ref['noise_std_nm'], bound)
     result['anomalies'] = flags
     result['status'] = status
     if reason:
         result['unknown_reason'] = reason
     skipped = int(np.sum(~np.isfinite(given) & np.isfinite(np.asarray(friction, float))))
-    result['calibration'] = {**scales, 'samples_not_tested': skipped}
+    result['calibration'] = {**scales, 'samples_not_tested': skipped,
+                             'viscous_z': z if np.isfinite(z) else None}
     return result

@@ -29,6 +29,10 @@ from rwa_monitor.core.llr_common import (candidate_log_p2, checkpoints, COUNTER_
                                          window_statistics)
 from rwa_monitor.core.params import AUTO
 
+_INF = math.inf
+_FLOOR_ABS = llr_stats.NOISE_FLOOR_ABS
+_FLOOR_REL = llr_stats.NOISE_FLOOR_REL
+
 __all__ = ['candidate_log_p2', 'COUNTER_NAMES', 'detect_batch', 'detect_batch_with_counters',
            'LLRDetector', 'NoiseModel', 'validate_parameters']
 
@@ -217,11 +221,13 @@ class LLRDetector:
         self._c = 0
         self._c_row = -1
         self._pref = zero
-        self._rterm = [None] * self._L
-        self._rpref = [None] * self._L
-        self._rpref[0] = zero
+        # Rings of the last L accepted samples: (h1, h2, f) for p = 2 (a restart recomputes
+        # the same products from them) or the terms for p > 2; row index; time.
+        self._rterm: list[Any] = [None] * self._L
         self._rrow = [0] * self._L
         self._rtime = [0.0] * self._L
+        self._rpref = [None] * self._L
+        self._rpref[0] = zero
         self._logpmin = 0.0
         self._kmin = 0
         self._ystar = 0.0
@@ -236,10 +242,11 @@ class LLRDetector:
         self._wlow = math.inf
         self._whigh = 0.0
         self._next_fit: int | None = None
-        self._lags: list[tuple[float, Any]] = []
+        self._lags: list[tuple[Any, ...]] = []
+        self._ar_order = 0
         self._fitting = self._ar_max > 0 or self._speed_model
         self._buffer: list[tuple[int, float, float, Any]] = []
-        self._plain = self._default and not self._fitting
+        self._fast = self._default and not self._fitting
         self._last_event: AnomalyEvent | None = None
 
     def update(self, t: float, speed: float, friction: float,
@@ -258,29 +265,33 @@ class LLRDetector:
         except (TypeError, ValueError):
             self._counters['nonfinite'] += 1
             return []
-        if (t - t) + (w - w) + (f - f) != 0.0:
-            self._counters['nonfinite'] += 1
+        max_w = self._max_w
+        max_f = self._max_f
+        if not (-max_w < w < max_w and -max_f < f < max_f and self._last_t < t < _INF):
+            # Something is wrong with the sample: count it by the first failed check.
+            self._reject(t, w, f)
             return []
-        if not (-self._max_w < w < self._max_w and -self._max_f < f < self._max_f):
-            self._counters['out_of_range'] += 1
-            return []
-        if not t > self._last_t:
-            self._counters['non_increasing_time'] += 1
-            return []
-        if self._plain:
-            # Inline copy of _add2 for the paper's model, white noise (one method call less
-            # per sample; test_llr checks that both give the same events).
+        if self._fast:
+            # The paper's model without a speed noise model, whitened inline when an AR
+            # noise model is fitted (same floats as _ingest_fitted, _whiten and _add2, one
+            # call instead of four per sample; test_llr checks that both agree exactly).
             self._last_t = t
             h1 = -1.0 if w > 0.0 else (1.0 if w < 0.0 else 0.0)
             h2 = -w
-            ta = h1 * h1
-            tb = h1 * h2
-            tc = h2 * h2
-            tu = h1 * f
-            tv = h2 * f
-            te = f * f
+            if self._ar:
+                lags = self._lags
+                fw, g1, g2 = f, h1, h2
+                for a, (lf, l1, l2) in zip(self._ar, lags):
+                    fw = fw - a * lf
+                    g1 = g1 - a * l1
+                    g2 = g2 - a * l2
+                lags.insert(0, (f, h1, h2))
+                if len(lags) > self._ar_order:
+                    lags.pop()
+                f, h1, h2 = fw, g1, g2
             P = self._pref
-            P = (P[0] + ta, P[1] + tb, P[2] + tc, P[3] + tu, P[4] + tv, P[5] + te)
+            P = (P[0] + h1 * h1, P[1] + h1 * h2, P[2] + h2 * h2, P[3] + h1 * f, P[4] + h2 * f,
+                 P[5] + f * f)
             self._pref = P
             j = self._pos
             self._pos = j + 1
@@ -288,15 +299,20 @@ class LLRDetector:
                 self._c_row = row
             L = self._L
             s = j % L
-            self._rterm[s] = (ta, tb, tc, tu, tv, te)
+            self._rterm[s] = (h1, h2, f)
             self._rrow[s] = row
             self._rtime[s] = t
             self._rpref[(j + 1) % L] = P
-            events = self._revise(j) if j == self._checkpoint else []
+            if j == self._checkpoint:
+                events = self._revise(j)
+                k = j - self._w + 1
+                if k > self._c + self._w and self._test2(k, P):
+                    events.extend(self._declare(j))
+                return events
             k = j - self._w + 1
             if k > self._c + self._w and self._test2(k, P):
-                events.extend(self._declare(j))
-            return events
+                return self._declare(j)
+            return []
         if self._default:
             h = (-1.0 if w > 0.0 else (1.0 if w < 0.0 else 0.0), -w)
         else:
@@ -305,6 +321,15 @@ class LLRDetector:
                 return []
         self._last_t = t
         return self.ingest_row(row, t, f, h, w)
+
+    def _reject(self, t: float, w: float, f: float) -> None:
+        """Count a sample that is not accepted, by the first check it fails."""
+        if (t - t) + (w - w) + (f - f) != 0.0:
+            self._counters['nonfinite'] += 1
+        elif not (-self._max_w < w < self._max_w and -self._max_f < f < self._max_f):
+            self._counters['out_of_range'] += 1
+        else:
+            self._counters['non_increasing_time'] += 1
 
     def ingest_row(self, row: int, t: float, f: float, h, speed: float) -> list[AnomalyEvent]:
         """Process an accepted sample whose regressor row ``h`` is already computed.
@@ -347,8 +372,9 @@ class LLRDetector:
         self._fitting = False
         self._noise = model
         self._ar = model.ar
+        self._ar_order = len(model.ar)
         self._speed_std = model.speed_std
-        self._plain = self._default and not self._ar and self._speed_std is None
+        self._fast = self._default and self._speed_std is None
         events: list[AnomalyEvent] = []
         for row, t, f, h, w in buffer:
             events.extend(self._ingest_fitted(row, t, f, h, w))
@@ -378,11 +404,11 @@ class LLRDetector:
         fw = f
         if self._p == 2:
             h1, h2 = float(h[0]), float(h[1])
-            for a, (lf, lh) in zip(self._ar, lags):
+            for a, (lf, l1, l2) in zip(self._ar, lags):
                 fw = fw - a * lf
-                h1 = h1 - a * lh[0]
-                h2 = h2 - a * lh[1]
-            lags.insert(0, (f, (float(h[0]), float(h[1]))))
+                h1 = h1 - a * l1
+                h2 = h2 - a * l2
+            lags.insert(0, (f, float(h[0]), float(h[1])))
             hw: Any = (h1, h2)
         else:
             h = np.asarray(h, dtype=float)
@@ -397,14 +423,9 @@ class LLRDetector:
     def _add2(self, row: int, t: float, f: float, h1: float, h2: float
               ) -> list[AnomalyEvent]:
         """Add one accepted sample to the sums and ring, then test (p = 2)."""
-        ta = h1 * h1
-        tb = h1 * h2
-        tc = h2 * h2
-        tu = h1 * f
-        tv = h2 * f
-        te = f * f
         P = self._pref
-        P = (P[0] + ta, P[1] + tb, P[2] + tc, P[3] + tu, P[4] + tv, P[5] + te)
+        P = (P[0] + h1 * h1, P[1] + h1 * h2, P[2] + h2 * h2, P[3] + h1 * f, P[4] + h2 * f,
+             P[5] + f * f)
         self._pref = P
         j = self._pos
         self._pos = j + 1
@@ -412,7 +433,7 @@ class LLRDetector:
             self._c_row = row
         L = self._L
         s = j % L
-        self._rterm[s] = (ta, tb, tc, tu, tv, te)
+        self._rterm[s] = (h1, h2, f)
         self._rrow[s] = row
         self._rtime[s] = t
         self._rpref[(j + 1) % L] = P
@@ -447,15 +468,15 @@ class LLRDetector:
         if det > self._min_exc * ac and dett > 0.0:
             x1 = (C * U - B * V) / det
             x2 = (A * V - B * U) / det
-            if self._noise_var is None:
-                dof = float(n_p - 2)
-                s2 = (E - (x1 * U + x2 * V)) / dof
-                floor = llr_stats.NOISE_FLOOR_REL * E / n_p + llr_stats.NOISE_FLOOR_ABS
+            s2 = self._noise_var
+            dof = None
+            if s2 is None:
+                # Dividing by the int n_p - 2 gives the quotient by float(n_p - 2).
+                s2 = (E - (x1 * U + x2 * V)) / (n_p - 2)
+                floor = _FLOOR_REL * E / n_p + _FLOOR_ABS
                 if not s2 > floor:
                     s2 = floor
-            else:
-                s2 = self._noise_var
-                dof = None
+                dof = n_p - 2
             Aw = At - A
             Bw = Bt - B
             Cw = Ct - C
@@ -467,7 +488,8 @@ class LLRDetector:
             tr = (Ct * Aw - 2.0 * Bt * Bw + At * Cw) / dett
             if tr > 0.0 and y > 0.0 and not y / tr < self._ystar:
                 dm = (Aw * Cw - Bw * Bw) / dett
-                logp = candidate_log_p2(y, tr, dm, self._logpmin, dof)
+                logp = candidate_log_p2(y, tr, dm, self._logpmin,
+                                        None if dof is None else float(dof))
                 if logp is not None and logp < self._logpmin:
                     self._record(k, logp)
         else:
@@ -582,6 +604,9 @@ class LLRDetector:
         """Return :func:`llr_stats.ramp_sums` of positions ``first..last`` (in the ring)."""
         L = self._L
         terms = np.asarray([self._rterm[j % L] for j in range(first, last + 1)], dtype=float)
+        if self._p == 2:   # the ring holds (h1, h2, f): the products of the prefix sums
+            h1, h2, f = terms.T
+            terms = np.column_stack((h1 * h1, h1 * h2, h2 * h2, h1 * f, h2 * f, f * f))
         times = np.asarray([self._rtime[j % L] for j in range(first, last + 1)], dtype=float)
         return llr_stats.ramp_sums(terms, times - t0)
 
@@ -593,12 +618,12 @@ class LLRDetector:
         P = self._zero
         self._rpref[c % L] = P
         for j in range(c, n + 1):
-            t = self._rterm[j % L]
             if self._p == 2:
-                P = (P[0] + t[0], P[1] + t[1], P[2] + t[2], P[3] + t[3], P[4] + t[4],
-                     P[5] + t[5])
+                h1, h2, f = self._rterm[j % L]
+                P = (P[0] + h1 * h1, P[1] + h1 * h2, P[2] + h2 * h2, P[3] + h1 * f,
+                     P[4] + h2 * f, P[5] + f * f)
             else:
-                P = P + t
+                P = P + self._rterm[j % L]
             self._rpref[(j + 1) % L] = P
         self._pref = P
         self._logpmin = 0.0

@@ -24,7 +24,7 @@ import numpy as np
 
 from rwa_monitor.core import llr_stats
 from rwa_monitor.core.events import AnomalyEvent
-from rwa_monitor.core.gchi2 import skip_threshold
+from rwa_monitor.core.gchi2 import log_lower_bound_array, skip_threshold
 from rwa_monitor.core.llr_common import (candidate_log_p2, checkpoints, declaration,
                                          fit_noise_model, make_event, ramp_points,
                                          reference_base, revision_due, speed_fit_done,
@@ -32,6 +32,10 @@ from rwa_monitor.core.llr_common import (candidate_log_p2, checkpoints, declarat
                                          window_statistics)
 
 CHUNK = 1 << 13
+# A candidate's exact p_k is computed only if its lower bound is within this relative
+# margin above the running minimum (candidate_log_p2 tests 1e-9; rounding is ~1e-15).
+_SKIP_REL = 1e-7
+_LOWER_AT_0 = math.log(2.0 / math.sqrt(math.pi)) - math.log(2.0)
 
 
 def as_arrays(time, speed, friction) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -82,10 +86,11 @@ class _Terms:
     def __init__(self, h1: np.ndarray, h2: np.ndarray, f: np.ndarray):
         self.h1, self.h2, self.f = h1, h2, f
 
-    def block(self, first: int, last: int) -> np.ndarray:
-        """Return the terms of positions ``first..last - 1``, shape ``(6, n)``."""
+    def block(self, first: int, last: int, out: np.ndarray | None = None) -> np.ndarray:
+        """Return the terms of positions ``first..last - 1``, shape ``(6, n)`` (into ``out``)."""
         h1, h2, f = self.h1[first:last], self.h2[first:last], self.f[first:last]
-        out = np.empty((6, h1.size))
+        if out is None:
+            out = np.empty((6, h1.size))
         np.multiply(h1, h1, out=out[0])
         np.multiply(h1, h2, out=out[1])
         np.multiply(h2, h2, out=out[2])
@@ -96,31 +101,56 @@ class _Terms:
 
 
 class _Reference:
-    """Prefix sums (shape ``(6, m)``) of one reference segment, extended chunk by chunk."""
+    """Prefix sums (shape ``(6, m)``) of one reference segment, extended chunk by chunk.
+
+    The prefixes live in a buffer that grows by doubling: a chunk's terms are written in
+    place after the last held prefix and summed there (``numpy.cumsum`` in place, the same
+    sequential additions as a sum of the concatenation); trimming moves the start only, and
+    the held part is moved to the front when the buffer is full.
+    """
 
     def __init__(self, terms: _Terms, c: int):
         self.terms = terms
         self.c = c
         self.pos0 = c
-        self.rows = np.zeros((6, 1))
+        self._buf = np.zeros((6, 2 * CHUNK))
+        self._lo = 0     # buffer column of position pos0
+        self._n = 1      # prefixes held: positions pos0 .. pos0 + _n - 1
+
+    @property
+    def rows(self) -> np.ndarray:
+        """Held prefixes, a ``(6, m)`` view valid until the next :meth:`extend`."""
+        return self._buf[:, self._lo:self._lo + self._n]
 
     @property
     def end(self) -> int:
         """Last position whose prefix is held."""
-        return self.pos0 + self.rows.shape[1] - 1
+        return self.pos0 + self._n - 1
 
     def extend(self, last: int) -> None:
         """Hold prefixes up to position ``last`` (sequential continuation of the sums)."""
-        if last <= self.end:
+        m = last - self.end
+        if m <= 0:
             return
-        block = np.concatenate([self.rows[:, -1:], self.terms.block(self.end, last)], axis=1)
-        self.rows = np.concatenate([self.rows, np.cumsum(block, axis=1)[:, 1:]], axis=1)
+        n = self._n
+        if self._lo + n + m > self._buf.shape[1]:
+            buf = self._buf
+            if n + m > buf.shape[1]:
+                buf = np.empty((6, max(2 * buf.shape[1], n + m)))
+            buf[:, :n] = self._buf[:, self._lo:self._lo + n]
+            self._buf, self._lo = buf, 0
+        lo = self._lo
+        self.terms.block(self.end, last, out=self._buf[:, lo + n:lo + n + m])
+        run = self._buf[:, lo + n - 1:lo + n + m]
+        np.cumsum(run, axis=1, out=run)
+        self._n = n + m
 
     def trim(self, first: int) -> None:
         """Drop prefixes of positions before ``first``."""
         cut = first - self.pos0
         if cut > 0:
-            self.rows = self.rows[:, cut:]
+            self._lo += cut
+            self._n -= cut
             self.pos0 = first
 
     def span(self, first: int, last: int) -> np.ndarray:
@@ -152,39 +182,109 @@ def _scan(ref: _Reference, k0: int, k1: int, state: dict, cfg: Mapping[str, Any]
     pp, pt = ref.span(k0, k1), ref.span(k0 + w, k1 + w)
     if cfg['reference_max'] is not None:
         pp, pt = pp - base, pt - base
-    ok, testable, y, tr, dm, upper, lower = window_statistics(pp, pt, n_p, cfg)
+    ok, testable, y, tr, dm, _, _ = window_statistics(pp, pt, n_p, cfg, bounds=False)
+    dof = None if cfg['noise_std'] is not None else n_p - 2.0
+    upper, lower = _rough_bounds(y, tr, dm, dof)
+    upper[~testable] = 0.0
     bound = np.minimum.accumulate(np.concatenate([[state['bound']], upper]))
     state['bound'] = float(bound[-1])
-    prev = bound[:-1]
-    margin = 1e-6 * (1.0 + np.abs(prev))
-    cand = np.flatnonzero(testable & (lower <= prev + margin))
-    dof = None if cfg['noise_std'] is not None else n_p - 2.0
-    declared = _candidates(ks, cand, y, tr, dm, dof, state, kverif, logr)
+    limit = bound[:-1]
+    limit += 1e-6 * (1.0 + np.abs(limit))
+    cand = np.flatnonzero(testable & (lower <= limit))
+    declared = _candidates(ks, cand, y, tr, dm, dof, state, kverif, logr, limit)
     last = k1 if declared is None else declared
     state['ill'] += int(np.count_nonzero(~ok[:last - k0 + 1]))
     return declared
 
 
-def _candidates(ks, cand, y, tr, dm, dof, state: dict, kverif: int, logr: float
-                ) -> int | None:
-    """Algorithm 1 lines 11-18 over the candidate tests of a chunk (exact p_k)."""
+def _rough_bounds(y: np.ndarray, tr: np.ndarray, dm: np.ndarray, dof: np.ndarray | None
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """Return cheap upper and lower bounds of log p_k (no logarithm), for the scan.
+
+    With ``b``, ``rho``, ``a`` as in :func:`candidate_log_p2`: upper ``-b`` (the tail of
+    ``l1 chi2_2``), studentised ``-b dof / (dof + 2 b)`` (``log1p(x) >= x / (1 + x)`` in the
+    tail at ``psi = 0``, :func:`gchi2.log_sf2_t`); lower ``-1.5 a + log(2 / sqrt(pi)) -
+    log 2 - b rho``, below the Gaussian bound of :func:`gchi2.log_lower_bound` (``log(sqrt
+    a + sqrt(a + 2)) <= log(a + 2) <= log 2 + a / 2``), which holds for both tails. Only
+    their use matters: the running minimum of the upper bounds stays at or above p_min, and
+    a test whose lower bound is above it cannot be a new minimum.
+    """
+    with np.errstate(all='ignore'):
+        half = 0.5 * tr
+        lam1 = half + np.sqrt(np.maximum(half * half - dm, 0.0))
+        b = y / (2.0 * lam1)
+        b_rho = b * (np.maximum(dm / lam1, 0.0) / lam1)
+        a = np.maximum(b - b_rho, 0.0)
+        upper = -b if dof is None else -b * dof / (dof + 2.0 * b)
+        lower = _LOWER_AT_0 - 1.5 * a - b_rho
+    return upper, lower
+
+
+def _candidates(ks, cand, y, tr, dm, dof, state: dict, kverif: int, logr: float,
+                limit: np.ndarray) -> int | None:
+    """Algorithm 1 lines 11-18 over the candidate tests of a chunk (exact p_k).
+
+    :func:`_lower_bounds` (the bound of :func:`candidate_log_p2`, vectorised) drops the
+    candidates whose bound is above ``limit`` (the running minimum of the upper bounds,
+    plus a margin), and skips the call for one that cannot beat the running minimum by
+    more than rounding: that call would return None or a p_k above the minimum, so the
+    records, hence the events, are those of the streaming path (the declaration position
+    depends on the records only). The loop runs on Python floats.
+    """
     k1 = int(ks[-1])
-    for i in cand:
-        k = int(ks[i])
-        if state['logp'] <= logr and state['kmin'] + kverif + 1 < k:
-            return state['kmin'] + kverif + 1
-        yv, trv = float(y[i]), float(tr[i])
-        if not yv / trv < state['ystar']:
-            logp = candidate_log_p2(yv, trv, float(dm[i]), state['logp'],
-                                    None if dof is None else float(dof[i]))
-            if logp is not None and logp < state['logp']:
-                state.update(logp=logp, kmin=k, ystar=skip_threshold(logp))
-        if state['logp'] <= logr and k > state['kmin'] + kverif:
-            return k
-    kd = state['kmin'] + kverif + 1
-    if state['logp'] <= logr and kd <= k1:
+    logp, kmin, ystar = state['logp'], state['kmin'], state['ystar']
+    declared = None
+    if cand.size:
+        yc, trc, dmc = y[cand], tr[cand], dm[cand]
+        dofc = None if dof is None else dof[cand]
+        lows = _lower_bounds(yc, trc, dmc, dofc)
+        keep = lows <= limit[cand]
+        if not keep.all():
+            cand, yc, trc, dmc, lows = cand[keep], yc[keep], trc[keep], dmc[keep], lows[keep]
+            dofc = None if dofc is None else dofc[keep]
+        lows = lows.tolist()
+        dofs = [None] * cand.size if dofc is None else dofc.tolist()
+        for k, yv, trv, dmv, dfv, low in zip(ks[cand].tolist(), yc.tolist(), trc.tolist(),
+                                             dmc.tolist(), dofs, lows):
+            if logp <= logr and kmin + kverif + 1 < k:
+                declared = kmin + kverif + 1
+                break
+            if not yv / trv < ystar and not low > logp + _SKIP_REL * (1.0 - logp):
+                new = candidate_log_p2(yv, trv, dmv, logp, dfv)
+                if new is not None and new < logp:
+                    logp, kmin, ystar = new, k, skip_threshold(new)
+            if logp <= logr and k > kmin + kverif:
+                declared = k
+                break
+    state.update(logp=logp, kmin=kmin, ystar=ystar)
+    if declared is not None:
+        return declared
+    kd = kmin + kverif + 1
+    if logp <= logr and kd <= k1:
         return kd
     return None
+
+
+def _lower_bounds(y: np.ndarray, tr: np.ndarray, dm: np.ndarray, dof: np.ndarray | None
+                  ) -> np.ndarray:
+    """Return the lower bound of log p_k that :func:`candidate_log_p2` tests, vectorised.
+
+    Same formula (eigenvalues of ``Pi_T^-1 Pi_W`` from trace and determinant, clamped;
+    Gaussian or studentised bound) in numpy: equal to the scalar one up to rounding, far
+    below the relative margin ``_SKIP_REL`` with which it is used.
+    """
+    with np.errstate(all='ignore'):
+        half = 0.5 * tr
+        disc = half * half - dm
+        lam1 = half + np.sqrt(np.maximum(disc, 0.0))
+        lam2 = np.clip(dm / lam1, 0.0, lam1)
+        b = y / (2.0 * lam1)
+        rho = lam2 / lam1
+        a = b * (1.0 - rho)
+        if dof is None:
+            return log_lower_bound_array(a) - b * rho
+        big_a = dof * a / (dof + 2.0 * b)
+        return -0.5 * dof * np.log1p(2.0 * b / dof) + big_a + log_lower_bound_array(big_a)
 
 
 def paper_h1(speed: np.ndarray) -> np.ndarray:

@@ -265,10 +265,12 @@ def candidate_log_p2(y: float, tr: float, dm: float, log_p_min: float,
     return log_sf2_t(y, lam1, lam2, dof)
 
 
-def window_statistics(pp: np.ndarray, pt: np.ndarray, n_p: np.ndarray, cfg: Mapping[str, Any]):
+def window_statistics(pp: np.ndarray, pt: np.ndarray, n_p: np.ndarray, cfg: Mapping[str, Any],
+                      bounds: bool = True):
     """Vectorised statistic of the streaming path (same operations, same order).
 
-    ``pp``, ``pt``: prefix rows at ``k`` and ``k + w``, shape ``(6, n)``.
+    ``pp``, ``pt``: prefix rows at ``k`` and ``k + w``, shape ``(6, n)``. ``bounds``: False
+    leaves out the bounds of log p_k (returned as None; the batch scan forms cheaper ones).
     """
     A, B, C, U, V, E = pp[0], pp[1], pp[2], pp[3], pp[4], pp[5]
     At, Bt, Ct, Ut, Vt = pt[0], pt[1], pt[2], pt[3], pt[4]
@@ -295,6 +297,8 @@ def window_statistics(pp: np.ndarray, pt: np.ndarray, n_p: np.ndarray, cfg: Mapp
         y = (A * d1 * d1 + 2.0 * B * d1 * d2 + C * d2 * d2) / s2
         tr = (Ct * Aw - 2.0 * Bt * Bw + At * Cw) / dett
         dm = (Aw * Cw - Bw * Bw) / dett
+        if not bounds:
+            return ok, ok & (tr > 0.0) & (y > 0.0), y, tr, dm, None, None
         half = 0.5 * tr
         lam1 = half + np.sqrt(np.maximum(half * half - dm, 0.0))
         testable = ok & (tr > 0.0) & (y > 0.0)

@@ -17,7 +17,7 @@ the shipped parameters file.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 import difflib
 import math
 import textwrap
@@ -372,8 +372,11 @@ VSADC = Schema('vsadc_detector', (
     Param('feature', 'residual', 'residual: gyro minus star-tracker rate, the true rate '
           'cancels (works under guidance); paper: the two residuals of Algorithm 1 '
           '(docs/vsadc.md).', choices=('residual', 'paper')),
-    Param('calibration_file', '', 'calibration.yaml whose gyro block sets the residual '
-          'thresholds; empty = defaults.', read_only=True),
+    # The shared calibration file; here a detector keyword (its gyro block sets the
+    # residual thresholds), so the same parameter with the detector's scope.
+    replace(CALIBRATION_FILE, scope='all', description=CALIBRATION_FILE.description.replace(
+        'wheels are judged against their nominal', 'its gyro block sets the residual '
+        'thresholds')),
     Param('saturation_rad_s', 0.35, 'A gyro rate at or above this is saturated: held and '
           'reported, never diagnosed.', low=0.0, low_open=True, unit='rad/s'),
     Param('residual_block', gc.DEFAULT_BLOCK, 'Residual steps per block mean (the '
@@ -458,6 +461,9 @@ IDENTIFY = Schema('identify', (
     Param('alpha', 1.0e-3, 'Family-wise level of the effect and jump tests.', low=0.0,
           high=0.5, low_open=True, scope='file'),
     Param('jumps', True, 'Segment friction jumps before fitting.', scope='file'),
+    Param('identical_wheels', True, 'With --wheel all: the wheels are of one design, so '
+          'effects are selected on their pooled evidence and a wheel is flagged when its '
+          'own data contradict its siblings; false = each wheel alone.', scope='file'),
     Param('inertia', AUTO, 'Wheel inertia J: friction = J dw/dt - K_T I (eq. 1b) when the '
           'file has no friction column; auto = none (the coast-down folder: its pendulum).',
           low=0.0, low_open=True, auto=True, kind=float, unit='kg m^2', scope='file'),

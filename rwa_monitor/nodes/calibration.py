@@ -106,7 +106,9 @@ class CalibrationInForce:
         if nominal is None:
             return friction
         out, reason = nominal.residual_one(t, speed, friction)
-        counts = self.not_tested.setdefault(wheel_id, dict.fromkeys(REASONS, 0))
+        counts = self.not_tested.get(wheel_id)
+        if counts is None:   # first sample of the wheel: its counts start at 0
+            counts = self.not_tested[wheel_id] = dict.fromkeys(REASONS, 0)
         if reason is not None:
             counts[reason] += 1
         return out

@@ -263,6 +263,21 @@ STALE = DiagnosticStatus.STALE
 LEVEL_NAMES = {OK: 'OK', WARN: 'WARN', ERROR: 'ERROR', STALE: 'STALE'}
 
 
+def publish_calibration_change(node: Node, publisher: Any, calibration: Any,
+                               detector: str) -> None:
+    """Publish the calibration now in force on ``anomalies`` (kind calibration_changed).
+
+    ``calibration`` is the node's :class:`rwa_monitor.nodes.calibration.CalibrationInForce`.
+    Not journalled with the alarms: it is a setting, not an anomaly (level OK).
+    """
+    out = DiagnosticArray()
+    now = node.get_clock().now()
+    out.header.stamp = now.to_msg()
+    out.status = [calibration.change_status(detector, now.nanoseconds * 1e-9,
+                                            node.get_name())]
+    publisher.publish(out)
+
+
 def wheel_names(text: str) -> set[str] | None:
     """Return the wheel ids of a comma-separated ``wheels`` parameter (None = any wheel)."""
     names = {n.strip() for n in text.split(',') if n.strip()}

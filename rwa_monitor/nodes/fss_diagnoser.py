@@ -140,6 +140,8 @@ class FssDiagnoserNode(Node):
             self._config = self._make_config(self.params)
         elif name == calibration.NAME:
             self.get_logger().info(self.calibration.set(value))
+            common.publish_calibration_change(self, self._anomaly_pub, self.calibration,
+                                              'fss')
         elif name == 'wheels':
             self._allowed = common.wheel_names(self.params['wheels'])
         elif name == 'window_period':

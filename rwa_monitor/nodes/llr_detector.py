@@ -162,7 +162,8 @@ class LLRDetectorNode(Node):
             for wheel_id, wheel in self.wheels.items():
                 wheel.restart()
                 wheel.detector = self._new_detector(wheel_id)
-            self._publish_calibration_change()
+            common.publish_calibration_change(self, self._anomaly_pub, self.calibration,
+                                              'llr')
         elif name == 'wheels':
             self._allowed = common.wheel_names(self.params['wheels'])
 
@@ -312,18 +313,6 @@ class LLRDetectorNode(Node):
         wheel.events += len(found)
         wheel.last_event = found[-1]
         self.events.extend(found)
-
-    def _publish_calibration_change(self) -> None:
-        """Publish the calibration now in force on ``anomalies`` (kind calibration_changed).
-
-        Not journalled with the alarms: it is a setting, not an anomaly (level OK).
-        """
-        out = DiagnosticArray()
-        now = self.get_clock().now()
-        out.header.stamp = now.to_msg()
-        out.status = [self.calibration.change_status('llr', now.nanoseconds * 1e-9,
-                                                     self.get_name())]
-        self._anomaly_pub.publish(out)
 
     def _wheel_health(self, wheel: _Wheel) -> tuple[bytes, str, dict[str, Any]]:
         values: dict[str, Any] = {'samples': wheel.samples, 'events': wheel.events}

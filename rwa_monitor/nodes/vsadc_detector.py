@@ -138,7 +138,9 @@ class VsadcDetectorNode(Node):
             self._pairer.time_jump = self.params['time_jump']
         if name == calibration.NAME:
             self.get_logger().info(self.calibration.set(value))
-        elif name == 'reference_rate':
+            common.publish_calibration_change(self, self._anomaly_pub, self.calibration,
+                                              'vsadc')
+        if name == 'reference_rate':
             self.reference = list(value)
         elif name in DETECTOR_PARAMETERS:
             self.detector = self._make_detector(self._detector_config())

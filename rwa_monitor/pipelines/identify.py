@@ -3,8 +3,10 @@
 The core (core/identify/) takes arrays: time, speed, friction, this wheel's auxiliary
 channels and every other signal. Here a Telemetry record is split into those for one
 wheel (:func:`prepare`), and :func:`identify_wheel` runs the identification with the
-output error when friction is derived from speed. Used by ``rwa-monitor identify`` and
-the identify benchmark; pipelines/identify_report.py writes the outputs.
+output error when friction is derived from speed; :func:`identify_wheels` identifies
+sibling wheels declared identical together (core/identify/joint.py). Used by
+``rwa-monitor identify`` and the identify benchmark; pipelines/identify_report.py
+writes the outputs.
 """
 
 from __future__ import annotations
@@ -13,7 +15,9 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from rwa_monitor.core.identify import data as samples
+from rwa_monitor.core.identify.consistency import compare_effects
 from rwa_monitor.core.identify.data import IdentData
+from rwa_monitor.core.identify.joint import identify_joint
 from rwa_monitor.core.identify.output_error import speed_rmse
 from rwa_monitor.core.identify.select import identify, Selection
 from rwa_monitor.exceptions import NotIdentifiableError
@@ -87,6 +91,41 @@ def identify_wheel(tele: Telemetry, wheel: str | None, inertia: float | None = N
     with threadpool_limits(BLAS_THREADS):
         data = prepare(tele, wheel, inertia, torque_constant, half_width)
         selection = identify(data, alpha=alpha, jumps=jumps)
+    return selection, _extra(tele, selection, inertia, torque_constant)
+
+
+def identify_wheels(tele: Telemetry, wheels: list[str], identical: bool = True,
+                    inertia: float | None = None, torque_constant: float | None = None,
+                    half_width: int | str = 'auto', alpha: float = 1e-3, jumps: bool = True
+                    ) -> tuple[dict[str, tuple[Selection, dict]], dict]:
+    """Identify several wheels of one record; return per wheel (selection, extra), consistency.
+
+    ``identical``: the wheels are of one design, so the effects are selected on their
+    pooled evidence (core/identify/joint.py) and a wheel is flagged when its own data
+    contradict its siblings (core/identify/consistency.py); otherwise each wheel is
+    identified alone (as with one ``--wheel``) and the sets are compared with the
+    majority's.
+    """
+    if not identical or len(wheels) < 2:
+        out = {}
+        for wheel in wheels:
+            selection, extra = identify_wheel(tele, wheel, inertia, torque_constant,
+                                              half_width, alpha, jumps)
+            out[selection.data.wheel] = (selection, extra)
+        names = {w: [e.name for e in s.effects] for w, (s, _) in out.items()}
+        return out, compare_effects(names)
+    with threadpool_limits(BLAS_THREADS):
+        datas = [prepare(tele, w, inertia, torque_constant, half_width) for w in wheels]
+        joint = identify_joint(datas, alpha=alpha, jumps=jumps)
+    out = {w: (s, _extra(tele, s, inertia, torque_constant))
+           for w, s in joint.selections.items()}
+    return out, joint.consistency
+
+
+def _extra(tele: Telemetry, selection: Selection, inertia: float | None,
+           torque_constant: float | None) -> dict:
+    """Return the ``extra`` outputs of one wheel (differentiator, output error)."""
+    data = selection.data
     extra: dict = {'details': {'differentiator': data.differentiator or
                                {'half_width': data.half_width, 'chosen_from': 'given'}}}
     if data.derived and inertia is not None:
@@ -97,4 +136,4 @@ def identify_wheel(tele: Telemetry, wheel: str | None, inertia: float | None = N
             sr = speed_rmse(selection, inertia, torque)
         extra['report'] = {'speed_rmse': {'before': sr['before'], 'after': sr['after']}}
         extra['details']['speed_rmse'] = sr
-    return selection, extra
+    return extra

@@ -14,6 +14,8 @@ import pathlib
 import numpy as np
 
 from rwa_monitor.core.identify import report as rep
+from rwa_monitor.core.identify.consistency import sibling_name
+from rwa_monitor.core.identify.effects import canonical_order
 from rwa_monitor.core.identify.model import snippet
 from rwa_monitor.core.identify.select import Selection
 from rwa_monitor.telemetry.atomic import atomic_write, write_text_atomic
@@ -152,8 +154,12 @@ def _axis_values(data, name: str) -> np.ndarray:
     return data.aux[name[4:]]
 
 
-def side_by_side(results: dict[str, dict]) -> dict:
-    """Return every wheel's effects and fit side by side, with the consistency check."""
+def side_by_side(results: dict[str, dict], consistency: dict | None = None) -> dict:
+    """Return every wheel's effects and fit side by side, with the consistency check.
+
+    ``consistency``: the joint selection's (pipelines.identify.identify_wheels); without
+    it the wheels' effect sets are compared with the majority's.
+    """
     from rwa_monitor.core.identify.consistency import compare_effects
     names = {w: [e['name'] for e in r['effects']] for w, r in results.items()}
     wheels = {}
@@ -166,25 +172,34 @@ def side_by_side(results: dict[str, dict]) -> dict:
                      'held_out_after': r['rmse_after']['held_out'],
                      'held_out_after_over_floor': r['rmse_after']['held_out']
                      / r['noise_floor']}
-    return {'wheels': wheels, 'consistency': compare_effects(names)}
+    return {'wheels': wheels,
+            'consistency': compare_effects(names) if consistency is None else consistency}
 
 
 def wheels_markdown(summary: dict) -> str:
     """Return the side-by-side table of every wheel's effects (markdown)."""
     wheels = summary['wheels']
-    effects = sorted({e for w in wheels.values() for e in w['effects']})
+    effects = canonical_order({sibling_name(e, w) for w, v in wheels.items()
+                               for e in v['effects']})
     lines = ['| wheel | held-out / floor | ' + ' | '.join(effects) + ' |',
              '|---|---|' + '---|' * len(effects)]
     for w, v in wheels.items():
         cells = []
+        own = {sibling_name(e, w): p for e, p in v['effects'].items()}
         for e in effects:
-            p = v['effects'].get(e)
+            p = own.get(e)
             cells.append('-' if p is None else ', '.join(
                 f'{k}={x:.3g}' if isinstance(x, float) else f'{k}={x}' for k, x in p.items()))
         lines.append(f'| {w} | {v["held_out_after_over_floor"]:.3f} | ' + ' | '.join(cells)
                      + ' |')
     c = summary['consistency']
     lines.append('')
+    if c.get('rule') == 'joint':
+        lines.append('Wheels declared identical: effects selected on their pooled evidence; '
+                     'a wheel is flagged when its own data contradict its siblings '
+                     '(docs/identify.md, "Identical wheels").')
+        for w, names in c.get('not_testable', {}).items():
+            lines.append(f'{w}: its data cannot show {", ".join(names)}.')
     if c['consistent']:
         lines.append(f'Every wheel has the same effects: {", ".join(c["reference"]) or "none"}.')
     for w, d in c['flagged'].items():

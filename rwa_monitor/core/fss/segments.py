@@ -9,7 +9,9 @@ smaller margin (the middle ``min_samples`` samples at least); an interval left w
 usable sample (all NaN or zero speed) merges with its right neighbour (the changepoint
 between them is dropped); when the speed does not vary enough to separate dry from
 viscous friction the viscous coefficient is fixed at the prior and ``identifiable`` is
-False.
+False. The viscous coefficient's standard error is that of least squares with white
+noise: sqrt(sigma^2 / S), S the speed's sum of squares left after the per-interval
+means of sign(w) (the Schur complement of the dry block).
 """
 
 from __future__ import annotations
@@ -33,6 +35,7 @@ class IntervalFit:
     sigma2: float              # residual variance RSS / (n - p)
     rmse: float                # eq. (28)
     identifiable: bool
+    viscous_se: float = float('inf')   # standard error of ``viscous``: sqrt(sigma2 / S)
 
 
 def _labels(n: int, cps: np.ndarray, dk_error: int, min_samples: int) -> np.ndarray:
@@ -92,6 +95,59 @@ def fit_intervals(y: np.ndarray, x: np.ndarray, changepoints: np.ndarray, *,
     rss = float(np.sum(resid ** 2))
     dof = max(count - m - (1 if identifiable else 0), 1)
     cost = a[:-1] * a[1:] / np.maximum(a[:-1] + a[1:], 1e-12) * (dry[:-1] - dry[1:]) ** 2
+    se = float(np.sqrt(rss / dof / denom)) if identifiable else float('inf')
     return IntervalFit(changepoints=cps, dry=dry, viscous=viscous, hth=a,
                        rejection_cost=np.nan_to_num(cost), sigma2=rss / dof,
-                       rmse=float(np.sqrt(rss / max(count, 1))), identifiable=identifiable)
+                       rmse=float(np.sqrt(rss / max(count, 1))), identifiable=identifiable,
+                       viscous_se=se)
+
+
+# fit_extra_columns: least usable samples, and least part of a column beyond model (1).
+MIN_EXTRA_SAMPLES = 100
+MIN_EXTRA_PART = 1.0e-3
+
+
+def fit_extra_columns(y: np.ndarray, x: np.ndarray, changepoints: np.ndarray,
+                      columns: np.ndarray, *, dk_error: int = 10, min_samples: int = 3,
+                      rcond: float = 1.0e-9) -> tuple[np.ndarray, np.ndarray]:
+    """Fit eq. (14) with extra regressor columns beside it; return their fitted part.
+
+    Least squares of ``y`` on one dry coefficient per interval (times sign(x)), one
+    viscous coefficient (times x) and ``columns`` (n, p), on the samples stage 2 uses
+    (finite, at least ``dk_error`` from a changepoint). Before the fit the columns lose
+    their projection on sign(x) and x over those samples, so that what model (1) can
+    hold stays with the dry and viscous coefficients; a column left with less than
+    MIN_EXTRA_PART of its RMS is model (1) on these samples and gets 0; columns are
+    scaled to unit RMS and directions the samples cannot tell apart are cut (relative
+    singular values below ``rcond``). Fewer than MIN_EXTRA_SAMPLES usable samples (or
+    four per coefficient): nothing is fitted. Return (coefficients of ``columns``,
+    coefficients of [sign(x), x]) such that ``columns @ c + [sign(x), x] @ d`` is the
+    fitted extra part (zero projection on sign(x) and x). This is how a calibration
+    learns what a wheel's nominal holds beyond model (1) without taking the FSS jumps
+    for effects of speed (docs/fss.md, "Calibrated").
+    """
+    y = np.asarray(y, dtype=float)
+    x = np.asarray(x, dtype=float)
+    columns = np.asarray(columns, dtype=float).reshape(y.size, -1)
+    n, p = columns.shape
+    cps = np.unique(np.asarray(changepoints, dtype=int))
+    cps = cps[(cps > 0) & (cps < n)]
+    label = _labels(n, cps, check_int('dk_error', dk_error, 0),
+                    check_int('min_samples', min_samples, 1))
+    use = np.isfinite(y) & np.isfinite(x) & np.all(np.isfinite(columns), axis=1)
+    use &= (label >= 0) & (x != 0.0)
+    if p == 0 or np.count_nonzero(use) < max(MIN_EXTRA_SAMPLES, 4 * (p + cps.size + 2)):
+        return np.zeros(p), np.zeros(2)
+    s, xu, yu, e = np.sign(x[use]), x[use], y[use], columns[use]
+    model1 = np.column_stack([s, xu])
+    proj = np.linalg.lstsq(model1, e, rcond=None)[0]
+    perp = e - model1 @ proj
+    scale = np.sqrt(np.mean(perp ** 2, axis=0))
+    keep = scale > MIN_EXTRA_PART * np.sqrt(np.mean(e ** 2, axis=0))
+    intervals = np.unique(label[use])
+    dummies = (label[use][:, None] == intervals[None, :]) * s[:, None]
+    design = np.column_stack([dummies, xu, perp[:, keep] / scale[keep]])
+    coef = np.linalg.lstsq(design, yu, rcond=rcond)[0]
+    c = np.zeros(p)
+    c[keep] = coef[intervals.size + 1:] / scale[keep]
+    return c, -proj @ c

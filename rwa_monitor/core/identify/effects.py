@@ -79,6 +79,21 @@ SMOOTH_KNOTS = 12
 NEAR_ZERO = (0.005, 0.01, 0.02, 0.04, 0.08)  # quantiles of abs(w): extra knots
 
 
+def canonical_order(names) -> list[str]:
+    """Return effect names in the vocabulary's order (NAMED, then the fallback), then by name.
+
+    The order the selection added them in depends on noise (two effects of nearly equal
+    evidence swap places); reports list effects in this order so that two wheels with the
+    same effects read the same.
+    """
+    order = NAMED + (FALLBACK,)
+
+    def key(name: str) -> tuple[int, str]:
+        kind = name.split(':')[0]
+        return (order.index(kind) if kind in order else len(order), name)
+    return sorted(names, key=key)
+
+
 def _get(aux, name):
     if aux is None or name not in aux:
         raise KeyError(f'the friction model needs the auxiliary channel {name!r}')
@@ -237,17 +252,20 @@ def stribeck_candidate(abs_speed: np.ndarray) -> Candidate:
                      extra={'refine': 'velocity_rad_s', 'ratio': ratio})
 
 
-def hysteresis_candidate(data: IdentData) -> Candidate:
+def hysteresis_candidate(data: IdentData, abs_speed: np.ndarray | None = None
+                         ) -> Candidate:
     """Return the hysteresis candidate, or its skip reason when the run cannot show it.
 
     The effect lives on the samples that left zero speed; a run whose speed never passes
     through zero (never reverses, never comes to rest) has none, and friction's
-    dependence on the direction of approach cannot be identified from it.
+    dependence on the direction of approach cannot be identified from it. The grid of
+    Stribeck speeds spans quantiles of ``abs_speed`` (default abs(w) of ``data``; the
+    joint selection of sibling wheels passes their pooled speeds).
     """
     past = data.past
     left = past.left_zero if past is not None else np.zeros(len(data), dtype=bool)
     approach = past.approaching if past is not None else left
-    aw = np.abs(data.speed)
+    aw = np.abs(data.speed) if abs_speed is None else np.abs(abs_speed)
     if past is None or past.passages == 0 or np.sum(left) < 10 or np.sum(approach) < 10:
         what = 'never reverses or approaches zero' if past is None or past.passages == 0 \
             else 'leaves zero speed on too few samples'
@@ -265,9 +283,13 @@ def hysteresis_candidate(data: IdentData) -> Candidate:
                                                  'ratio': float(scales[1] / scales[0])})
 
 
-def presliding_candidate(data: IdentData) -> Candidate:
-    """Return the pre-sliding band candidate (needs samples near zero speed)."""
-    aw = np.abs(data.speed)
+def presliding_candidate(data: IdentData, abs_speed: np.ndarray | None = None
+                         ) -> Candidate:
+    """Return the pre-sliding band candidate (needs samples near zero speed).
+
+    Band widths span quantiles of ``abs_speed`` (default abs(w) of ``data``).
+    """
+    aw = np.abs(data.speed) if abs_speed is None else np.abs(abs_speed)
     lo, hi = (float(np.quantile(aw, q)) for q in PRESLIDING_RANGE)
     if hi <= 0 or np.sum(aw < hi) < 10 or data.past is None or data.past.passages == 0:
         return Candidate('presliding', 'presliding', [], tests=1,

@@ -2,11 +2,13 @@
 
 report.json has exactly the keys of DESIGN.md: ``baseline`` (model and parameters),
 ``noise_floor`` (N m), ``rmse_before`` / ``rmse_after`` (each ``in_sample`` and
-``held_out``, N m) and ``effects`` (in the order added: ``name``, ``parameters``,
-``evidence``), plus ``dropped_rows`` (rows with a non-finite value, rows whose time
-does not increase) when any input row was left out. Everything else (the steps of the
-selection with every candidate's evidence, the residual tests before and after, the
-jumps) goes to selection.json.
+``held_out``, N m) and ``effects`` (``name``, ``parameters``, ``evidence``; listed in the
+vocabulary's order, effects.canonical_order, so that wheels with the same effects read
+the same; ``evidence.added_at_step`` keeps the order the selection added them in), plus
+``dropped_rows`` (rows with a non-finite value, rows whose time does not increase) when
+any input row was left out. Everything else (the steps of the selection with every
+candidate's evidence, the residual tests before and after, the jumps) goes to
+selection.json.
 This module builds the dictionaries and the markdown text (no I/O, no plots);
 pipelines/identify_report.py draws the figures and writes the files.
 """
@@ -18,6 +20,7 @@ from typing import Any
 
 import numpy as np
 
+from rwa_monitor.core.identify.effects import canonical_order
 from rwa_monitor.core.identify.model import column_names, plain
 
 # Input rows left out, reported in report.json when there are any (docs/contracts.md).
@@ -64,10 +67,14 @@ def report(selection) -> dict:
     for i, start in enumerate(selection.segments.starts[1:], start=1):
         parameters[f'jump{i}_time_s'] = float(selection.data.time[start])
     effects = []
-    for eff in selection.effects:
+    order = canonical_order([e.name for e in selection.effects])
+    added = {e.name: i for i, e in enumerate(selection.effects, start=1)}
+    for eff in sorted(selection.effects, key=lambda e: order.index(e.name)):
+        evidence = {k: _finite(v) for k, v in plain(eff.evidence).items()}
+        evidence['added_at_step'] = added[eff.name]
         effects.append({'name': eff.name,
                         'parameters': effect_parameters(eff, final.coef),
-                        'evidence': {k: _finite(v) for k, v in plain(eff.evidence).items()}})
+                        'evidence': evidence})
     out = {'baseline': {'model': 'coulomb+viscous', 'parameters': parameters},
            'noise_floor': float(selection.data.noise_floor),
            'rmse_before': {'in_sample': base.rmse_train, 'held_out': base.rmse_held_out},
@@ -131,7 +138,8 @@ def markdown(selection, rep: dict, title: str) -> str:
     jumps = [k for k in rep['baseline']['parameters'] if k.startswith('jump')]
     lines.append(f'Baseline: {len(jumps)} friction jump(s) segmented.')
     if rep['effects']:
-        lines += ['', 'Effects, in the order added:', '']
+        lines += ['', "Effects (the vocabulary's order; evidence.added_at_step: the order "
+                  'added):', '']
         for e in rep['effects']:
             ev = e['evidence']
             shown = {k: v for k, v in e['parameters'].items()

@@ -88,7 +88,8 @@ class Selection:
         return self.design.residual(self.final_fit)
 
 
-def _lr(n: int, rss0: float, rss1: float) -> float:
+def likelihood_ratio(n: int, rss0: float, rss1: float) -> float:
+    """Return n log(RSS_0 / RSS_1): the likelihood ratio with unknown noise variance."""
     return float(n * np.log(max(rss0, 1e-300) / max(rss1, 1e-300)))
 
 
@@ -117,7 +118,7 @@ def _refine(design: Design, cand: fx.Candidate, data: IdentData, best: tuple) ->
     return got if got is not None and got[1].rss_train < best[1].rss_train else best
 
 
-def _free_parameters(cand: fx.Candidate) -> int:
+def free_parameters(cand: fx.Candidate) -> int:
     """Return the number of nonlinear parameters searched (those that vary on the grid)."""
     if len(cand.grid) <= 1:
         return 0
@@ -141,9 +142,9 @@ def _score(design: Design, current: Fit, cand: fx.Candidate, data: IdentData
     dof = fit.rank - current.rank
     if dof <= 0:
         return None
-    lr = _lr(fit.n_train, current.rss_train, fit.rss_train)
-    lr_held = _lr(fit.n_held_out, current.rss_held_out, fit.rss_held_out)
-    free = int(dof) + _free_parameters(cand)
+    lr = likelihood_ratio(fit.n_train, current.rss_train, fit.rss_train)
+    lr_held = likelihood_ratio(fit.n_held_out, current.rss_held_out, fit.rss_held_out)
+    free = int(dof) + free_parameters(cand)
     return {'candidate': cand, 'params': params, 'fit': fit, 'columns': cols,
             'evidence': {'lr': lr, 'dof': int(dof), 'p_value': float(stats.chi2.sf(lr, dof)),
                          'lr_held_out': lr_held,
@@ -202,7 +203,8 @@ def _select(data: IdentData, segments: Segments, alpha: float, alpha_held: float
         if len(sel.effects) >= max_effects:
             sel.stop_reason = f'max_effects = {max_effects} reached'
             break
-        chosen, record = _step(design, current, data, residual, tried, alpha, alpha_held)
+        chosen, record = selection_step(design, current, data, residual, tried, alpha,
+                                        alpha_held)
         sel.steps.append(record)
         if chosen is None:
             sel.stop_reason = 'no candidate effect is significant'
@@ -223,8 +225,10 @@ def _select(data: IdentData, segments: Segments, alpha: float, alpha_held: float
     return sel
 
 
-def _step(design: Design, current: Fit, data: IdentData, residual: np.ndarray,
-          tried: set[str], alpha: float, alpha_held: float) -> tuple[dict | None, dict]:
+def selection_step(design: Design, current: Fit, data: IdentData, residual: np.ndarray,
+                   tried: set[str], alpha: float, alpha_held: float
+                   ) -> tuple[dict | None, dict]:
+    """Score every untried candidate on one wheel; return the one to add (or None)."""
     cands = [c for c in fx.named_candidates(data, residual) if c.name not in tried]
     fallback = fx.fallback_candidate(data)
     m = sum(c.tests for c in cands if c.skipped is None) + fallback.tests
@@ -242,7 +246,7 @@ def _step(design: Design, current: Fit, data: IdentData, residual: np.ndarray,
             record['candidates'].append({'name': cand.name,
                                          'skipped': 'adds nothing the model lacks'})
             continue
-        s['significant'] = _significant(s['evidence'], level, alpha_held)
+        s['significant'] = significant(s['evidence'], level, alpha_held)
         record['candidates'].append({'name': cand.name, 'params': s['params'],
                                      'significant': s['significant'], **s['evidence']})
         scored.append(s)
@@ -251,7 +255,7 @@ def _step(design: Design, current: Fit, data: IdentData, residual: np.ndarray,
     if fallback.name not in tried:
         generic = _score(design, current, fallback, data)
         if generic is not None:
-            generic['significant'] = _significant(generic['evidence'], level, alpha_held)
+            generic['significant'] = significant(generic['evidence'], level, alpha_held)
             record['candidates'].append({'name': fallback.name, 'params': generic['params'],
                                          'significant': generic['significant'],
                                          **generic['evidence']})
@@ -332,7 +336,8 @@ def _preferred(design: Design, data: IdentData, winners: list[dict], level: floa
     return chosen
 
 
-def _significant(evidence: dict, level: float, alpha_held: float) -> bool:
+def significant(evidence: dict, level: float, alpha_held: float) -> bool:
+    """Return whether evidence passes the three tests (p, held-out LR, BIC gain)."""
     evidence['level'] = level
     evidence['held_out_threshold'] = float(stats.chi2.isf(alpha_held, evidence['dof']))
     return bool(evidence['p_value'] < level
