@@ -590,7 +590,7 @@ class LLRDetector:
         if prev['ramp_end'] < n:
             blocks.append(self._ramp_block(prev['ramp_end'] + 1, n, prev['ramp_t0']))
         after = prev['gap'] + np.asarray(self._pref, dtype=float)
-        tail = np.asarray([self._rterm[j % L] for j in range(tau, n + 1)], dtype=float)
+        tail = self._terms(tau, n)
         times = np.asarray([self._rtime[j % L] for j in range(tau, n + 1)], dtype=float)
         if not llr_stats.continues(prev['before'], prev['n_before'], after,
                                    np.asarray(blocks), tail, times - prev['ramp_t0'],
@@ -603,12 +603,21 @@ class LLRDetector:
     def _ramp_block(self, first: int, last: int, t0: float) -> np.ndarray:
         """Return :func:`llr_stats.ramp_sums` of positions ``first..last`` (in the ring)."""
         L = self._L
-        terms = np.asarray([self._rterm[j % L] for j in range(first, last + 1)], dtype=float)
-        if self._p == 2:   # the ring holds (h1, h2, f): the products of the prefix sums
-            h1, h2, f = terms.T
-            terms = np.column_stack((h1 * h1, h1 * h2, h2 * h2, h1 * f, h2 * f, f * f))
         times = np.asarray([self._rtime[j % L] for j in range(first, last + 1)], dtype=float)
-        return llr_stats.ramp_sums(terms, times - t0)
+        return llr_stats.ramp_sums(self._terms(first, last), times - t0)
+
+    def _terms(self, first: int, last: int) -> np.ndarray:
+        """Return the per-sample terms of positions ``first..last`` (in the ring), ``(n, w)``.
+
+        For p = 2 the ring holds ``(h1, h2, f)``: the six products are formed with numpy as
+        the batch path forms them (``llr_batch._Terms``), so both get the same floats.
+        """
+        L = self._L
+        rows = np.asarray([self._rterm[j % L] for j in range(first, last + 1)], dtype=float)
+        if self._p != 2:
+            return rows
+        h1, h2, f = rows[:, 0], rows[:, 1], rows[:, 2]
+        return np.column_stack((h1 * h1, h1 * h2, h2 * h2, h1 * f, h2 * f, f * f))
 
     def _restart(self, c: int, n: int) -> None:
         """Start the new reference at position ``c`` and rebuild its prefix sums."""
