@@ -526,7 +526,10 @@ class LLRDetector:
         change position), so that the new reference holds post-change samples only. The
         kind is re-checked on ``[tau, j]`` (the gap ``[tau, start)`` is kept as one
         prefix-sum row). Tests of the new reference whose window is already complete run
-        at once (never, since the start is at or after ``k_min``; kept for safety).
+        at once (never, since the start is at or after ``k_min``; kept for safety). Not in
+        the paper: a declaration that the previous change's growth explains
+        (:meth:`_continues`, docs/llr.md "Kinds on ramps") is no new change: its kind is
+        re-checked instead and the reference restarts as after any declaration.
         """
         L = self._L
         c, k_min = self._c, self._kmin
@@ -597,21 +600,24 @@ class LLRDetector:
         prev['ramp_end'] = n
         return True
 
-    def _terms(self, first: int, last: int) -> np.ndarray:
-        """Return the prefix-sum terms of ring positions ``first..last``, one row each."""
-        L = self._L
-        terms = np.asarray([self._rterm[j % L] for j in range(first, last + 1)], dtype=float)
-        if self._p == 2:   # the ring holds (h1, h2, f): the products of the prefix sums
-            h1, h2, f = terms.T
-            terms = np.column_stack((h1 * h1, h1 * h2, h2 * h2, h1 * f, h2 * f, f * f))
-        return terms
-
     def _ramp_block(self, first: int, last: int, t0: float) -> np.ndarray:
         """Return :func:`llr_stats.ramp_sums` of positions ``first..last`` (in the ring)."""
         L = self._L
-        terms = self._terms(first, last)
         times = np.asarray([self._rtime[j % L] for j in range(first, last + 1)], dtype=float)
-        return llr_stats.ramp_sums(terms, times - t0)
+        return llr_stats.ramp_sums(self._terms(first, last), times - t0)
+
+    def _terms(self, first: int, last: int) -> np.ndarray:
+        """Return the per-sample terms of positions ``first..last`` (in the ring), ``(n, w)``.
+
+        For p = 2 the ring holds ``(h1, h2, f)``: the six products are formed with numpy as
+        the batch path forms them (``llr_batch._Terms``), so both get the same floats.
+        """
+        L = self._L
+        rows = np.asarray([self._rterm[j % L] for j in range(first, last + 1)], dtype=float)
+        if self._p != 2:
+            return rows
+        h1, h2, f = rows[:, 0], rows[:, 1], rows[:, 2]
+        return np.column_stack((h1 * h1, h1 * h2, h2 * h2, h1 * f, h2 * f, f * f))
 
     def _restart(self, c: int, n: int) -> None:
         """Start the new reference at position ``c`` and rebuild its prefix sums."""

@@ -32,8 +32,8 @@ UNDECIDED = 'undecided'
 # even at 5 % (two-sided): between this and the category level the data are ambiguous.
 Z_ABSENT = 1.959963984540054
 POWER_Z = 1.2815515655446004   # one-sided normal quantile of 0.9 (detectable steps)
-# A kind named from the ramp models (:func:`ramp_fits`) needs its own single-direction
-# ramp not rejected even at this level (the ramp analogue of Z_ABSENT).
+# A kind named by the growth tests (:func:`ramp_kind`) needs the other kind's growth not
+# significant even at this level (the growth analogue of Z_ABSENT).
 RAMP_ABSENT_LEVEL = 0.05
 SHAPES = ('step', 'ramp')
 
@@ -275,7 +275,7 @@ def categorise(before: np.ndarray, n_before: int, after: np.ndarray, p: int,
     if ramp is None:
         return step
     shapes = ramp_shapes(ramp, p)
-    fits = np.array([ramp_fits(before, after, row, p) for row in shapes])
+    fits = ramp_fits(before, after, shapes, p)
     best = fits.max(axis=0)
     named = ramp_kind(best, s2, z_threshold)
     if named is None:
@@ -369,7 +369,8 @@ def ramp_fits(before: np.ndarray, after: np.ndarray, ramp: np.ndarray, p: int
     own (offsets in every direction free, so a change that began before the estimated
     change time and leaks into the before fit does not bias it) with the regressors
     ``h`` plus a growth ``r(u) h_dry`` and / or ``r(u) h_viscous`` (``r`` the time shape
-    of ``ramp``, one row of :func:`ramp_shapes`): ``full`` both growth columns, ``dry
+    of ``ramp``, rows of :func:`ramp_shapes`, leading axes kept): ``full`` both growth
+    columns, ``dry
     growth`` the dry one, ``viscous growth`` the viscous one. ``explained_h`` includes
     the before fit, so that ``RSS_h = E_before + E_after - explained_h`` as in
     :func:`change_fits`.
@@ -377,28 +378,43 @@ def ramp_fits(before: np.ndarray, after: np.ndarray, ramp: np.ndarray, p: int
     pi_b, q_b, _ = unpack(before, p)
     gram, rhs = _ramp_after(after, ramp, p)
     base = float(solve_scaled(pi_b, q_b) @ q_b)
-    explained = np.empty(3)
-    explained[0] = base + float(solve_scaled(gram, rhs) @ rhs)
+    explained = np.empty(gram.shape[:-2] + (3,))
+    explained[..., 0] = base + _explained(gram, rhs)
     for i in (0, 1):
         cols = list(range(p)) + [p + i]
-        r = rhs[cols]
-        explained[1 + i] = base + float(solve_scaled(gram[np.ix_(cols, cols)], r) @ r)
+        explained[..., 1 + i] = base + _explained(_sub(gram, cols), rhs[..., cols])
     return explained
 
 
 def _ramp_after(after: np.ndarray, ramp: np.ndarray, p: int
                 ) -> tuple[np.ndarray, np.ndarray]:
-    """Return the Gram matrix and right-hand side of the after rows ``(h, u h_0, u h_1)``."""
+    """Return the Gram matrices and right-hand sides of the after rows ``(h, r h_0, r h_1)``.
+
+    ``ramp``: one or more rows of :func:`ramp_shapes` (leading axes kept).
+    """
+    ramp = np.asarray(ramp, dtype=float)
+    lead = ramp.shape[:-1]
     pi_a, q_a, _ = unpack(after, p)
     n = width(p)
-    u1, uq, _ = unpack(ramp[:n], p)
-    u2 = unpack(ramp[n:], p)[0]
-    gram = np.empty((p + 2, p + 2))
-    gram[:p, :p] = pi_a
-    gram[:p, p:] = u1[:, :2]
-    gram[p:, :p] = u1[:2, :]
-    gram[p:, p:] = u2[:2, :2]
-    return gram, np.concatenate([q_a, uq[:2]])
+    u1, uq, _ = unpack(ramp[..., :n], p)
+    u2 = unpack(ramp[..., n:], p)[0]
+    gram = np.empty(lead + (p + 2, p + 2))
+    gram[..., :p, :p] = pi_a
+    gram[..., :p, p:] = u1[..., :, :2]
+    gram[..., p:, :p] = u1[..., :2, :]
+    gram[..., p:, p:] = u2[..., :2, :2]
+    rhs = np.concatenate([np.broadcast_to(q_a, lead + (p,)), uq[..., :2]], axis=-1)
+    return gram, rhs
+
+
+def _explained(m: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Return ``theta . v`` of the least-squares fits ``m theta = v`` (stacked)."""
+    return np.einsum('...i,...i->...', solve_scaled(m, v), v)
+
+
+def _sub(m: np.ndarray, cols: list[int]) -> np.ndarray:
+    """Return the rows and columns ``cols`` of stacked square matrices."""
+    return m[..., cols, :][..., :, cols]
 
 
 def continues(before: np.ndarray, n_before: int, after: np.ndarray, blocks: np.ndarray,
@@ -433,26 +449,25 @@ def continues(before: np.ndarray, n_before: int, after: np.ndarray, blocks: np.n
     else:
         change = list(range(p + 2))
     step = list(range(p + 2, 2 * p + 2))
-    best = [-np.inf, -np.inf]
-    for row, knot in zip(shapes, knots):
-        gram, rhs = _ramp_after(after, row, p)
-        r = np.minimum(u, knot)[:, None]
-        r_pi, r_q, _ = unpack((tail * r).sum(axis=0), p)
-        big = np.zeros((2 * p + 2, 2 * p + 2))
-        big[:p + 2, :p + 2] = gram
-        big[:p, p + 2:] = pi_t
-        big[p:p + 2, p + 2:] = r_pi[:2, :]
-        big[p + 2:, :p + 2] = big[:p + 2, p + 2:].T
-        big[p + 2:, p + 2:] = pi_t
-        full_rhs = np.concatenate([rhs, q_t])
-        for i, cols in enumerate((change, change + step)):
-            m = np.empty((p + len(cols), p + len(cols)))
-            m[:p, :p] = pi_b + big[:p, :p]
-            m[:p, p:] = big[:p, cols]
-            m[p:, :p] = big[cols, :p]
-            m[p:, p:] = big[np.ix_(cols, cols)]
-            v = np.concatenate([q_b + full_rhs[:p], full_rhs[cols]])
-            best[i] = max(best[i], float(solve_scaled(m, v) @ v))
+    gram, rhs = _ramp_after(after, shapes, p)
+    m = shapes.shape[0]
+    r = np.minimum(u[None, :], knots[:, None])
+    r_pi = unpack((tail[None, :, :] * r[:, :, None]).sum(axis=1), p)[0]
+    big = np.empty((m, 2 * p + 2, 2 * p + 2))
+    big[:, :p + 2, :p + 2] = gram
+    big[:, :p, p + 2:] = pi_t
+    big[:, p:p + 2, p + 2:] = r_pi[:, :2, :]
+    big[:, p + 2:, :p + 2] = np.swapaxes(big[:, :p + 2, p + 2:], 1, 2)
+    big[:, p + 2:, p + 2:] = pi_t
+    full_rhs = np.concatenate([rhs, np.broadcast_to(q_t, (m, p))], axis=-1)
+    best = []
+    for cols in (change, change + step):
+        # x (before and after) first, then the after-only change columns.
+        idx = list(range(p)) + cols
+        joint, v = _sub(big, idx), full_rhs[:, idx]
+        joint[:, :p, :p] += pi_b
+        v[:, :p] += q_b
+        best.append(float(np.max(_explained(joint, v))))
     return (best[1] - best[0]) / noise_var <= ramp_limits(p, z_threshold)[0]
 
 
