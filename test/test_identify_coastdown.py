@@ -94,3 +94,11 @@ def test_a_coast_to_rest_says_hysteresis_cannot_be_identified(tmp_path):
     assert 'Identifiable from this run' in text and 'drag' in text
     details = json.loads((tmp_path / 'o' / 'selection.json').read_text())
     assert details['counts']['dropped_external_torque_rows'] == 0
+
+
+def test_a_run_through_zero_speed_is_not_searched():
+    # friction's own fast structure near zero (sign flip, breakaway) is not a touch
+    t = np.arange(0.0, 600.0, 0.1)
+    w = 5.0 * np.sin(2 * np.pi * t / 200.0)
+    w[3000:3010] -= 0.5           # a touch-like dip while the speed reverses anyway
+    assert external_torques(t, w) == []

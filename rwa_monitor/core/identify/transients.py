@@ -13,11 +13,13 @@ Found in two steps on each run without gaps:
 
 1. Samples whose friction estimate departs from the record's trend: dw/dt from the
    finest local quadratic (``HALF_WIDTH`` = 2: a few samples long, so a short episode is
-   not smeared), trend = running median over ``TREND_SAMPLES`` (a median keeps a step and
-   follows a smooth curve, so only episodes shorter than half its window stand out; at
-   the run's ends the median is extended linearly), standardised by the propagated
-   noise; flagged beyond the two-sided Bonferroni level alpha / n. Neighbouring flagged
-   samples (closer than one window) form one episode.
+   not smeared), standardised by the propagated noise, against two trends over
+   ``TREND_SAMPLES``: the running median (it keeps a friction step, and only episodes
+   shorter than half its window stand out; at the run's ends it is extended linearly)
+   and the local quadratic (it follows a smooth extremum, which a median flattens). A
+   sample is flagged when its departure from both exceeds the two-sided Bonferroni
+   level alpha / n. Neighbouring flagged samples (closer than one window) form one
+   episode.
 2. An episode is external when it carries a net impulse: the speed after it is offset
    from the speed before it. A cubic in time plus a kink (a friction step at the
    episode, allowed) plus a step (the impulse) is fitted to ``TREND_SAMPLES`` speed
@@ -27,6 +29,11 @@ Found in two steps on each run without gaps:
    An episode too close to a run's end (fewer than half the samples on its far side)
    cannot be tested this way: the run is trimmed to exclude it (the coast is taken to
    start after it, or to end before it: a lift-off at the start, a brake at the end).
+
+Only runs whose speed keeps one sign (coasts) are searched: where the speed passes zero,
+friction's own structure is as fast as a touch (the sign flip, the breakaway and the
+Stribeck peak on leaving zero carry a net impulse too) and this test cannot tell them
+apart. Episodes longer than half the trend window are not found.
 """
 
 from __future__ import annotations
@@ -39,6 +46,7 @@ from scipy import stats
 
 from rwa_monitor.core.identify.differentiate import local_noise_std
 from rwa_monitor.core.identify.differentiate import local_polynomial_derivative
+from rwa_monitor.core.identify.differentiate import local_polynomial_smooth
 
 HALF_WIDTH = 2
 TREND_SAMPLES = 51
@@ -101,12 +109,15 @@ def external_torques(time: np.ndarray, speed: np.ndarray, alpha: float = 1e-3,
     time = np.asarray(time, dtype=float)
     speed = np.asarray(speed, dtype=float)
     n = len(time)
-    if n < 2 * TREND_SAMPLES:
+    if n < 2 * TREND_SAMPLES or np.any(speed > 0) and np.any(speed < 0):
         return []
     level = float(stats.norm.isf(alpha / (2 * (samples or n))))
     rate, gain = local_polynomial_derivative(time, speed, HALF_WIDTH)
     noise = local_noise_std(time, speed, HALF_WIDTH, 2, NOISE_BLOCK)
-    z = (rate - running_median(rate, TREND_SAMPLES)) / np.maximum(gain * noise, 1e-300)
+    scale = np.maximum(gain * noise, 1e-300)
+    to_median = (rate - running_median(rate, TREND_SAMPLES)) / scale
+    to_smooth = (rate - local_polynomial_smooth(time, rate, TREND_SAMPLES // 2)) / scale
+    z = np.where(np.abs(to_median) < np.abs(to_smooth), to_median, to_smooth)
     flagged = np.flatnonzero(np.abs(z) > level)
     if not len(flagged):
         return []
