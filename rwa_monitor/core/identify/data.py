@@ -186,20 +186,19 @@ def _without_external_torques(time: np.ndarray, speed: np.ndarray, ok: np.ndarra
     legitimately. The rows are dropped and counted; an episode inside a run splits it
     (each side is differentiated and, in the output error, integrated on its own).
     """
+    before = ok
     ok = ok.copy()
-    dropped = 0
     total = int(np.sum(ok))
     for run in _chunks(time, ok):
         for ep in external_torques(time[run], speed[run], samples=total):
             rows = run[ep.first:ep.last + 1]
             ok[rows] = False
-            dropped += len(rows)
             what = (f'speed step {ep.impulse_rad_s:.3g} rad/s, z = {ep.impulse_z:.1f}'
-                    if ep.kind == 'impulse' else 'at the end of a run: run trimmed')
+                    if ep.kind == 'impulse' else 'at an end of a run: run trimmed')
             notes.append(f'external torque (touch or brake) from t = {time[rows[0]]:.6g} s to '
                          f'{time[rows[-1]]:.6g} s ({what}; dw/dt up to {ep.peak_z:.1f} sigma '
                          f'off its trend): {len(rows)} rows cut out')
-    counts['dropped_external_torque_rows'] = dropped
+    counts['dropped_external_torque_rows'] = int(np.sum(before & ~ok))
     return ok
 
 
