@@ -113,10 +113,10 @@ def markdown(results: dict) -> str:
     paper_cls = results['classification_paper_levels']
     lines = ['## FSS window diagnoser (physics-informed FSS paper, section V)', '',
              f'`python -m bench fss`, {results["bench_seconds"]:.0f} s on the shared '
-             'machine.' + ''.join(
-                 f' Re-measured since: {" and ".join(r["parts"])} '
-                 f'(`python -m bench.bench_fss {" ".join(r["parts"])}`, {r["seconds"]:.0f} s).'
-                 for r in results.get('reruns', [])), '']
+             'machine.' + (' Re-measured since, alone: ' + '; '.join(
+                 f'{" and ".join(r["parts"])} (`python -m bench.bench_fss '
+                 f'{" ".join(r["parts"])}`, {r["seconds"]:.0f} s)'
+                 for r in results['reruns']) + '.' if results.get('reruns') else ''), '']
     lines += sizes_markdown(results['sizes'], results['paper_examples'])
     lines += ['### Legacy magnitudes: the figures of the paper reproduced', '',
               'The anomalies of the first bench, 2.5-3x away from nominal (`rwa-monitor fss '

@@ -25,7 +25,8 @@ import numpy as np
 from rwa_monitor.core.fss.baseline import (baseline_flags, baseline_scores, KINDS,
                                            nominal_thresholds)
 from rwa_monitor.core.fss.classify import (noise_ratio_bound, relative_features,
-                                           relative_verdict, train_model)
+                                           relative_verdict, train_model,
+                                           viscous_significant, viscous_z)
 from rwa_monitor.core.fss.laws import describe, estimate_systems
 from rwa_monitor.core.fss.model import DEFAULT_SYSTEMS
 from rwa_monitor.core.fss.pipeline import extract, FssConfig
@@ -56,7 +57,8 @@ def _item(status: str, key: tuple, seed: int, size: float | None, config: FssCon
             **fss.extraction_item(sig['speed'], sig['friction'], config)}
     r = fss.extraction_item(ref['speed'], ref['friction'], config)
     item['reference'] = {'features': r['features'], 'identifiable': r['identifiable'],
-                         'ls': r['ls'], 'sigma': r['stats']['sigma']}
+                         'ls': r['ls'], 'sigma': r['stats']['sigma'],
+                         'viscous_se': r['stats']['viscous_se']}
     return item
 
 
@@ -65,7 +67,8 @@ def learned_decisions(model, item: dict) -> tuple[dict[str, float], bool]:
 
     The SVM's w^T z + b on relative features; -inf where the diagnoser reports no
     anomaly whatever the SVM (an FSS with one level, a viscous coefficient that was not
-    identifiable); unknown by core/fss/classify.py relative_verdict (residual noise).
+    identifiable or not significantly above the reference's, core/calibrate.py
+    ``diagnose_fss``); unknown by core/fss/classify.py relative_verdict (residual noise).
     """
     feats = relative_features(item['features'], item['reference']['features'])
     out = model.decision(feats)
@@ -74,9 +77,14 @@ def learned_decisions(model, item: dict) -> tuple[dict[str, float], bool]:
             out[name] = -np.inf
     if not item['identifiable']:
         out['viscous'] = -np.inf
+    ref = item['reference']
+    if out['viscous'] > 0 and not viscous_significant(viscous_z(
+            item['features']['viscous'], item['stats'].get('viscous_se', np.nan),
+            ref['features']['viscous'], ref.get('viscous_se', np.nan))):
+        out['viscous'] = -np.inf
     status, _, _ = relative_verdict({k: v > 0 for k, v in out.items()},
                                     item['stats']['sigma'], item['reference']['sigma'],
-                                    noise_ratio_bound(model.spec.get('noise_ratio_spread')))
+                                    noise_ratio_bound(model.spec.get('noise_ratio')))
     return out, status == 'unknown'
 
 

@@ -222,8 +222,9 @@ def test_fss_verdict_unknown_when_the_window_is_not_explained():
     flags = {'dry': True, 'viscous': False}
     from rwa_monitor.core.fss.classify import noise_ratio_bound
     bound = noise_ratio_bound()   # one-sided normal quantile at level 1e-3 of log(ratio)
-    assert bound == pytest.approx(np.exp(3.0902 * 0.046), rel=1e-4)
-    assert noise_ratio_bound(0.02) == pytest.approx(np.exp(3.0902 * 0.02), rel=1e-4)
+    assert bound == pytest.approx(np.exp(0.0618 + 3.0902 * 0.0645), rel=1e-4)   # fss1's
+    assert noise_ratio_bound({'a': (0.0, 0.02), 'b': (0.01, 0.01)}) == pytest.approx(
+        np.exp(3.0902 * 0.02), rel=1e-4)
     status, out, reason = relative_verdict(flags, 1.01 * bound * 1e-4, 1.0e-4)
     assert status == 'unknown' and not any(out.values()) and 'not explained' in reason
     assert relative_verdict(flags, 0.99 * bound * 1e-4, 1.0e-4)[:2] == ('anomalous', flags)
@@ -345,3 +346,24 @@ def test_paper_example_window_the_model_cannot_explain_is_unknown(paper_block):
     res = core.diagnose_fss(block, t, w, f + wobble, model, config)
     assert res['status'] == 'unknown' and not any(res['anomalies'].values())
     assert 'not explained' in res['unknown_reason']
+
+
+def test_a_viscous_flag_needs_a_significant_change(paper_block):
+    from rwa_monitor.core.fss.classify import viscous_significant, viscous_z
+    from rwa_monitor.core.fss.pipeline import FssConfig
+    from rwa_monitor.telemetry.fss_model import load_model
+    assert viscous_z(1.1, 0.03, 1.0, 0.04) == pytest.approx(2.0)
+    assert viscous_z(1.1, 0.03, 1.0, float('nan')) == pytest.approx(0.1 / 0.03)
+    assert viscous_significant(3.2) and not viscous_significant(3.0)   # z(1e-3) = 3.09
+    assert viscous_significant(float('nan'))
+    block, (t, w, f) = paper_block
+    model, config = load_model(), FssConfig()
+    # A reference 15 % low: the window reads 1.18 x it, above the classifier's x1.14.
+    low = {**block, 'fss': {**block['fss'], 'viscous_nms': 0.85 * block['fss']['viscous_nms']}}
+    res = core.diagnose_fss(low, t, w, f, model, config)
+    assert res['anomalies']['viscous'] and res['calibration']['viscous_z'] > 10
+    # The same reference known to +-10 % only: the difference is not significant.
+    vague = {**low, 'fss': {**low['fss'], 'viscous_se_nms': 0.1 * low['fss']['viscous_nms']}}
+    res = core.diagnose_fss(vague, t, w, f, model, config)
+    assert not res['anomalies']['viscous'] and res['viscous_not_significant']
+    assert 1.0 < res['calibration']['viscous_z'] < 3.09

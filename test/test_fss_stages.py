@@ -286,3 +286,19 @@ def test_extra_columns_fitted_beside_the_interval_jumps():
     # No columns, or too few samples: nothing fitted.
     assert fit_extra_columns(y, x, cps, np.zeros((n, 0)))[0].size == 0
     assert not np.any(fit_extra_columns(y[:10], x[:10], cps[:0], columns[:10])[0])
+
+
+def test_viscous_standard_error_is_the_scatter_of_the_estimate():
+    # 400 noise draws on one speed profile with two dry jumps: the std of the viscous
+    # estimates is the reported standard error, within 4 sigma of a std from 400 draws
+    # (sqrt(1 / (2 * 399)) = 3.5 %).
+    n, sigma = 3000, 0.05
+    x = 0.8 + 0.3 * np.sin(np.arange(n) / 300.0)
+    clean = np.where(np.arange(n) < 1000, 1.0, 1.3) * np.sign(x) + 1.0 * x
+    rng = np.random.default_rng(5)
+    fits = [fit_intervals(clean + rng.normal(0.0, sigma, n), x, np.array([1000, 2000]))
+            for _ in range(400)]
+    scatter = np.std([f.viscous for f in fits], ddof=1)
+    reported = np.mean([f.viscous_se for f in fits])
+    assert scatter == pytest.approx(reported, rel=0.14)
+    assert fit_intervals(clean, np.full(n, 0.5), np.array([1000])).viscous_se == np.inf

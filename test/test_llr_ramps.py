@@ -31,8 +31,8 @@ def _terms(w: np.ndarray, f: np.ndarray) -> np.ndarray:
 
 
 CASES = {   # (dry, viscous) change: ramps give the slope per second, steps the size
-    'dry ramp': ('ramp', 2.0e-3, 0.0),
-    'viscous ramp': ('ramp', 0.0, 1.5e-4),
+    'dry ramp': ('ramp', 3.0e-3, 0.0),
+    'viscous ramp': ('ramp', 0.0, 3.0e-4),
     'both step': ('step', 1.0, 0.05),
 }
 
@@ -60,10 +60,11 @@ def _sums(name: str, noise: np.ndarray | None):
 
 
 def _noncentrality(name: str) -> tuple[float, float]:
-    """Return the non-centralities of the dry-ramp and viscous-ramp tests (unit noise).
+    """Return the non-centralities of the two growth tests (unit noise).
 
-    Noise-free sums: ``(RSS_h - RSS_full)`` is then exactly the non-centrality of the
-    ``p``-dof chi-square that the statistic follows with unit white noise.
+    Entry ``h``: ``RSS`` of the after fit with only kind ``h``'s growth minus that with
+    both, on noise-free sums: exactly the non-centrality of the 1-dof chi-square that the
+    statistic follows with unit white noise.
     """
     before, after, ramp = _sums(name, None)
     row = llr_stats.ramp_shapes(ramp, 2)[-1]
@@ -77,16 +78,17 @@ def _categorise(name: str, seed: int) -> llr_stats.Category:
 
 
 def test_ramp_limits_are_the_chi_square_quantiles():
-    reject, absent = llr_stats.ramp_limits(2, Z_STAR)
+    reject, absent = llr_stats.ramp_limits(1, Z_STAR)
+    assert reject == pytest.approx(Z_STAR ** 2, rel=1e-9)
+    assert absent == pytest.approx(llr_stats.Z_ABSENT ** 2, rel=1e-9)
     # Two degrees of freedom: P(chi2_2 > x) = exp(-x / 2).
-    assert reject == pytest.approx(-2.0 * math.log(1e-3), rel=1e-9)
-    assert absent == pytest.approx(-2.0 * math.log(llr_stats.RAMP_ABSENT_LEVEL), rel=1e-9)
+    assert llr_stats.ramp_limits(2, Z_STAR)[0] == pytest.approx(-2.0 * math.log(1e-3))
     assert llr_stats.ramp_limits(3, Z_STAR)[0] == pytest.approx(stats.chi2.isf(1e-3, 3))
 
 
 def test_full_ramp_model_is_the_separate_fit_of_the_after_segment():
     # full = before fitted alone + after fitted on (h, u h_dry, u h_viscous); the
-    # single-kind ramps are nested in it.
+    # single-kind growth models are nested in it.
     noise = np.random.default_rng(3).standard_normal(N_BEFORE + N_AFTER)
     before, after, ramp = _sums('dry ramp', noise)
     w = bus_like_speed(N_BEFORE + N_AFTER)
@@ -108,62 +110,54 @@ def test_full_ramp_model_is_the_separate_fit_of_the_after_segment():
 def test_a_ramp_is_named_its_kind(name, kind):
     """40 seeded ramps, change time exact, unit noise known (the test's exact case).
 
-    Without the ramp models the step categorisation of the noise-free data is not the
-    right confirmed kind (measured: dry ramp undecided with guess viscous, viscous ramp
-    both). The kind is named when its own ramp is not rejected at 5 % (probability 0.95,
-    central chi-square with 2 dof) and the other ramp is rejected at 1e-3 (non-central
-    chi-square, non-centrality from the noise-free sums), if the guard holds (noise-free
-    margin checked). A wrong single kind needs the right ramp rejected at 1e-3 or the
-    wrong one (which nests the wrong step) not rejected at 1e-3.
+    Without the growth tests the step categorisation of the noise-free data confirms
+    ``both`` (the rise is shared with the other direction). The kind is named when the
+    other kind's growth is not significant at 5 % (probability 0.95: it is absent, central
+    chi-square with 1 dof) and its own is at 1e-3 (non-central chi-square, non-centrality
+    from the noise-free sums), if the guard holds (noise-free margin checked). A wrong
+    single kind needs a false significance of the other kind's growth at 1e-3.
     """
     before, after, ramp = _sums(name, None)
     step = llr_stats.categorise(before, N_BEFORE, after, 2, 1.0, Z_STAR)
-    assert (step.kind, step.confirmed) != (kind, True)
+    assert (step.kind, step.confirmed) == ('both', True)
     h = llr_stats.KINDS.index(kind)
     lam = _noncentrality(name)
-    reject, absent = llr_stats.ramp_limits(2, Z_STAR)
+    reject, absent = llr_stats.ramp_limits(1, Z_STAR)
     assert lam[h] == pytest.approx(0.0, abs=1e-6)
-    p_named = (stats.chi2.cdf(absent, 2) * stats.ncx2.sf(reject, 2, lam[1 - h])
+    p_named = (stats.chi2.cdf(absent, 1) * stats.ncx2.sf(reject, 1, lam[1 - h])
                * (1.0 - 1e-3))
-    assert p_named > 0.9
-    # Guard: the other kind's step beside the ramp is found with 90 % power for a change
-    # of this torque; noise-free margin >= 5 sd of the single-kind step estimate (whose
+    assert p_named > 0.85
+    # Guard (the step rule's): a step of the other kind of this torque would be found with
+    # 90 % power; noise-free margin >= 5 sd of the single-kind step estimate (whose
     # variance is the inverse Schur complement of its column in the joint fit).
-    info = llr_stats.ramp_information(before, after, llr_stats.ramp_shapes(ramp, 2)[-1], 2)
-    detectable = llr_stats.detectable_steps(info, 1.0, Z_STAR)
     _, dx = llr_stats.change_fits(before, after, 2)
     pi_b, pi_a = (llr_stats.unpack(x, 2)[0] for x in (before, after))
     joint = np.block([[pi_b + pi_a, pi_a[:, h:h + 1]], [pi_a[h:h + 1, :], pi_a[h, h]]])
     sd = math.sqrt(np.linalg.inv(joint)[-1, -1])
     scale = (1.0, pi_a[0, 1] / pi_a[0, 0])
-    margin = abs(dx[h, h]) * scale[h] - detectable[1 - h] * scale[1 - h]
+    margin = abs(dx[h, h]) * scale[h] - step.detectable[1 - h] * scale[1 - h]
     assert margin > 5.0 * sd * scale[h]
     runs = 40
     cats = [_categorise(name, seed) for seed in range(runs)]
     right = sum(c.kind == kind and c.confirmed for c in cats)
     wrong = sum(c.confirmed and c.kind == llr_stats.KINDS[1 - h] for c in cats)
     assert right >= stats.binom.ppf(1e-3, runs, p_named), [c.kind for c in cats]
-    p_wrong = 1e-3 + stats.ncx2.cdf(reject, 2, lam[1 - h])
-    assert wrong <= stats.binom.isf(1e-3, runs, p_wrong)
-    assert any(c.shape == 'ramp' for c in cats)
+    assert wrong <= stats.binom.isf(1e-3, runs, 1e-3)
+    assert all(c.shape == 'ramp' for c in cats if c.kind == kind)
 
 
 def test_a_both_step_stays_both():
-    """A step in both directions is not named a single kind by the ramp models.
+    """A step in both directions is not named a single kind by the growth tests.
 
-    It is named dry (viscous) only if the dry (viscous) ramp is not rejected at 5 %:
-    probability ``ncx2.cdf(absent, 2, lambda_h)`` with the non-centrality of the
-    noise-free sums; the step categorisation confirms ``both`` (both single steps
-    rejected at 1e-3, z of 19 and 9 noise-free).
+    A step does not grow: both growth statistics are central chi-square (noise-free
+    non-centrality 0), so a single kind is named only by a false significance at 1e-3
+    of one of them; the step categorisation confirms ``both`` (z of 19 and 9 noise-free).
     """
-    lam = _noncentrality('both step')
-    _, absent = llr_stats.ramp_limits(2, Z_STAR)
-    p_single = sum(stats.ncx2.cdf(absent, 2, x) for x in lam)
-    assert p_single < 1e-3
+    assert _noncentrality('both step') == pytest.approx((0.0, 0.0), abs=1e-6)
     runs = 40
     cats = [_categorise('both step', seed) for seed in range(runs)]
     single = sum(c.kind in ('dry', 'viscous') for c in cats)
-    assert single <= stats.binom.isf(1e-3, runs, p_single + 2e-3)
+    assert single <= stats.binom.isf(1e-3, runs, 2e-3)
     assert sum(c.kind == 'both' and c.shape == 'step' for c in cats) >= runs - single - 1
 
 
@@ -184,31 +178,41 @@ def test_ramp_shapes_include_a_ramp_that_stopped():
 
 
 def _ramp_run(seed: int, dry: float, visc: float, n: int = 24_000, start: int = 6000,
-              ramp: int = 7200):
-    """Detector-level run: unit noise, bus-like speed, a ramp from ``start`` to full size."""
+              ramp: int = 7200, second: tuple[int, float, float] | None = None):
+    """Detector-level run: unit noise, bus-like speed, a ramp from ``start`` to full size.
+
+    ``second``: (index, dry step, viscous step) of a second, independent change.
+    """
     rng = np.random.default_rng(seed)
     k = np.arange(n, dtype=float)
     w = bus_like_speed(n)
     rise = np.clip((k - start) / ramp, 0.0, 1.0)
-    f = -(1.0 + dry * rise) * np.sign(w) - (0.05 + visc * rise) * w + rng.standard_normal(n)
+    fc = 1.0 + dry * rise
+    fv = 0.05 + visc * rise
+    if second is not None:
+        fc = fc + second[1] * (k >= second[0])
+        fv = fv + second[2] * (k >= second[0])
+    f = -fc * np.sign(w) - fv * w + rng.standard_normal(n)
     return k * DT, w, f
 
 
-def test_detector_names_ramps_and_streaming_equals_batch():
+def test_detector_names_ramps_declares_them_once_and_streaming_equals_batch():
     """Seeded ramps through the detector (ramp sums taken block by block, revisions).
 
     Regression on fixed seeds (measured: the first declaration ends with the right
-    confirmed kind in 4/6 dry and 6/6 viscous ramps; the step categorisation alone in 0/6
-    and 3/6, dry ramps ending as confirmed ``both``); a confirmed wrong single kind needs
-    a rejection at 1e-3 of the right ramp. Streaming and batch events are identical.
+    confirmed kind in 6/6 dry and 5/6 viscous ramps, the step categorisation alone in 0/6
+    and 3/6; at most one more declaration of the same ramp, 3 in the 6 dry ramps, where
+    each dry ramp was declared 4 times before the continuation test); a confirmed wrong
+    single kind needs a false significance at 1e-3. Streaming and batch events are
+    identical.
     """
-    for dry, visc, kind, least in ((6.0, 0.0, 'dry', 3), (0.0, 0.06, 'viscous', 5)):
+    for dry, visc, kind, least in ((6.0, 0.0, 'dry', 5), (0.0, 0.06, 'viscous', 4)):
         right = wrong = 0
         for seed in range(6):
             t, w, f = _ramp_run(seed, dry, visc)
             events = detect_batch(t, w, f)
             first = [e for e in events if e.revision == 0 and e.index >= 5500]
-            assert first, 'every ramp is detected'
+            assert 1 <= len(first) <= 2, first
             final = max((e for e in events if e.index == first[0].index),
                         key=lambda e: e.revision)
             confirmed = final.details[keys.KIND_CONFIRMED]
@@ -220,6 +224,20 @@ def test_detector_names_ramps_and_streaming_equals_batch():
                 for a, b, c in zip(t.tolist(), w.tolist(), f.tolist()):
                     streamed.extend(det.update(a, b, c))
                 assert streamed == events
-                assert any(e.details[keys.KIND_SHAPE] == 'ramp' for e in events)
         assert right >= least, (kind, right)
         assert wrong == 0, (kind, wrong)
+
+
+@pytest.mark.parametrize('second', [(11_000, 0.0, 0.1), (11_000, 3.0, 0.0)])
+def test_a_second_change_during_a_ramp_is_still_declared(second):
+    """The continuation test never hides a second change declared while a ramp grows.
+
+    A viscous (dry) step of torque ~1 sd (3 sd) at 11000, while the dry ramp declared at
+    about 8100 is still followed: a new change is declared within 500 samples of it in
+    every run (measured 6/6 each), because a step beside the growing ramp is significant
+    at 1e-3 (:func:`llr_stats.continues`).
+    """
+    for seed in range(3):
+        t, w, f = _ramp_run(seed, 6.0, 0.0, second=second)
+        firsts = [e.index for e in detect_batch(t, w, f) if e.revision == 0]
+        assert any(abs(i - second[0]) <= 500 for i in firsts), firsts

@@ -526,7 +526,10 @@ class LLRDetector:
         change position), so that the new reference holds post-change samples only. The
         kind is re-checked on ``[tau, j]`` (the gap ``[tau, start)`` is kept as one
         prefix-sum row). Tests of the new reference whose window is already complete run
-        at once (never, since the start is at or after ``k_min``; kept for safety).
+        at once (never, since the start is at or after ``k_min``; kept for safety). Not in
+        the paper: a declaration that the previous change's growth explains
+        (:meth:`_continues`, docs/llr.md "Kinds on ramps") is no new change: its kind is
+        re-checked instead and the reference restarts as after any declaration.
         """
         L = self._L
         c, k_min = self._c, self._kmin
@@ -543,6 +546,11 @@ class LLRDetector:
 
         tau, start, cat = declaration(prefix, first, base, k_min, n, self._cfg, self._z_thr,
                                       ramp_of)
+        if self._continues(tau, n):
+            prev = self._cat
+            events = self._recheck(n, prev['gap'] + np.asarray(self._pref, dtype=float))
+            prev['gap'] = prev['gap'] + np.asarray(self._rpref[start % L], dtype=float)
+            return events + self._restart_and_test(start, n)
         rows = (self._rrow[tau % L], self._rrow[k_min % L], self._rrow[n % L])
         times = (self._rtime[tau % L], self._rtime[n % L])
         event = make_event(self._component, cat, rows, times, self._logpmin, 0)
@@ -555,23 +563,61 @@ class LLRDetector:
                          ramp=[ramps[tau]], ramp_end=n, ramp_t0=times[0])
         self._checks = ramp_points(n, checks, self._w)
         self._checkpoint = self._checks.pop(0) if self._checks else -1
+        return [event] + self._restart_and_test(start, n)
+
+    def _restart_and_test(self, start: int, n: int) -> list[AnomalyEvent]:
+        """Restart the reference at ``start``; run the tests whose window is complete."""
         self._restart(start, n)
-        events = [event]
+        events: list[AnomalyEvent] = []
         test = self._test2 if self._p == 2 else self._test_general
         for k in range(start + self._w + 1, n - self._w + 2):
-            if test(k, self._rpref[(k + self._w) % L]):
+            if test(k, self._rpref[(k + self._w) % self._L]):
                 events.extend(self._declare(n))
         return events
+
+    def _continues(self, tau: int, n: int) -> bool:
+        """Return True if the change declared at ``n`` is the previous one still growing.
+
+        Possible while the previous change's kind is still re-checked (its ramp sums are
+        kept up to date): :func:`llr_stats.continues` on its segments up to ``n`` and on
+        the samples ``[tau, n]``. If so, its ramp sums take in the samples up to ``n``.
+        """
+        prev = self._cat
+        if prev is None or self._checkpoint < 0:
+            return False
+        L = self._L
+        blocks = list(prev['ramp'])
+        if prev['ramp_end'] < n:
+            blocks.append(self._ramp_block(prev['ramp_end'] + 1, n, prev['ramp_t0']))
+        after = prev['gap'] + np.asarray(self._pref, dtype=float)
+        tail = self._terms(tau, n)
+        times = np.asarray([self._rtime[j % L] for j in range(tau, n + 1)], dtype=float)
+        if not llr_stats.continues(prev['before'], prev['n_before'], after,
+                                   np.asarray(blocks), tail, times - prev['ramp_t0'],
+                                   prev['kind'], self._p, self._noise_var, self._z_thr):
+            return False
+        prev['ramp'] = blocks
+        prev['ramp_end'] = n
+        return True
 
     def _ramp_block(self, first: int, last: int, t0: float) -> np.ndarray:
         """Return :func:`llr_stats.ramp_sums` of positions ``first..last`` (in the ring)."""
         L = self._L
-        terms = np.asarray([self._rterm[j % L] for j in range(first, last + 1)], dtype=float)
-        if self._p == 2:   # the ring holds (h1, h2, f): the products of the prefix sums
-            h1, h2, f = terms.T
-            terms = np.column_stack((h1 * h1, h1 * h2, h2 * h2, h1 * f, h2 * f, f * f))
         times = np.asarray([self._rtime[j % L] for j in range(first, last + 1)], dtype=float)
-        return llr_stats.ramp_sums(terms, times - t0)
+        return llr_stats.ramp_sums(self._terms(first, last), times - t0)
+
+    def _terms(self, first: int, last: int) -> np.ndarray:
+        """Return the per-sample terms of positions ``first..last`` (in the ring), ``(n, w)``.
+
+        For p = 2 the ring holds ``(h1, h2, f)``: the six products are formed with numpy as
+        the batch path forms them (``llr_batch._Terms``), so both get the same floats.
+        """
+        L = self._L
+        rows = np.asarray([self._rterm[j % L] for j in range(first, last + 1)], dtype=float)
+        if self._p != 2:
+            return rows
+        h1, h2, f = rows[:, 0], rows[:, 1], rows[:, 2]
+        return np.column_stack((h1 * h1, h1 * h2, h2 * h2, h1 * f, h2 * f, f * f))
 
     def _restart(self, c: int, n: int) -> None:
         """Start the new reference at position ``c`` and rebuild its prefix sums."""
@@ -605,7 +651,11 @@ class LLRDetector:
         cat['ramp_end'] = j
         if j not in cat['checks']:
             return []
-        after = cat['gap'] + np.asarray(self._pref, dtype=float)
+        return self._recheck(j, cat['gap'] + np.asarray(self._pref, dtype=float))
+
+    def _recheck(self, j: int, after: np.ndarray) -> list[AnomalyEvent]:
+        """Re-check the kind of the last declared change on its after segment up to ``j``."""
+        cat = self._cat
         new = llr_stats.categorise(cat['before'], cat['n_before'], after, self._p,
                                    self._noise_var, self._z_thr, np.asarray(cat['ramp']))
         if not revision_due(cat['kind'], cat['guess'], cat['confirmed'], new):

@@ -357,17 +357,35 @@ def detect_paper_model(t: np.ndarray, w: np.ndarray, f: np.ndarray, cfg: Mapping
             if j not in cat['checks']:
                 continue
             ref.extend(j + 1)
-            after = cat['gap'] + ref.at(j + 1)
-            new = llr_stats.categorise(cat['before'], cat['n_before'], after, 2, noise_var,
-                                       z_thr, np.asarray(cat['ramp']))
-            if revision_due(cat['kind'], cat['guess'], cat['confirmed'], new):
-                cat['kind'] = new.kind
-                cat['guess'] = new.guess
-                cat['confirmed'] = new.confirmed
-                cat['revision'] += 1
-                ev_rows = cat['rows'][:2] + (int(rows[j]),)
-                events.append(make_event(component, new, ev_rows, (cat['time'], float(tv[j])),
-                                         cat['log_p'], cat['revision']))
+            recheck(j, cat['gap'] + ref.at(j + 1))
+
+    def recheck(j: int, after: np.ndarray) -> None:
+        new = llr_stats.categorise(cat['before'], cat['n_before'], after, 2, noise_var,
+                                   z_thr, np.asarray(cat['ramp']))
+        if revision_due(cat['kind'], cat['guess'], cat['confirmed'], new):
+            cat['kind'] = new.kind
+            cat['guess'] = new.guess
+            cat['confirmed'] = new.confirmed
+            cat['revision'] += 1
+            ev_rows = cat['rows'][:2] + (int(rows[j]),)
+            events.append(make_event(component, new, ev_rows, (cat['time'], float(tv[j])),
+                                     cat['log_p'], cat['revision']))
+
+    def continues(tau: int, n: int, ref: _Reference) -> bool:
+        """Return the streaming detector's ``_continues`` (same blocks, same floats)."""
+        if cat is None or not checks:
+            return False
+        blocks = list(cat['ramp'])
+        if cat['ramp_end'] < n:
+            blocks.append(ramp_block(cat['ramp_end'] + 1, n, cat['ramp_t0']))
+        after = cat['gap'] + ref.at(n + 1)
+        if not llr_stats.continues(cat['before'], cat['n_before'], after, np.asarray(blocks),
+                                   terms.block(tau, n + 1).T, tv[tau:n + 1] - cat['ramp_t0'],
+                                   cat['kind'], 2, noise_var, z_thr):
+            return False
+        cat['ramp'] = blocks
+        cat['ramp_end'] = n
+        return True
 
     c = 0
     while True:
@@ -402,6 +420,11 @@ def detect_paper_model(t: np.ndarray, w: np.ndarray, f: np.ndarray, cfg: Mapping
 
         tau, start, category = declaration(prefix, first, base, k_min, n, cfg, z_thr,
                                            ramp_of)
+        if continues(tau, n, ref):
+            recheck(n, cat['gap'] + ref.at(n + 1))
+            cat['gap'] = cat['gap'] + ref.at(start)
+            c = start
+            continue
         ev_rows = (int(rows[tau]), int(rows[k_min]), int(rows[n]))
         times = (float(tv[tau]), float(tv[n]))
         events.append(make_event(component, category, ev_rows, times, state['logp'], 0))

@@ -32,8 +32,8 @@ UNDECIDED = 'undecided'
 # even at 5 % (two-sided): between this and the category level the data are ambiguous.
 Z_ABSENT = 1.959963984540054
 POWER_Z = 1.2815515655446004   # one-sided normal quantile of 0.9 (detectable steps)
-# A kind named from the ramp models (:func:`ramp_fits`) needs its own single-direction
-# ramp not rejected even at this level (the ramp analogue of Z_ABSENT).
+# A kind named by the growth tests (:func:`ramp_kind`) needs the other kind's growth not
+# significant even at this level (the growth analogue of Z_ABSENT).
 RAMP_ABSENT_LEVEL = 0.05
 SHAPES = ('step', 'ramp')
 
@@ -228,14 +228,16 @@ def categorise(before: np.ndarray, n_before: int, after: np.ndarray, p: int,
     (constrained fit for a single component), never the free fit of an unidentifiable
     segment.
 
-    ``ramp``: the block rows (:func:`ramp_sums`) of the after segment. Given, the ramp
-    models (:func:`ramp_kind` on the best time shape of each hypothesis,
-    :func:`ramp_shapes`; docs/llr.md "Kinds on ramps") may name a single kind; if it
-    differs from the step outcome and the other kind's step would be found beside that
-    ramp (:func:`ramp_information`, the guard of :func:`separable`), it replaces it, with
-    ``shape`` ``ramp`` and the step estimate ``dx`` of that kind. Each ramp model nests
-    the step of its kind, so a true single step is named the other kind by it only
-    through a rejection of its own ramp at the category level.
+    ``ramp``: the block rows (:func:`ramp_sums`) of the after segment. Given, the growth
+    tests (:func:`ramp_kind` on the best time shape of each hypothesis,
+    :func:`ramp_shapes`; docs/llr.md "Kinds on ramps") may name the kind in which the
+    change grows; if it differs from the step outcome and a growth of the other kind of
+    the same torque rate would have been found (:func:`ramp_growth`, the guard of
+    :func:`separable`), it replaces it, with ``shape`` ``ramp`` and the step estimate
+    ``dx`` of that kind; a confirmed single step kind refuted by a significant growth of
+    the other kind is withdrawn (:func:`refuted`). A step has no growth: a true single
+    step is named the other kind only through a false significance of that kind's growth
+    at the category level.
     """
     before = np.asarray(before, dtype=float)
     after = np.asarray(after, dtype=float)
@@ -273,15 +275,14 @@ def categorise(before: np.ndarray, n_before: int, after: np.ndarray, p: int,
     if ramp is None:
         return step
     shapes = ramp_shapes(ramp, p)
-    fits = np.array([ramp_fits(before, after, row, p) for row in shapes])
+    fits = ramp_fits(before, after, shapes, p)
     best = fits.max(axis=0)
-    named = ramp_kind(best, s2, p, z_threshold)
+    named = ramp_kind(best, s2, z_threshold)
     if named is None:
-        return refuted(step, ramp_statistics(best, s2), ramp_limits(p, z_threshold)[0], dx)
+        return refuted(step, ramp_statistics(best, s2), ramp_limits(1, z_threshold)[0], dx)
     if step.kind == KINDS[named]:
         return step
-    info = ramp_information(before, after, shapes[int(np.argmax(fits[:, 1 + named]))], p)
-    if not separable(dx, named, detectable_steps(info, s2, z_threshold), mean_speed):
+    if not separable(dx, named, detectable, mean_speed):
         return step
     return Category(KINDS[named], dx[named].copy(), (z_d, z_v), s2, True, KINDS[named],
                     detectable, SHAPES[1])
@@ -291,10 +292,11 @@ def refuted(step: Category, chi: tuple[float, float], reject: float, dx: np.ndar
             ) -> Category:
     """Return the step category, unless the ramp tests refute its single kind.
 
-    Not in the paper (docs/llr.md "Kinds on ramps"). The ramp of a kind nests its step:
-    when it is rejected at the category level (``chi > reject``), a confirmed step of
-    that kind alone is refuted. Then ``both`` (confirmed) if the other kind's ramp is
-    rejected too, else ``undecided`` with the other kind as guess.
+    Not in the paper (docs/llr.md "Kinds on ramps"). ``chi[h]``: the significance of the
+    growth of the kind other than ``h`` beside ``h``'s own (:func:`ramp_statistics`).
+    When the change grows in the other kind's direction at the category level (``chi >
+    reject``), a confirmed step of kind ``h`` alone is refuted: ``both`` (confirmed) if
+    it grows in both directions, else ``undecided`` with the other kind as guess.
     """
     if not step.confirmed or step.kind not in KINDS[:2]:
         return step
@@ -361,88 +363,124 @@ def ramp_shapes(blocks: np.ndarray, p: int) -> np.ndarray:
 
 def ramp_fits(before: np.ndarray, after: np.ndarray, ramp: np.ndarray, p: int
               ) -> np.ndarray:
-    """Return ``explained`` of the ramp hypotheses ``(full, dry ramp, viscous ramp)``.
+    """Return ``explained`` of the growth hypotheses ``(full, dry growth, viscous growth)``.
 
-    Not in the paper (docs/llr.md "Kinds on ramps"). Joint fit of the before segment
-    (``x``) and the after segment, where the change may grow with the time ``u`` since the
-    estimated change: after = ``h (x + dx) + u (g_d h_dry + g_v h_viscous)``. ``full``:
-    ``dx`` and ``(g_d, g_v)`` free (``p + 2`` change parameters: the before and after
-    segments fitted apart, the after one on ``(h, u h_dry, u h_viscous)``); ``dry ramp``:
-    ``dx = a e_dry``, ``g = (b, 0)``; ``viscous ramp``: ``dx = a e_viscous``, ``g = (0,
-    b)`` (2 parameters each). As in :func:`change_fits`, ``RSS_h = E_before + E_after -
-    explained_h``. ``ramp``: one row of :func:`ramp_shapes` (``u`` replaced by the time
-    shape ``r(u)``).
+    Not in the paper (docs/llr.md "Kinds on ramps"). The after segment is fitted on its
+    own (offsets in every direction free, so a change that began before the estimated
+    change time and leaks into the before fit does not bias it) with the regressors
+    ``h`` plus a growth ``r(u) h_dry`` and / or ``r(u) h_viscous`` (``r`` the time shape
+    of ``ramp``, rows of :func:`ramp_shapes`, leading axes kept): ``full`` both growth
+    columns, ``dry
+    growth`` the dry one, ``viscous growth`` the viscous one. ``explained_h`` includes
+    the before fit, so that ``RSS_h = E_before + E_after - explained_h`` as in
+    :func:`change_fits`.
     """
     pi_b, q_b, _ = unpack(before, p)
-    pi_a, q_a, _ = unpack(after, p)
     gram, rhs = _ramp_after(after, ramp, p)
-    explained = np.empty(3)
-    explained[0] = (float(solve_scaled(pi_b, q_b) @ q_b)
-                    + float(solve_scaled(gram, rhs) @ rhs))
-    m = np.empty((p + 2, p + 2))
-    m[:p, :p] = pi_b + pi_a
+    base = float(solve_scaled(pi_b, q_b) @ q_b)
+    explained = np.empty(gram.shape[:-2] + (3,))
+    explained[..., 0] = base + _explained(gram, rhs)
     for i in (0, 1):
-        cols = [i, p + i]
-        m[:p, p:] = gram[:p, cols]
-        m[p:, :p] = gram[cols, :p]
-        m[p:, p:] = gram[np.ix_(cols, cols)]
-        r = np.concatenate([q_b + q_a, rhs[cols]])
-        explained[1 + i] = float(solve_scaled(m, r) @ r)
+        cols = list(range(p)) + [p + i]
+        explained[..., 1 + i] = base + _explained(_sub(gram, cols), rhs[..., cols])
     return explained
 
 
 def _ramp_after(after: np.ndarray, ramp: np.ndarray, p: int
                 ) -> tuple[np.ndarray, np.ndarray]:
-    """Return the Gram matrix and right-hand side of the after rows ``(h, u h_0, u h_1)``."""
+    """Return the Gram matrices and right-hand sides of the after rows ``(h, r h_0, r h_1)``.
+
+    ``ramp``: one or more rows of :func:`ramp_shapes` (leading axes kept).
+    """
+    ramp = np.asarray(ramp, dtype=float)
+    lead = ramp.shape[:-1]
     pi_a, q_a, _ = unpack(after, p)
     n = width(p)
-    u1, uq, _ = unpack(ramp[:n], p)
-    u2 = unpack(ramp[n:], p)[0]
-    gram = np.empty((p + 2, p + 2))
-    gram[:p, :p] = pi_a
-    gram[:p, p:] = u1[:, :2]
-    gram[p:, :p] = u1[:2, :]
-    gram[p:, p:] = u2[:2, :2]
-    return gram, np.concatenate([q_a, uq[:2]])
+    u1, uq, _ = unpack(ramp[..., :n], p)
+    u2 = unpack(ramp[..., n:], p)[0]
+    gram = np.empty(lead + (p + 2, p + 2))
+    gram[..., :p, :p] = pi_a
+    gram[..., :p, p:] = u1[..., :, :2]
+    gram[..., p:, :p] = u1[..., :2, :]
+    gram[..., p:, p:] = u2[..., :2, :2]
+    rhs = np.concatenate([np.broadcast_to(q_a, lead + (p,)), uq[..., :2]], axis=-1)
+    return gram, rhs
 
 
-def ramp_information(before: np.ndarray, after: np.ndarray, ramp: np.ndarray, p: int
-                     ) -> tuple[float, float]:
-    """Return the information on a step of the other kind beside each single-kind ramp.
+def _explained(m: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Return ``theta . v`` of the least-squares fits ``m theta = v`` (stacked)."""
+    return np.einsum('...i,...i->...', solve_scaled(m, v), v)
 
-    Not in the paper (docs/llr.md "Kinds on ramps"). ``(I_viscous, I_dry)``-like pair
-    indexed like the kinds: entry 1 is the information on a viscous step ``dx_v`` added to
-    the dry-ramp model (``x``, ``dx_d``, ``g_d`` free), entry 0 that on a dry step added to
-    the viscous-ramp model; ``var = sigma^2 / I`` as in :func:`component_information`, 0
-    when the ramp of one kind and the step of the other cannot be told apart (e.g. ``|w|``
-    linear in time over the after segment, no sign change).
+
+def _sub(m: np.ndarray, cols: list[int]) -> np.ndarray:
+    """Return the rows and columns ``cols`` of stacked square matrices."""
+    return m[..., cols, :][..., :, cols]
+
+
+def continues(before: np.ndarray, n_before: int, after: np.ndarray, blocks: np.ndarray,
+              tail: np.ndarray, tail_offsets: np.ndarray, kind: str, p: int,
+              noise_var: float | None, z_threshold: float) -> bool:
+    """Return True if a new declaration is the previous change still growing.
+
+    Not in the paper (docs/llr.md "Kinds on ramps"). ``before``/``n_before``: the before
+    segment of the previous change; ``after``: sums of its after segment up to the new
+    declaration, ``blocks`` its :func:`ramp_sums` rows; ``tail`` (per-sample terms) and
+    ``tail_offsets`` (``u`` of the previous change): the samples from the new change
+    position to the new declaration. H0: the previous change of kind ``kind`` grows
+    (its single-kind ramp, or the full ramp for ``both`` / ``undecided``, over every time
+    shape of :func:`ramp_shapes`); H1: H0 plus a free step (``p`` parameters) at the new
+    change position. The new declaration is a new change when H1 explains more by
+    ``chi2_p`` at the category level (each hypothesis at its best time shape); else it
+    is the same change, as its own ramp explains the samples that triggered it.
     """
-    pi_b = unpack(before, p)[0]
-    gram, _ = _ramp_after(after, ramp, p)
-    m = np.zeros((p + 3, p + 3))
-    m[:p, :p] = pi_b + gram[:p, :p]
-    out = [0.0, 0.0]
-    for h in (0, 1):
-        cols = [h, p + h, 1 - h]
-        m[:p, p:] = gram[:p, cols]
-        m[p:, :p] = gram[cols, :p]
-        m[p:, p:] = gram[np.ix_(cols, cols)]
-        s_ll = float(m[-1, -1])
-        s_lr = m[-1, :-1]
-        info = s_ll - float(s_lr @ solve_scaled(m[:-1, :-1], s_lr))
-        out[1 - h] = info if info > 1e-9 * max(s_ll, 1e-300) else 0.0
-    return out[0], out[1]
+    shapes = ramp_shapes(blocks, p)
+    knots = np.atleast_2d(np.asarray(blocks, dtype=float))[:, 0]
+    pi_b, q_b, e_b = unpack(before, p)
+    if noise_var is None:
+        rss = float(e_b) - float(solve_scaled(pi_b, q_b) @ q_b)
+        floor = NOISE_FLOOR_REL * float(e_b) / n_before + NOISE_FLOOR_ABS
+        noise_var = max(rss / (n_before - p), floor)
+    tail = np.ascontiguousarray(tail, dtype=float)
+    u = np.ascontiguousarray(tail_offsets, dtype=float)
+    pi_t, q_t, _ = unpack(tail.sum(axis=0), p)
+    if kind in KINDS[:2]:
+        h = KINDS.index(kind)
+        change = [h, p + h]
+    else:
+        change = list(range(p + 2))
+    step = list(range(p + 2, 2 * p + 2))
+    gram, rhs = _ramp_after(after, shapes, p)
+    m = shapes.shape[0]
+    r = np.minimum(u[None, :], knots[:, None])
+    r_pi = unpack((tail[None, :, :] * r[:, :, None]).sum(axis=1), p)[0]
+    big = np.empty((m, 2 * p + 2, 2 * p + 2))
+    big[:, :p + 2, :p + 2] = gram
+    big[:, :p, p + 2:] = pi_t
+    big[:, p:p + 2, p + 2:] = r_pi[:, :2, :]
+    big[:, p + 2:, :p + 2] = np.swapaxes(big[:, :p + 2, p + 2:], 1, 2)
+    big[:, p + 2:, p + 2:] = pi_t
+    full_rhs = np.concatenate([rhs, np.broadcast_to(q_t, (m, p))], axis=-1)
+    best = []
+    for cols in (change, change + step):
+        # x (before and after) first, then the after-only change columns.
+        idx = list(range(p)) + cols
+        joint, v = _sub(big, idx), full_rhs[:, idx]
+        joint[:, :p, :p] += pi_b
+        v[:, :p] += q_b
+        best.append(float(np.max(_explained(joint, v))))
+    return (best[1] - best[0]) / noise_var <= ramp_limits(p, z_threshold)[0]
 
 
-def ramp_limits(p: int, z_threshold: float) -> tuple[float, float]:
-    """Return the chi-square limits ``(reject, absent)`` of the ramp tests (``p`` dof).
+def ramp_limits(dof: int, z_threshold: float) -> tuple[float, float]:
+    """Return the chi-square limits ``(reject, absent)`` with ``dof`` degrees of freedom.
 
-    ``reject``: the upper quantile at the category level (the level whose two-sided normal
-    quantile is ``z_threshold``); ``absent``: at :data:`RAMP_ABSENT_LEVEL`.
+    ``reject``: the upper quantile at the category level (the level whose two-sided
+    normal quantile is ``z_threshold``); ``absent``: at :data:`RAMP_ABSENT_LEVEL`.
     """
     from scipy import special
     level = math.erfc(z_threshold / math.sqrt(2.0))
-    return float(special.chdtri(p, level)), float(special.chdtri(p, RAMP_ABSENT_LEVEL))
+    return (float(special.chdtri(dof, level)),
+            float(special.chdtri(dof, RAMP_ABSENT_LEVEL)))
 
 
 def ramp_statistics(explained: np.ndarray, noise_var: float) -> tuple[float, float]:
@@ -451,18 +489,17 @@ def ramp_statistics(explained: np.ndarray, noise_var: float) -> tuple[float, flo
             max(float(explained[0] - explained[2]), 0.0) / noise_var)
 
 
-def ramp_kind(explained: np.ndarray, noise_var: float, p: int, z_threshold: float
-              ) -> int | None:
-    """Return the kind (0 dry, 1 viscous) the ramp models name, or None.
+def ramp_kind(explained: np.ndarray, noise_var: float, z_threshold: float) -> int | None:
+    """Return the kind (0 dry, 1 viscous) the growth tests name, or None.
 
     Not in the paper (docs/llr.md "Kinds on ramps"). Nested likelihood-ratio tests of
-    each single-direction ramp against the full model (:func:`ramp_fits`), ``p`` degrees
-    of freedom each: a direction is named when its own ramp is not rejected even at
-    :data:`RAMP_ABSENT_LEVEL` and the other direction's ramp is rejected at the category
-    level (:func:`ramp_limits`); None when neither or both are.
+    each single-kind growth model against the full one (:func:`ramp_fits`), one degree of
+    freedom each (the other kind's growth column): a kind is named when the other kind's
+    growth is not significant even at :data:`RAMP_ABSENT_LEVEL` and its own growth is,
+    at the category level (:func:`ramp_limits`); None otherwise.
     """
     chi = ramp_statistics(explained, noise_var)
-    reject, absent = ramp_limits(p, z_threshold)
+    reject, absent = ramp_limits(1, z_threshold)
     for h in (0, 1):
         if chi[h] <= absent and chi[1 - h] > reject:
             return h

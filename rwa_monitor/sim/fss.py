@@ -336,6 +336,7 @@ def extraction_item(speed: np.ndarray, friction: np.ndarray, config) -> dict:
             'stats': {'detected': int(ext.detected.size), 'rejected': ext.rejected,
                       'accepted': int(ext.accepted.size), 'iterations': ext.iterations,
                       'exact': ext.exact, 'rmse': ext.rmse, 'sigma': ext.sigma,
+                      'viscous_se': ext.viscous_se,
                       'timings': ext.timings}}
 
 

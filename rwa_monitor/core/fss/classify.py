@@ -17,7 +17,7 @@ sign(w^T z + b) (eq. 26) without scikit-learn.
 
 from __future__ import annotations
 
-from typing import Sequence
+from typing import Mapping, Sequence
 
 import numpy as np
 
@@ -176,14 +176,16 @@ def train_model(items: Sequence[dict], *, bins: int = 20, c: float = 1.0, seed: 
 
     ``relative``: on features relative to each window's nominal reference
     (:func:`relative_features`), the way a calibrated wheel is judged; the spec then
-    keeps the training windows' :func:`noise_ratio_spread` (the "unknown" bound).
+    keeps the training windows' :func:`noise_ratio_stats` (the "unknown" bound; without
+    them the measured NOISE_RATIO applies).
     """
     model = WindowClassifier.fit([item_features(it, relative) for it in items],
                                  [it['status'] for it in items], bins=bins, c=c, seed=seed,
                                  use=use)
     model.spec['relative'] = bool(relative)
-    if relative:
-        model.spec['noise_ratio_spread'] = noise_ratio_spread(items)
+    noise = noise_ratio_stats(items) if relative else {}
+    if noise:
+        model.spec['noise_ratio'] = noise
     return model
 
 
@@ -206,43 +208,53 @@ def detection_matrix(classifier: WindowClassifier, items: Sequence[dict],
 
 # "Unknown" (docs/fss.md, "Calibrated"). The residual noise of stages 1-3 on a window the
 # model explains (nominal, or one of the known anomalies) scatters around its reference
-# window's: the undetected part of short FSS jumps and the noise estimate itself. Its
-# spread, the std of log(window noise / reference noise), measured on the development
-# windows (bench/fss_sizes.py training pairs, seed 12, 8 windows per status, every status;
-# 0.052 on the nominal ones, 0.065 on fss1, 0.017-0.021 on the others). A model trained on
-# relative features stores its own training set's value (``noise_ratio_spread``).
-NOISE_RATIO_SPREAD = 0.046
+# window's: the undetected part of short FSS jumps and the noise estimates. Per status,
+# the mean and std of log(window noise / reference noise), measured on development
+# windows (bench/fss_sizes.py training pairs, seed 12, 8 windows per status, sizes drawn
+# in x1.1-x3). A model trained on relative features keeps its own training set's values
+# (spec ``noise_ratio``).
+NOISE_RATIO = {'nominal': (-0.0048, 0.052), 'dry': (0.0014, 0.0165),
+               'viscous': (0.0024, 0.0199), 'fss1': (0.0618, 0.0645),
+               'fss2': (-0.0026, 0.021)}
+# Least windows of a status for its (mean, std) in a trained model's spec.
+MIN_NOISE_WINDOWS = 5
 # Level of the one-sided test "this window's noise is larger than an explained one's".
 UNKNOWN_LEVEL = 1.0e-3
 
 
-def noise_ratio_spread(items: Sequence[dict]) -> float:
-    """Return the std of log(window noise / reference noise) over extraction items.
+def noise_ratio_stats(items: Sequence[dict]) -> dict[str, tuple[float, float]]:
+    """Return per status (mean, std) of log(window noise / reference noise).
 
-    ``items``: with ``stats.sigma`` and ``reference.sigma`` (bench/fss_sizes.py); the
-    windows must be ones the model explains (every status of the simulator).
+    ``items``: extraction items with ``status``, ``stats.sigma`` and ``reference.sigma``
+    (bench/fss_sizes.py); every status of the simulator is one the model explains. A
+    status with fewer than MIN_NOISE_WINDOWS such windows is left out.
     """
-    logs = [np.log(it['stats']['sigma'] / it['reference']['sigma']) for it in items
-            if it.get('reference', {}).get('sigma', 0) > 0 and it['stats']['sigma'] > 0]
-    if len(logs) < 10:
-        raise ValueError('the noise-ratio spread needs at least 10 windows with a reference')
-    return float(np.std(logs, ddof=1))
+    logs: dict[str, list[float]] = {}
+    for it in items:
+        ref = it.get('reference', {}).get('sigma', 0.0)
+        if ref > 0 and it['stats']['sigma'] > 0:
+            logs.setdefault(it['status'], []).append(np.log(it['stats']['sigma'] / ref))
+    return {k: (float(np.mean(v)), float(np.std(v, ddof=1))) for k, v in logs.items()
+            if len(v) >= MIN_NOISE_WINDOWS}
 
 
-def noise_ratio_bound(spread: float | None = NOISE_RATIO_SPREAD,
+def noise_ratio_bound(stats_by_status: Mapping[str, Sequence[float]] | None = None,
                       level: float = UNKNOWN_LEVEL) -> float:
     """Return the largest window / calibrated noise ratio of an explained window.
 
-    log(ratio) of explained windows is taken as normal with mean 0 (the reference is a
-    window like the others) and std ``spread``; the bound is its one-sided quantile
-    exp(z_(1 - level) spread): an explained window exceeds it with probability
-    ``level``.
+    Per status, log(ratio) of its windows is taken as normal with the given (mean, std);
+    its one-sided quantile at ``level`` is exp(mean + z_(1 - level) std). The bound is
+    the largest over the statuses: a window above it is outside every class's support
+    (an explained window of the most scattered class exceeds it with probability
+    ``level``).
     """
     from scipy import stats
-    spread = check_real('spread', NOISE_RATIO_SPREAD if spread is None else spread, 0.0,
-                        low_open=True)
     check_real('level', level, 0.0, 1.0, low_open=True, high_open=True)
-    return float(np.exp(stats.norm.isf(level) * spread))
+    table = NOISE_RATIO if stats_by_status is None else stats_by_status
+    if not table:
+        raise ValueError('noise_ratio_bound needs (mean, std) of at least one status')
+    z = stats.norm.isf(level)
+    return float(max(np.exp(float(m) + z * float(sd)) for m, sd in table.values()))
 
 
 def relative_verdict(flags: dict[str, bool], window_noise: float, nominal_noise: float,
@@ -265,3 +277,34 @@ def relative_verdict(flags: dict[str, bool], window_noise: float, nominal_noise:
                   'is not explained')
         return 'unknown', {k: False for k in flags}, reason
     return ('anomalous' if any(flags.values()) else 'nominal'), dict(flags), None
+
+
+# Level of the one-sided test "the window's viscous coefficient is above the reference's"
+# that a viscous flag must also pass (docs/fss.md, "Calibrated").
+VISCOUS_LEVEL = 1.0e-3
+
+
+def viscous_z(window: float, window_se: float, reference: float, reference_se: float
+              ) -> float:
+    """Return (window - reference) / sqrt(se_window^2 + se_reference^2).
+
+    Both coefficients are least-squares estimates with standard errors from their own
+    windows (core/fss/segments.py); under "no change" the difference is normal with that
+    variance. A reference without a standard error (an older calibration) counts as
+    exact.
+    """
+    ref_se = reference_se if np.isfinite(reference_se) else 0.0
+    var = window_se ** 2 + ref_se ** 2
+    if not np.isfinite(var) or var <= 0:
+        return float('nan')
+    return float((window - reference) / np.sqrt(var))
+
+
+def viscous_significant(z: float, level: float = VISCOUS_LEVEL) -> bool:
+    """Return whether z exceeds the one-sided normal quantile at ``level`` (NaN: True).
+
+    NaN (no standard error) leaves the classifier's answer alone.
+    """
+    from scipy import stats
+    check_real('level', level, 0.0, 1.0, low_open=True, high_open=True)
+    return bool(not np.isfinite(z) or z > stats.norm.isf(level))

@@ -66,6 +66,7 @@ class Extraction:
     iterations: int
     exact: bool
     identifiable: bool
+    viscous_se: float = float('inf')    # least-squares standard error of ``viscous``
     timings: dict[str, float] = field(default_factory=dict)       # wall time (s)
     cpu_timings: dict[str, float] = field(default_factory=dict)   # this thread's CPU (s)
 
@@ -118,7 +119,8 @@ def extract(speed: np.ndarray, friction: np.ndarray, config: FssConfig = FssConf
                       levels=levels, configs=qs, sigma=float(np.sqrt(refit.sigma2)),
                       rmse=refit.rmse, rejected=int(np.sum(assignment.inputs == 0)),
                       iterations=assignment.iterations, exact=assignment.exact,
-                      identifiable=refit.identifiable, timings=timings, cpu_timings=cpu)
+                      identifiable=refit.identifiable, viscous_se=refit.viscous_se,
+                      timings=timings, cpu_timings=cpu)
 
 
 def _changepoints(speed: np.ndarray, friction: np.ndarray, config: FssConfig) -> np.ndarray:
@@ -151,8 +153,8 @@ def diagnose(speed_rad_s: np.ndarray, friction_nm: np.ndarray, time_s: np.ndarra
     """Return one wheel's window diagnosis (DESIGN.md "Window diagnosis"), SI units.
 
     ``anomalies``: one boolean per anomaly; ``estimates``: base dry (N m), viscous
-    (N m s/rad), noise std (N m), levels per FSS (N m); ``changepoints``: time, index,
-    FSS and dry jump (N m) of each accepted changepoint.
+    (N m s/rad) and its standard error, noise std (N m), levels per FSS (N m);
+    ``changepoints``: time, index, FSS and dry jump (N m) of each accepted changepoint.
     """
     speed, friction = normalise(speed_rad_s, friction_nm, config)
     time_s = np.asarray(time_s, dtype=float)
@@ -168,6 +170,8 @@ def diagnose(speed_rad_s: np.ndarray, friction_nm: np.ndarray, time_s: np.ndarra
         'viscous_nms': ext.viscous * tq / config.speed_scale_rad_s,
         'noise_std_nm': ext.sigma * tq,
         'viscous_identifiable': ext.identifiable,
+        'viscous_se_nms': (ext.viscous_se * tq / config.speed_scale_rad_s
+                           if np.isfinite(ext.viscous_se) else None),   # None: not identified
         'changepoints_detected': int(ext.detected.size),
         'changepoints_rejected': ext.rejected,
         'assignment_exact': ext.exact,

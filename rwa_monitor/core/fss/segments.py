@@ -9,7 +9,9 @@ smaller margin (the middle ``min_samples`` samples at least); an interval left w
 usable sample (all NaN or zero speed) merges with its right neighbour (the changepoint
 between them is dropped); when the speed does not vary enough to separate dry from
 viscous friction the viscous coefficient is fixed at the prior and ``identifiable`` is
-False.
+False. The viscous coefficient's standard error is that of least squares with white
+noise: sqrt(sigma^2 / S), S the speed's sum of squares left after the per-interval
+means of sign(w) (the Schur complement of the dry block).
 """
 
 from __future__ import annotations
@@ -33,6 +35,7 @@ class IntervalFit:
     sigma2: float              # residual variance RSS / (n - p)
     rmse: float                # eq. (28)
     identifiable: bool
+    viscous_se: float = float('inf')   # standard error of ``viscous``: sqrt(sigma2 / S)
 
 
 def _labels(n: int, cps: np.ndarray, dk_error: int, min_samples: int) -> np.ndarray:
@@ -92,9 +95,11 @@ def fit_intervals(y: np.ndarray, x: np.ndarray, changepoints: np.ndarray, *,
     rss = float(np.sum(resid ** 2))
     dof = max(count - m - (1 if identifiable else 0), 1)
     cost = a[:-1] * a[1:] / np.maximum(a[:-1] + a[1:], 1e-12) * (dry[:-1] - dry[1:]) ** 2
+    se = float(np.sqrt(rss / dof / denom)) if identifiable else float('inf')
     return IntervalFit(changepoints=cps, dry=dry, viscous=viscous, hth=a,
                        rejection_cost=np.nan_to_num(cost), sigma2=rss / dof,
-                       rmse=float(np.sqrt(rss / max(count, 1))), identifiable=identifiable)
+                       rmse=float(np.sqrt(rss / max(count, 1))), identifiable=identifiable,
+                       viscous_se=se)
 
 
 # fit_extra_columns: least usable samples, and least part of a column beyond model (1).
