@@ -85,6 +85,10 @@ def _measured(out_dir: pathlib.Path, quick: bool) -> dict[str, Any]:
                          'noise_floor': rep['noise_floor'],
                          'rmse_before': rep['rmse_before'], 'rmse_after': rep['rmse_after'],
                          'jumps': len(sel.segments.starts) - 1,
+                         'external_torque_rows':
+                             sel.data.counts.get('dropped_external_torque_rows', 0),
+                         'external_torques': [note for note in sel.data.notes
+                                              if note.startswith('external torque')],
                          'effects': [e['name'] for e in rep['effects']],
                          'speed_rmse': rep['speed_rmse'],
                          'speed_noise': speed_noise,
@@ -152,6 +156,16 @@ def _limits(runs: list[dict]) -> list[str]:
         return ['Every run meets both cut goals.', '']
     return (['Runs below a goal (torque >= 4x, speed >= 5x), with the largest cut their noise '
              'allows (docs/identify.md, "Limits"):', ''] + lines + [''])
+
+
+def _external_torques(runs: list[dict]) -> list[str]:
+    """Return the external torque episodes cut out of the runs (core/identify/transients.py)."""
+    lines = [f'- {r["run"]} ({r["body"]}): {note}' for r in runs
+             for note in r.get('external_torques', [])]
+    head = ('External torques (a touch inside a coast, with its net speed step; a brake or '
+            'a lift-off at a run end, run trimmed) cut out before differentiating '
+            '(docs/identify.md, section 1):')
+    return [head, '', *lines, ''] if lines else ['No external torque episode was found.', '']
 
 
 def _undeclared(quick: bool) -> list[dict]:
@@ -516,23 +530,29 @@ def _markdown(res: dict) -> str:
                   f'revolutions). Samplewheel_29 left out (not a free coast).', '',
                   table(['run', 'body', 'n', 'h', 'noise floor', 'torque held-out before',
                          'after', 'cut', 'speed RMSE before (rad/s)', 'after', 'cut',
-                         'jumps', 'effects (in order)'],
+                         'jumps', 'external torque rows cut', 'effects (in order)'],
                         [[r['run'], r['body'], r['samples'], r['half_width'], r['noise_floor'],
                           r['rmse_before']['held_out'], r['rmse_after']['held_out'],
                           r['rmse_before']['held_out'] / r['rmse_after']['held_out'],
                           r['speed_rmse']['before'], r['speed_rmse']['after'],
                           r['speed_rmse']['before'] / r['speed_rmse']['after'],
-                          r['jumps'], ', '.join(r['effects']) or '(none)']
+                          r['jumps'], r.get('external_torque_rows', 0),
+                          ', '.join(r['effects']) or '(none)']
                          for r in m['runs']]), '',
+                  *_external_torques(m['runs']),
                   f'**Speed (output error)**: pooled speed RMSE {p["speed_rmse_before"]:.4g} -> '
                   f'{p["speed_rmse_after"]:.4g} rad/s, cut {p["speed_cut"]:.1f}x (goal >= 10x); '
                   f'smallest cut of a run {p["speed_cut_min"]:.1f}x (goal >= 5x). Smallest '
                   f'torque RMSE cut of a run {p["torque_cut_min"]:.1f}x (goal >= 4x). Speed '
-                  f'integrated from the first sample of each coast (one segment per run, so '
-                  f'the speed RMSE is over the whole run; the model was fitted on the '
-                  f'interleaved training blocks). h = differentiator half width chosen from '
-                  f'the data (docs/identify.md). Before this issue (main 95c06df, h = 5): '
-                  f'pooled torque RMSE 0.2175 -> 0.109 N m, per-run factors 2.0 to 17.1.', '',
+                  f'integrated from the first sample of each coast, and again after a touch '
+                  f'that was cut out (its impulse belongs to no friction model); the speed '
+                  f'RMSE is over the whole run, the model was fitted on the interleaved '
+                  f'training blocks. h = differentiator half width chosen from the data '
+                  f'(docs/identify.md). Before this issue (main 95c06df, h = 5): pooled '
+                  f'torque RMSE 0.2175 -> 0.109 N m, per-run factors 2.0 to 17.1. Before '
+                  f'external torques were cut out (main 8b89610): Greenspeed_Scorcher Left 80 '
+                  f'psi torque cut 1.8x, speed cut 3.7x, 2 jumps (a touch at 150 s and an '
+                  f'artefact of it), h = 12.', '',
                   *_limits(m['runs']),
                   f'Pooled over {len(m["runs"])} runs (sample-weighted RMS): held out '
                   f'{p["rmse_before_held_out"]:.4g} -> {p["rmse_after_held_out"]:.4g}, in sample '

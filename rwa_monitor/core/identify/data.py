@@ -11,6 +11,7 @@ from rwa_monitor.core.identify.differentiate import choose_half_width, HALF_WIDT
 from rwa_monitor.core.identify.differentiate import local_noise_std
 from rwa_monitor.core.identify.differentiate import local_polynomial_derivative
 from rwa_monitor.core.identify.history import History, history
+from rwa_monitor.core.identify.transients import external_torques
 from rwa_monitor.core.params import check_int, check_real
 from rwa_monitor.exceptions import NotIdentifiableError
 
@@ -147,6 +148,8 @@ def prepare(time: np.ndarray, speed: np.ndarray, friction: np.ndarray | None = N
         if current is not None:
             ok &= np.isfinite(current)
         ok = _usable(time, ok, counts)
+        if current is None:
+            ok = _without_external_torques(time, speed, ok, counts, notes)
         if half_width == 'auto':
             half_width, differentiator = _auto_half_width(time, speed, ok)
         half_width = check_int('half_width', half_width, 1, 1000)
@@ -173,6 +176,30 @@ def _auto_half_width(time: np.ndarray, speed: np.ndarray, ok: np.ndarray
     best, table = choose_half_width(time[run], speed[run])
     return best, {'half_width': best, 'chosen_from': 'data (noise against bias)',
                   'rows_used': len(run), 'candidates': {str(k): v for k, v in table.items()}}
+
+
+def _without_external_torques(time: np.ndarray, speed: np.ndarray, ok: np.ndarray,
+                              counts: dict[str, int], notes: list[str]) -> np.ndarray:
+    """Return ``ok`` without the rows of external torque episodes (transients.py).
+
+    Only on a coast (no motor current): with a drive the commanded torque changes dw/dt
+    legitimately. The rows are dropped and counted; an episode inside a run splits it
+    (each side is differentiated and, in the output error, integrated on its own).
+    """
+    before = ok
+    ok = ok.copy()
+    total = int(np.sum(ok))
+    for run in _chunks(time, ok):
+        for ep in external_torques(time[run], speed[run], samples=total):
+            rows = run[ep.first:ep.last + 1]
+            ok[rows] = False
+            what = (f'speed step {ep.impulse_rad_s:.3g} rad/s, z = {ep.impulse_z:.1f}'
+                    if ep.kind == 'impulse' else 'at an end of a run: run trimmed')
+            notes.append(f'external torque (touch or brake) from t = {time[rows[0]]:.6g} s to '
+                         f'{time[rows[-1]]:.6g} s ({what}; dw/dt up to {ep.peak_z:.1f} sigma '
+                         f'off its trend): {len(rows)} rows cut out')
+    counts['dropped_external_torque_rows'] = int(np.sum(before & ~ok))
+    return ok
 
 
 def _run_starts(time: np.ndarray) -> list[int]:

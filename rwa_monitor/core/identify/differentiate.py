@@ -83,6 +83,14 @@ def local_polynomial_derivative(time: np.ndarray, values: np.ndarray, half_width
     return np.sum(slope * values[idx], axis=1), np.sqrt(np.sum(slope ** 2, axis=1))
 
 
+def local_polynomial_smooth(time: np.ndarray, values: np.ndarray, half_width: int,
+                            order: int = 2) -> np.ndarray:
+    """Return the local polynomial's value at every sample (windows shifted at the ends)."""
+    time = np.asarray(time, dtype=float)
+    idx, coef = _local_fit_weights(time, half_width, order)
+    return np.sum(coef[:, 0, :] * np.asarray(values, dtype=float)[idx], axis=1)
+
+
 def local_noise_std(time: np.ndarray, values: np.ndarray, half_width: int = 5,
                     order: int = 2, block: int = 0, exclude: np.ndarray | None = None
                     ) -> np.ndarray:

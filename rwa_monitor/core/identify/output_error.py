@@ -7,6 +7,14 @@ integrating J dw/dt = u + f(w, t) from the first measured sample of each segment
 derivative amplifies the speed noise by the differentiator's gain; the integrated speed
 does not, so small, systematic model errors (a missing drag term) dominate it.
 
+Initial value: the first sample's speed, corrected by the median misfit of the
+integrated speed over the segment's first 2h+1 samples (h the differentiator's half
+width) and integrated again. A per-revolution speed carries single glitched samples
+(one pulse late: one speed high, the next low); taken as is, such a first sample set
+the whole trajectory off by its error (0.27 rad/s on one drum run, ten times the
+model's error). The median over a window is not moved by one glitch; both models get
+the same rule.
+
 Integration: classical Runge-Kutta (order 4) on the sample times, u held over each
 interval (the zero-order hold of a torque command), aux channels and history channels
 (hysteresis) taken at the interval's start; time-dependent effects (drift, periodic) are
@@ -51,16 +59,22 @@ def integrate_speed(selection, inertia: float, model: str, torque: np.ndarray | 
     u = np.zeros(n) if torque is None else np.asarray(torque, dtype=float)
     bounds = list(starts if starts is not None else data.runs) + [n]
     out = np.empty(n)
+    first = 2 * max(data.half_width, 1) + 1
     for a, b in zip(bounds[:-1], bounds[1:]):
-        out[a:b] = _segment(selection, coef, effects, inertia, u, a, b)
+        start = float(data.speed[a])
+        path = _segment(selection, coef, effects, inertia, u, a, b, start)
+        m = min(first, b - a)
+        misfit = float(np.median(path[:m] - data.speed[a:a + m]))
+        out[a:b] = _segment(selection, coef, effects, inertia, u, a, b, start - misfit) \
+            if misfit != 0.0 else path
     return out
 
 
-def _segment(selection, coef, effects, inertia, u, a, b) -> np.ndarray:
-    """Integrate one segment (rows a..b-1), vectorised over nothing: one RK4 per step."""
+def _segment(selection, coef, effects, inertia, u, a, b, start: float) -> np.ndarray:
+    """Integrate one segment (rows a..b-1) from ``start`` (rad/s): one RK4 per step."""
     t = selection.data.time
     w = np.empty(b - a)
-    w[0] = selection.data.speed[a]
+    w[0] = start
     for k in range(a, b - 1):
         h = t[k + 1] - t[k]
         row = np.array([k])
