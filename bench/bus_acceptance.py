@@ -287,10 +287,12 @@ def markdown(acc: dict[str, Any], r: float, rate_hz: float) -> list[str]:
                   + ' of its size, and extra declarations of the same ramp followed ('
                   + ', '.join(f'{e["extra_declarations"]} in {e["detected"]} {name}s'
                               for name, e in ramps.items())
-                  + '). The categorisation tests a step: fitted over a window in which the '
-                  'level is still rising, the rise is shared with the other direction '
-                  'wherever |w| trends; measured z values: docs/calibration.md, "Kinds on '
-                  'ramps".', '']
+                  + '). A ramp is named by the growth tests of the categorisation (a level '
+                  'growing in time in one direction; docs/llr.md "Kinds on ramps"); its kind '
+                  'at declaration is often both or undecided and becomes the right one at the '
+                  "re-checks; a re-declaration that the first change's growth explains is a "
+                  'revision of it, not a new declaration (development numbers: '
+                  'docs/calibration.md, "Kinds on ramps").', '']
     c = acc['calibration']
     described = '; '.join(
         f'{w}: effects {", ".join(v["effects"]) or "none"}, noise {v["noise_std_nm"]:.3g} N m, '
