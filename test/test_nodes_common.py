@@ -110,3 +110,40 @@ def test_a_failing_health_provider_reports_error_not_a_crash():
         status = diag.status(diag.components['rw1'])
         assert status.level == DiagnosticStatus.ERROR and 'bug' in status.message
         diag.publish()
+
+
+_INTERRUPTED_INSIDE_RCLPY = '''
+import os, signal, sys, time
+from rclpy.clock import Clock
+from rclpy.clock_type import ClockType
+from rclpy.node import Node
+from rwa_monitor.nodes.common import run_node
+
+
+class Interrupted(Node):
+    def __init__(self):
+        super().__init__('interrupted')
+        self.create_timer(0.1, self.tick, clock=Clock(clock_type=ClockType.STEADY_TIME))
+
+    def tick(self):
+        try:
+            os.kill(os.getpid(), signal.SIGINT)
+            time.sleep(1.0)
+        except KeyboardInterrupt:
+            # What rclpy's C++ layer makes of Ctrl-C arriving inside take_message.
+            raise RuntimeError('Unable to convert call argument 0 to Python object')
+
+
+sys.exit(run_node(Interrupted, [sys.argv[0]]))
+'''
+
+
+def test_ctrl_c_inside_an_rclpy_call_is_a_clean_stop(tmp_path):
+    import subprocess
+    import sys
+    script = tmp_path / 'interrupted.py'
+    script.write_text(_INTERRUPTED_INSIDE_RCLPY)
+    done = subprocess.run([sys.executable, str(script)], capture_output=True, text=True,
+                          timeout=60)
+    assert done.returncode == 0, done.stderr
+    assert 'Traceback' not in done.stderr + done.stdout

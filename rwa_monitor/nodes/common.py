@@ -21,8 +21,10 @@ The API (documented in docs/nodes.md):
 from __future__ import annotations
 
 import contextlib
+import signal
 import sys
 import textwrap
+import threading
 import time
 from typing import Any, Callable, Iterator, Mapping, NamedTuple, Sequence
 
@@ -461,6 +463,14 @@ def node_help(prog: str, description: str | None, specs: Sequence[Any] = ()) -> 
     return '\n'.join(lines)
 
 
+def _interrupt_handler(flag: threading.Event) -> Callable[[int, Any], None]:
+    """Return a SIGINT handler that records the signal, then interrupts as Python does."""
+    def handler(signum: int, frame: Any) -> None:
+        flag.set()
+        raise KeyboardInterrupt
+    return handler
+
+
 def run_node(factory: Callable[[], Node], args: Sequence[str] | None = None,
              executor: str = 'single', *, help_text: str | Callable[[], str] | None = None
              ) -> int:
@@ -487,6 +497,9 @@ def run_node(factory: Callable[[], Node], args: Sequence[str] | None = None,
                              getattr(module, 'PARAMETERS', ()))
         print(text)
         return 0
+    interrupted = threading.Event()
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGINT, _interrupt_handler(interrupted))
     rclpy.init(args=with_sim_time(argv))
     node = None
     try:
@@ -504,9 +517,11 @@ def run_node(factory: Callable[[], Node], args: Sequence[str] | None = None,
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except Exception:  # noqa: BLE001 - see below
-        if rclpy.ok():
+        if rclpy.ok() and not interrupted.is_set():
             raise
-        # The context was shut down (SIGINT/SIGTERM) while a callback was using it.
+        # The context was shut down (SIGINT/SIGTERM) while a callback was using it, or
+        # Ctrl-C landed inside a call into rclpy's C++ layer, which turns the
+        # KeyboardInterrupt into a RuntimeError (seen in take_message).
     finally:
         if node is not None:
             with contextlib.suppress(Exception):
