@@ -319,6 +319,15 @@ class LLRDetector:
         Non-finite values (or a missing auxiliary channel of the model) and times not after
         the last accepted one are dropped and counted; they never enter the sums.
         """
+        if self._fast:
+            # The paper's model (whitened when an AR noise model is fitted): one compiled
+            # call per sample (core/llr_kernel.py step), which takes Python and numpy
+            # numbers as floats; anything else is converted here first.
+            try:
+                flags = _step(self._fs, self._ints, t, speed, friction)
+            except TypeError:
+                return self._update_converted(t, speed, friction)
+            return self._after(flags, t, speed, friction) if flags else []
         try:
             t = float(t)
             w = float(speed)
@@ -327,11 +336,6 @@ class LLRDetector:
             self._ints[kern.I_ROWS] += 1
             self._counters['nonfinite'] += 1
             return []
-        if self._fast:
-            # The paper's model (whitened when an AR noise model is fitted): one compiled
-            # call per sample (core/llr_kernel.py step).
-            flags = _step(self._fs, self._ints, t, w, f)
-            return self._after(flags, t, w, f) if flags else []
         row = kern.accept(self._fs, self._ints, t, w, f)
         if row < 0:
             self._reject(t, w, f)
@@ -345,10 +349,23 @@ class LLRDetector:
         self._last_t = t
         return self.ingest_row(row, t, f, h, w)
 
+    def _update_converted(self, t: Any, speed: Any, friction: Any) -> list[AnomalyEvent]:
+        """:meth:`update` of the fast path for values the kernel does not take as floats."""
+        try:
+            t = float(t)
+            w = float(speed)
+            f = float(friction)
+        except (TypeError, ValueError):
+            self._ints[kern.I_ROWS] += 1
+            self._counters['nonfinite'] += 1
+            return []
+        flags = _step(self._fs, self._ints, t, w, f)
+        return self._after(flags, t, w, f) if flags else []
+
     def _after(self, flags: int, t: float, w: float, f: float) -> list[AnomalyEvent]:
         """Act on the flags of a kernel call: count a rejection, revise, test, declare."""
         if flags & kern.REJECT:
-            self._reject(t, w, f)
+            self._reject(float(t), float(w), float(f))
             return []
         j = self._pos - 1
         events = self._revise(j) if flags & kern.REVISE else []

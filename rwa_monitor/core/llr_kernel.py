@@ -67,6 +67,11 @@ I_O_AR = 19
 I_O_LAGS = 20
 I_SCALARS = 21
 
+# A candidate goes to the exact tail only if its lower bound of log p_k is within this
+# relative margin above p_min (candidate_log_p2 tests 1e-9; rounding is ~1e-15).
+SKIP_REL = 1e-7
+_LOG_2_OVER_SQRT_PI = math.log(2.0 / math.sqrt(math.pi))
+
 # Flags returned by step / ingest / test.
 REJECT = 1    # sample not accepted (the caller counts it by reason)
 REVISE = 2    # the position is a revision point of the last declared change
@@ -97,33 +102,127 @@ def allocate(length: int, width: int, term_width: int, ar_max: int
 
 
 @njit(cache=True)
-def accept(fs, ints, t, w, f):
-    """Count the row; return its index if the sample is accepted, else -1.
+def test(fs, ints, k, at, bt, ct, ut, vt):
+    """Algorithm 1 lines 9-18 at candidate ``k`` (p = 2); return EXACT, DECLARE or 0.
 
-    Accepted: finite, ``|w| < max_abs_speed``, ``|f| < max_abs_friction``, time after
-    the last accepted one.
+    ``(at, bt, ct, ut, vt)`` is the prefix row at ``k + w`` (T_k), the one at ``k`` (P_k)
+    is in the ring. Statistic: eq. (5) as ``d^T Pi_P d / sigma^2`` with ``d = x_T - x_P =
+    Pi_T^-1 (q_W - Pi_W x_P)`` (the window's residual against the reference fit: no
+    difference of two nearly equal estimates). Skips (counted) when ``Pi_P`` is
+    ill-conditioned. When the skip bound ``y / tr < y*`` (Algorithm 2) does not rule the
+    candidate out, returns EXACT with ``y``, ``tr = trace(Pi_T^-1 Pi_W)``, ``dm = det(Pi_T^-1
+    Pi_W)`` and the degrees of freedom stored: the caller computes the tail
+    (``llr_common.candidate_log_p2``), records a new minimum and decides.
     """
-    row = ints[I_ROWS]
-    ints[I_ROWS] = row + 1
-    max_w = fs[F_MAX_W]
-    max_f = fs[F_MAX_F]
-    if -max_w < w < max_w and -max_f < f < max_f and fs[F_LAST_T] < t < math.inf:
-        return row
-    return -1
+    length = ints[I_L]
+    o = ints[I_O_RPREF] + 6 * (k % length)
+    a = fs[o]
+    b = fs[o + 1]
+    c = fs[o + 2]
+    u = fs[o + 3]
+    v = fs[o + 4]
+    e = fs[o + 5]
+    r = ints[I_R]
+    if r >= 0 and k - r > ints[I_C]:
+        # Sliding reference: P_k = [k - R, k - 1] (docs/llr.md, "Slow drifts").
+        o = ints[I_O_RPREF] + 6 * ((k - r) % length)
+        b0 = fs[o]
+        b1 = fs[o + 1]
+        b2 = fs[o + 2]
+        b3 = fs[o + 3]
+        b4 = fs[o + 4]
+        b5 = fs[o + 5]
+        a, b, c, u, v, e = a - b0, b - b1, c - b2, u - b3, v - b4, e - b5
+        at, bt, ct, ut, vt = at - b0, bt - b1, ct - b2, ut - b3, vt - b4
+        n_p = r
+    else:
+        n_p = k - ints[I_C]
+    ac = a * c
+    det = ac - b * b
+    dett = at * ct - bt * bt
+    if det > fs[F_MIN_EXC] * ac and dett > 0.0:
+        x1 = (c * u - b * v) / det
+        x2 = (a * v - b * u) / det
+        dof = -1
+        if ints[I_ESTIMATED]:
+            s2 = (e - (x1 * u + x2 * v)) / (n_p - 2)
+            floor = fs[F_FLOOR_REL] * e / n_p + fs[F_FLOOR_ABS]
+            if not s2 > floor:
+                s2 = floor
+            dof = n_p - 2
+        else:
+            s2 = fs[F_NOISE_VAR]
+        aw = at - a
+        bw = bt - b
+        cw = ct - c
+        g1 = (ut - u) - (aw * x1 + bw * x2)
+        g2 = (vt - v) - (bw * x1 + cw * x2)
+        d1 = (ct * g1 - bt * g2) / dett
+        d2 = (at * g2 - bt * g1) / dett
+        y = (a * d1 * d1 + 2.0 * b * d1 * d2 + c * d2 * d2) / s2
+        tr = (ct * aw - 2.0 * bt * bw + at * cw) / dett
+        if tr > 0.0 and y > 0.0 and not y / tr < fs[F_YSTAR]:
+            dm = (aw * cw - bw * bw) / dett
+            logpmin = fs[F_LOGPMIN]
+            if not lower_bound(y, tr, dm, float(dof)) > logpmin + SKIP_REL * (1.0 - logpmin):
+                fs[F_Y] = y
+                fs[F_TR] = tr
+                fs[F_DM] = dm
+                ints[I_K] = k
+                ints[I_DOF] = dof
+                return EXACT
+    else:
+        ints[I_ILL] += 1
+    if fs[F_LOGPMIN] <= fs[F_LOGR] and k > ints[I_KMIN] + ints[I_KVERIF]:
+        return DECLARE
+    return 0
 
 
 @njit(cache=True)
-def step(fs, ints, t, w, f):
-    """Process one sample of model (1): accept, form ``h = (-sign w, -w)``, ingest."""
-    row = accept(fs, ints, t, w, f)
-    if row < 0:
-        return REJECT
-    fs[F_LAST_T] = t
-    h1 = -1.0 if w > 0.0 else (1.0 if w < 0.0 else 0.0)
-    return ingest(fs, ints, row, t, f, h1, -w)
+def _log_lower(b):
+    """``gchi2.log_lower_bound``: a lower bound of ``log erfc(sqrt(b))`` (b < 0 taken as 0)."""
+    if not b > 0.0:
+        b = 0.0
+    return -b + _LOG_2_OVER_SQRT_PI - math.log(math.sqrt(b) + math.sqrt(b + 2.0))
 
 
-@njit(cache=True)
+@njit(cache=True, error_model='numpy')
+def lower_bound(y, tr, dm, dof):
+    """Return the lower bound of log p_k that ``llr_common.candidate_log_p2`` tests.
+
+    Same formula (eigenvalues of ``Pi_T^-1 Pi_W`` from trace and determinant, clamped;
+    Gaussian bound ``gchi2.log_lower_bound`` or, for ``dof >= 0``, the studentised one):
+    equal to it up to rounding, far below the margin SKIP_REL with which it is used.
+    """
+    half = 0.5 * tr
+    lam1 = half + math.sqrt(max(half * half - dm, 0.0))
+    lam2 = min(max(dm / lam1, 0.0), lam1)
+    b = y / (2.0 * lam1)
+    rho = lam2 / lam1
+    a = b * (1.0 - rho)
+    if dof < 0.0:
+        return _log_lower(a) - b * rho
+    big_a = dof * a / (dof + 2.0 * b)
+    return -0.5 * dof * math.log1p(2.0 * b / dof) + big_a + _log_lower(big_a)
+
+
+@njit('float64[::1](float64[::1], float64[::1], float64[::1], float64[::1])', cache=True)
+def lower_bounds(y, tr, dm, dof):
+    """Return :func:`lower_bound` of each candidate (``dof < 0``: known noise)."""
+    out = np.empty(y.size)
+    for i in range(y.size):
+        out[i] = lower_bound(y[i], tr[i], dm[i], dof[i])
+    return out
+
+
+@njit('int64(float64[::1], int64[::1], int64, float64[::1])', cache=True)
+def test_row(fs, ints, k, row):
+    """:func:`test` with T_k's prefix row given as an array (a restart's catch-up)."""
+    return test(fs, ints, k, row[0], row[1], row[2], row[3], row[4])
+
+
+@njit('int64(float64[::1], int64[::1], int64, float64, float64, float64, float64)',
+      cache=True)
 def ingest(fs, ints, row, t, f, h1, h2):
     """Prewhiten an accepted sample, add it to the sums and ring, test; return flags.
 
@@ -194,81 +293,28 @@ def ingest(fs, ints, row, t, f, h1, h2):
     return flags
 
 
-@njit(cache=True)
-def test_row(fs, ints, k, row):
-    """:func:`test` with T_k's prefix row given as an array (a restart's catch-up)."""
-    return test(fs, ints, k, row[0], row[1], row[2], row[3], row[4])
+@njit('int64(float64[::1], int64[::1], float64, float64, float64)', cache=True)
+def accept(fs, ints, t, w, f):
+    """Count the row; return its index if the sample is accepted, else -1.
 
-
-@njit(cache=True)
-def test(fs, ints, k, at, bt, ct, ut, vt):
-    """Algorithm 1 lines 9-18 at candidate ``k`` (p = 2); return EXACT, DECLARE or 0.
-
-    ``(at, bt, ct, ut, vt)`` is the prefix row at ``k + w`` (T_k), the one at ``k`` (P_k)
-    is in the ring. Statistic: eq. (5) as ``d^T Pi_P d / sigma^2`` with ``d = x_T - x_P =
-    Pi_T^-1 (q_W - Pi_W x_P)`` (the window's residual against the reference fit: no
-    difference of two nearly equal estimates). Skips (counted) when ``Pi_P`` is
-    ill-conditioned. When the skip bound ``y / tr < y*`` (Algorithm 2) does not rule the
-    candidate out, returns EXACT with ``y``, ``tr = trace(Pi_T^-1 Pi_W)``, ``dm = det(Pi_T^-1
-    Pi_W)`` and the degrees of freedom stored: the caller computes the tail
-    (``llr_common.candidate_log_p2``), records a new minimum and decides.
+    Accepted: finite, ``|w| < max_abs_speed``, ``|f| < max_abs_friction``, time after
+    the last accepted one.
     """
-    length = ints[I_L]
-    o = ints[I_O_RPREF] + 6 * (k % length)
-    a = fs[o]
-    b = fs[o + 1]
-    c = fs[o + 2]
-    u = fs[o + 3]
-    v = fs[o + 4]
-    e = fs[o + 5]
-    r = ints[I_R]
-    if r >= 0 and k - r > ints[I_C]:
-        # Sliding reference: P_k = [k - R, k - 1] (docs/llr.md, "Slow drifts").
-        o = ints[I_O_RPREF] + 6 * ((k - r) % length)
-        b0 = fs[o]
-        b1 = fs[o + 1]
-        b2 = fs[o + 2]
-        b3 = fs[o + 3]
-        b4 = fs[o + 4]
-        b5 = fs[o + 5]
-        a, b, c, u, v, e = a - b0, b - b1, c - b2, u - b3, v - b4, e - b5
-        at, bt, ct, ut, vt = at - b0, bt - b1, ct - b2, ut - b3, vt - b4
-        n_p = r
-    else:
-        n_p = k - ints[I_C]
-    ac = a * c
-    det = ac - b * b
-    dett = at * ct - bt * bt
-    if det > fs[F_MIN_EXC] * ac and dett > 0.0:
-        x1 = (c * u - b * v) / det
-        x2 = (a * v - b * u) / det
-        dof = -1
-        if ints[I_ESTIMATED]:
-            s2 = (e - (x1 * u + x2 * v)) / (n_p - 2)
-            floor = fs[F_FLOOR_REL] * e / n_p + fs[F_FLOOR_ABS]
-            if not s2 > floor:
-                s2 = floor
-            dof = n_p - 2
-        else:
-            s2 = fs[F_NOISE_VAR]
-        aw = at - a
-        bw = bt - b
-        cw = ct - c
-        g1 = (ut - u) - (aw * x1 + bw * x2)
-        g2 = (vt - v) - (bw * x1 + cw * x2)
-        d1 = (ct * g1 - bt * g2) / dett
-        d2 = (at * g2 - bt * g1) / dett
-        y = (a * d1 * d1 + 2.0 * b * d1 * d2 + c * d2 * d2) / s2
-        tr = (ct * aw - 2.0 * bt * bw + at * cw) / dett
-        if tr > 0.0 and y > 0.0 and not y / tr < fs[F_YSTAR]:
-            fs[F_Y] = y
-            fs[F_TR] = tr
-            fs[F_DM] = (aw * cw - bw * bw) / dett
-            ints[I_K] = k
-            ints[I_DOF] = dof
-            return EXACT
-    else:
-        ints[I_ILL] += 1
-    if fs[F_LOGPMIN] <= fs[F_LOGR] and k > ints[I_KMIN] + ints[I_KVERIF]:
-        return DECLARE
-    return 0
+    row = ints[I_ROWS]
+    ints[I_ROWS] = row + 1
+    max_w = fs[F_MAX_W]
+    max_f = fs[F_MAX_F]
+    if -max_w < w < max_w and -max_f < f < max_f and fs[F_LAST_T] < t < math.inf:
+        return row
+    return -1
+
+
+@njit('int64(float64[::1], int64[::1], float64, float64, float64)', cache=True)
+def step(fs, ints, t, w, f):
+    """Process one sample of model (1): accept, form ``h = (-sign w, -w)``, ingest."""
+    row = accept(fs, ints, t, w, f)
+    if row < 0:
+        return REJECT
+    fs[F_LAST_T] = t
+    h1 = -1.0 if w > 0.0 else (1.0 if w < 0.0 else 0.0)
+    return ingest(fs, ints, row, t, f, h1, -w)
