@@ -8,9 +8,9 @@ positions, then the ring of row indices). The exact tail of eq. (7) (rare: a sam
 skip bound does not rule it out) and all categorisation stay in Python: the kernel returns
 flags and leaves ``y``, ``tr``, ``dm`` in ``fs``.
 
-Compiled with numba (no fast-math: the same IEEE operations in the same order as the
-batch path and the golden files; docs/llr.md "Compiled per-sample path"). The functions
-are plain Python functions when numba is absent or disabled (``NUMBA_DISABLE_JIT=1``).
+Compiled by :mod:`rwa_monitor.core.jit` (numba, no fast-math: the same IEEE operations in
+the same order as the batch path and the golden files; docs/llr.md "Compiled per-sample
+path"); plain Python functions when numba is absent or disabled.
 """
 
 from __future__ import annotations
@@ -19,12 +19,7 @@ import math
 
 import numpy as np
 
-try:
-    from numba import njit
-except ImportError:   # pragma: no cover - numba is pinned; plain Python keeps it working
-    def njit(*args, **kwargs):
-        """Return the function unchanged (no compiler)."""
-        return args[0] if args and callable(args[0]) else (lambda fn: fn)
+from rwa_monitor.core.jit import njit
 
 # Float scalars of ``fs``.
 F_LAST_T = 0
