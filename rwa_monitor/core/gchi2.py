@@ -145,6 +145,7 @@ def _log_sf2_array(x: np.ndarray, w1: float, w2: float) -> np.ndarray:
     return out
 
 
+@njit('float64(float64)', cache=True)
 def log_lower_bound(b: float) -> float:
     """Return a lower bound of ``log erfc(sqrt(b))`` (closed form, b >= 0).
 
@@ -164,6 +165,7 @@ def log_lower_bound_array(b: np.ndarray) -> np.ndarray:
     return -b + _LOG_2_OVER_SQRT_PI - np.log(np.sqrt(b) + np.sqrt(b + 2.0))
 
 
+@njit('float64(float64)', cache=True)
 def skip_threshold(log_p: float) -> float:
     """Return ``y`` >= 0 such that ``b < y`` implies ``log_lower_bound(b) > log_p``.
 

@@ -19,6 +19,7 @@ import math
 
 import numpy as np
 
+from rwa_monitor.core.gchi2 import log_lower_bound
 from rwa_monitor.core.jit import njit
 
 # Float scalars of ``fs``.
@@ -65,7 +66,6 @@ I_SCALARS = 21
 # A candidate goes to the exact tail only if its lower bound of log p_k is within this
 # relative margin above p_min (candidate_log_p2 tests 1e-9; rounding is ~1e-15).
 SKIP_REL = 1e-7
-_LOG_2_OVER_SQRT_PI = math.log(2.0 / math.sqrt(math.pi))
 
 # Flags returned by step / ingest / test.
 REJECT = 1    # sample not accepted (the caller counts it by reason)
@@ -173,20 +173,12 @@ def test(fs, ints, k, at, bt, ct, ut, vt):
     return 0
 
 
-@njit(cache=True)
-def _log_lower(b):
-    """``gchi2.log_lower_bound``: a lower bound of ``log erfc(sqrt(b))`` (b < 0 taken as 0)."""
-    if not b > 0.0:
-        b = 0.0
-    return -b + _LOG_2_OVER_SQRT_PI - math.log(math.sqrt(b) + math.sqrt(b + 2.0))
-
-
 @njit(cache=True, error_model='numpy')
 def lower_bound(y, tr, dm, dof):
     """Return the lower bound of log p_k that ``llr_common.candidate_log_p2`` tests.
 
     Same formula (eigenvalues of ``Pi_T^-1 Pi_W`` from trace and determinant, clamped;
-    Gaussian bound ``gchi2.log_lower_bound`` or, for ``dof >= 0``, the studentised one):
+    Gaussian bound :func:`gchi2.log_lower_bound` or, for ``dof >= 0``, the studentised one):
     equal to it up to rounding, far below the margin SKIP_REL with which it is used.
     """
     half = 0.5 * tr
@@ -196,9 +188,9 @@ def lower_bound(y, tr, dm, dof):
     rho = lam2 / lam1
     a = b * (1.0 - rho)
     if dof < 0.0:
-        return _log_lower(a) - b * rho
+        return log_lower_bound(a) - b * rho
     big_a = dof * a / (dof + 2.0 * b)
-    return -0.5 * dof * math.log1p(2.0 * b / dof) + big_a + _log_lower(big_a)
+    return -0.5 * dof * math.log1p(2.0 * b / dof) + big_a + log_lower_bound(big_a)
 
 
 @njit('float64[::1](float64[::1], float64[::1], float64[::1], float64[::1])', cache=True)
