@@ -29,8 +29,10 @@ from scipy import stats
 # calibration seed 1000 / evaluation 3000-3009, then 4020 / 4000-4019, then 6020 /
 # 6000-6019: those are spent (seen while developing) and are development seeds now, like
 # every seed below 100.
+# 40 runs, 10 per fault, so that one miss in a fault still reads 90 % (with 5 runs per
+# fault the 90 % goal allowed no miss at all).
 CALIBRATION_SEED = 7020
-EVAL_SEEDS = tuple(range(7000, 7020))
+EVAL_SEEDS = tuple(range(7000, 7020)) + tuple(range(7100, 7120))
 SPENT_SEEDS = '3000-3009, 4000-4020 and 6000-6020'
 STREAMING_GOAL = 300_000.0   # samples/s, issue 12 item 3 (model (1) throughput kept)
 BATCH_GOAL = 3_000_000.0
@@ -226,6 +228,17 @@ def _chance(mode: dict[str, Any]) -> str:
             f'{mode["other_wheels_after_fault"]}) = {mode["other_wheels_after_fault_p"]:.2f}')
 
 
+def _ranges(seeds: list[int]) -> str:
+    """Return seeds as runs of consecutive values, e.g. '7000-7019, 7100-7119'."""
+    runs: list[list[int]] = []
+    for s in seeds:
+        if runs and s == runs[-1][-1] + 1:
+            runs[-1].append(s)
+        else:
+            runs.append([s])
+    return ', '.join(f'{r[0]}-{r[-1]}' if len(r) > 1 else f'{r[0]}' for r in runs)
+
+
 def _met(ok: bool, gap: str = '') -> str:
     return 'met' if ok else f'**not met**{f" ({gap})" if gap else ""}'
 
@@ -278,7 +291,7 @@ def markdown(acc: dict[str, Any], r: float, rate_hz: float) -> list[str]:
              f'Default guidance and null speed (wheels cross zero). Calibration: one '
              f'fault-free {acc["calibration"]["hours"]:g}-hour run, seed '
              f'{acc["calibration"]["seed"]} (`rwa-monitor calibrate`). Evaluation: '
-             f'{len(seeds)} fresh {HOURS:g}-hour runs, seeds {seeds[0]}-{seeds[-1]} (fixed '
+             f'{len(seeds)} fresh {HOURS:g}-hour runs, seeds {_ranges(seeds)} (fixed '
              f'before any result was seen; development used seeds below 100 and the seeds of '
              f'earlier acceptance runs, {SPENT_SEEDS}), one fault '
              f'per run on one wheel at {FAULT_TIME_S:g} s (steps: dry +3e-4 N m, viscous '
