@@ -32,6 +32,9 @@ from rwa_monitor.core.params import AUTO
 _INF = math.inf
 _PREF = slice(kern.F_PREF, kern.F_PREF + 6)
 _step = kern.step
+_KERNEL_COUNTERS = (('nonfinite', kern.I_NONFINITE), ('out_of_range', kern.I_OUT_OF_RANGE),
+                    ('non_increasing_time', kern.I_NON_INCREASING),
+                    ('ill_conditioned', kern.I_ILL))
 
 __all__ = ['candidate_log_p2', 'COUNTER_NAMES', 'detect_batch', 'detect_batch_with_counters',
            'LLRDetector', 'NoiseModel', 'validate_parameters']
@@ -147,7 +150,9 @@ class LLRDetector:
     def counters(self) -> dict[str, int]:
         """Rejected samples and skipped tests by reason."""
         counters = dict(self._counters)
-        counters['ill_conditioned'] += int(self._ints[kern.I_ILL])
+        ints = self._ints
+        for name, slot in _KERNEL_COUNTERS:
+            counters[name] += int(ints[slot])
         return counters
 
     @property
@@ -327,7 +332,7 @@ class LLRDetector:
                 flags = _step(self._fs, self._ints, t, speed, friction)
             except TypeError:
                 return self._update_converted(t, speed, friction)
-            return self._after(flags, t, speed, friction) if flags else []
+            return self._after(flags) if flags else []
         try:
             t = float(t)
             w = float(speed)
@@ -338,7 +343,6 @@ class LLRDetector:
             return []
         row = kern.accept(self._fs, self._ints, t, w, f)
         if row < 0:
-            self._reject(t, w, f)
             return []
         if self._default:
             h = (-1.0 if w > 0.0 else (1.0 if w < 0.0 else 0.0), -w)
@@ -360,13 +364,10 @@ class LLRDetector:
             self._counters['nonfinite'] += 1
             return []
         flags = _step(self._fs, self._ints, t, w, f)
-        return self._after(flags, t, w, f) if flags else []
+        return self._after(flags) if flags else []
 
-    def _after(self, flags: int, t: float, w: float, f: float) -> list[AnomalyEvent]:
-        """Act on the flags of a kernel call: count a rejection, revise, test, declare."""
-        if flags & kern.REJECT:
-            self._reject(float(t), float(w), float(f))
-            return []
+    def _after(self, flags: int) -> list[AnomalyEvent]:
+        """Act on the flags of a kernel call: revise, finish the test, declare."""
         j = self._pos - 1
         events = self._revise(j) if flags & kern.REVISE else []
         if flags & kern.DECLARE or flags & kern.EXACT and self._exact():
@@ -385,15 +386,6 @@ class LLRDetector:
         if logp is not None and logp < logpmin:
             self._record(k, logp)
         return self._logpmin <= self._logr and k > self._kmin + self._kverif
-
-    def _reject(self, t: float, w: float, f: float) -> None:
-        """Count a sample that is not accepted, by the first check it fails."""
-        if (t - t) + (w - w) + (f - f) != 0.0:
-            self._counters['nonfinite'] += 1
-        elif not (-self._max_w < w < self._max_w and -self._max_f < f < self._max_f):
-            self._counters['out_of_range'] += 1
-        else:
-            self._counters['non_increasing_time'] += 1
 
     def ingest_row(self, row: int, t: float, f: float, h, speed: float) -> list[AnomalyEvent]:
         """Process an accepted sample whose regressor row ``h`` is already computed.
@@ -458,7 +450,7 @@ class LLRDetector:
                 h = np.asarray(h, dtype=float) / level
         if self._p == 2:
             flags = kern.ingest(self._fs, self._ints, row, t, f, float(h[0]), float(h[1]))
-            return self._after(flags, t, speed, f) if flags else []
+            return self._after(flags) if flags else []
         if self._ar:
             f, h = self._whiten(f, h)
         return self._update_general(row, t, f, np.asarray(h, dtype=float))

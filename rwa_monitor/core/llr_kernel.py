@@ -61,14 +61,16 @@ I_O_RTERM = 17
 I_O_RTIME = 18
 I_O_AR = 19
 I_O_LAGS = 20
-I_SCALARS = 21
+I_NONFINITE = 21      # rejected samples by the first check they fail
+I_OUT_OF_RANGE = 22
+I_NON_INCREASING = 23
+I_SCALARS = 24
 
 # A candidate goes to the exact tail only if its lower bound of log p_k is within this
 # relative margin above p_min (candidate_log_p2 tests 1e-9; rounding is ~1e-15).
 SKIP_REL = 1e-7
 
-# Flags returned by step / ingest / test.
-REJECT = 1    # sample not accepted (the caller counts it by reason)
+# Flags returned by step / ingest / test (0: nothing to do, the usual case).
 REVISE = 2    # the position is a revision point of the last declared change
 EXACT = 4     # the exact tail is needed at candidate ints[I_K] (y, tr, dm in fs)
 DECLARE = 8   # Algorithm 1 line 18: declare
@@ -282,10 +284,10 @@ def ingest(fs, ints, row, t, f, h1, h2):
 
 @njit('int64(float64[::1], int64[::1], float64, float64, float64)', cache=True)
 def accept(fs, ints, t, w, f):
-    """Count the row; return its index if the sample is accepted, else -1.
+    """Count the row; return its index if the sample is accepted, else count why and -1.
 
     Accepted: finite, ``|w| < max_abs_speed``, ``|f| < max_abs_friction``, time after
-    the last accepted one.
+    the last accepted one; a rejected sample is counted by the first check it fails.
     """
     row = ints[I_ROWS]
     ints[I_ROWS] = row + 1
@@ -293,6 +295,12 @@ def accept(fs, ints, t, w, f):
     max_f = fs[F_MAX_F]
     if -max_w < w < max_w and -max_f < f < max_f and fs[F_LAST_T] < t < math.inf:
         return row
+    if (t - t) + (w - w) + (f - f) != 0.0:
+        ints[I_NONFINITE] += 1
+    elif not (-max_w < w < max_w and -max_f < f < max_f):
+        ints[I_OUT_OF_RANGE] += 1
+    else:
+        ints[I_NON_INCREASING] += 1
     return -1
 
 
@@ -301,7 +309,7 @@ def step(fs, ints, t, w, f):
     """Process one sample of model (1): accept, form ``h = (-sign w, -w)``, ingest."""
     row = accept(fs, ints, t, w, f)
     if row < 0:
-        return REJECT
+        return 0
     fs[F_LAST_T] = t
     h1 = -1.0 if w > 0.0 else (1.0 if w < 0.0 else 0.0)
     return ingest(fs, ints, row, t, f, h1, -w)
