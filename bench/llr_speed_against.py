@@ -9,7 +9,9 @@ checkout and for this tree:
 - with ``--bus``: the calibrated bus case of bench/bus_acceptance.py ``throughput`` (every
   wheel of FILE, LLR parameters of config/rwa_monitor.yaml): streaming = the per-sample
   calibrated residual ``NominalWheel.residual_one`` then ``LLRDetector.update``, batch =
-  ``NominalWheel.residual`` then ``detect_batch``;
+  ``NominalWheel.residual`` then ``detect_batch``, and where the tree has it the one-call
+  streaming path ``LLRDetector.update_nominal(NominalWheel.table, ...)`` (its events
+  compared with the two-call ones);
 
 and prints the samples per CPU second of each (process time: a loaded shared machine
 changes the wall clock, not the work), then the medians over the rounds and their ratio
@@ -77,6 +79,17 @@ for wheel, ch in tele.wheels.items():
             found.extend(out)
     rates['streaming'].append(n / (time.process_time() - start))
     same &= [e.to_json() for e in batch] == [e.to_json() for e in found]
+    if hasattr(LLRDetector, 'update_nominal'):
+        detector = LLRDetector(wheel, **kwargs)
+        table = NominalWheel(cal['wheels'][wheel]).table
+        one = []
+        start = time.process_time()
+        for t_k, w_k, f_k in zip(t, w, f):
+            out = detector.update_nominal(table, t_k, w_k, f_k)
+            if out:
+                one.extend(out)
+        rates.setdefault('one call', []).append(n / (time.process_time() - start))
+        same &= [e.to_json() for e in one] == [e.to_json() for e in found]
 out = {k: float(np.median(v)) for k, v in rates.items()}
 print(json.dumps(dict(out, batch_equals_streaming=same)))
 '''
@@ -113,14 +126,20 @@ def main(argv: list[str]) -> int:
                 got.setdefault((label, name), []).append(rates)
                 print(f'round {round_no} {label} {name}: streaming {rates["streaming"]:.0f}/s, '
                       f'batch {rates["batch"]:.0f}/s'
+                      + (f', streaming in one call {rates["one call"]:.0f}/s'
+                         if 'one call' in rates else '')
                       + (f', batch events == streaming: {rates["batch_equals_streaming"]}'
                          if 'batch_equals_streaming' in rates else ''), flush=True)
     for label, _, _ in cases:
-        for mode in ('streaming', 'batch'):
-            before = statistics.median(r[mode] for r in got[(label, 'other')])
-            now = statistics.median(r[mode] for r in got[(label, 'this')])
-            print(f'median {label} {mode}: other {before:.0f}/s, this {now:.0f}/s, '
-                  f'ratio {now / before:.2f}')
+        for mode in ('streaming', 'batch', 'one call'):
+            now = [r[mode] for r in got[(label, 'this')] if mode in r]
+            if not now:
+                continue
+            before = [r[mode] for r in got[(label, 'other')] if mode in r]
+            print(f'median {label} {mode}: this {statistics.median(now):.0f}/s'
+                  + (f', other {statistics.median(before):.0f}/s, ratio '
+                     f'{statistics.median(now) / statistics.median(before):.2f}'
+                     if before else ''))
     return 0
 
 

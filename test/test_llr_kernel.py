@@ -8,6 +8,7 @@ import sys
 import numpy as np
 from test_llr import friction_signal, stream
 
+from rwa_monitor.core.calibrate import NominalWheel
 from rwa_monitor.core.llr import LLRDetector
 
 SCRIPT = '''
@@ -15,6 +16,7 @@ import json, sys
 import numpy as np
 sys.path.insert(0, {test_dir!r})
 from test_llr import friction_signal, stream
+from rwa_monitor.core.calibrate import NominalWheel
 from rwa_monitor.core.llr import LLRDetector
 t, w, f = friction_signal(4000, 61, ((2000, 0.6, 0.0),), profile='crossing')
 det = LLRDetector('rw1', window=150)
@@ -55,3 +57,24 @@ def test_uncompiled_kernel_gives_the_same_events():
                          env=dict(os.environ, NUMBA_DISABLE_JIT='1'))
     assert len(compiled) > 1
     assert json.loads(out.stdout.strip().splitlines()[-1]) == json.loads(json.dumps(compiled))
+
+
+def test_one_call_calibrated_update_equals_lookup_then_update():
+    block = {'friction_model': {'effects': [], 'weights': {'dry': 0.5, 'viscous': 0.02}},
+             'noise': {'low_speed_band': {'speed_abs_below_rad_s': 1.0}},
+             'speed_range_rad_s': [-12.0, 16.0]}
+    t, w, f = friction_signal(6000, 63, ((3000, 0.8, 0.0),), profile='crossing')
+    two_calls, one_call = NominalWheel(block), NominalWheel(block)
+    det_two, det_one = LLRDetector('rw1', window=150), LLRDetector('rw1', window=150)
+    expected, got, reasons = [], [], []
+    for row in zip(t.tolist(), w.tolist(), f.tolist()):
+        residual, why = two_calls.residual_one(*row)
+        reasons.append(why)
+        expected.extend(det_two.update(row[0], row[1], residual))
+        got.extend(det_one.update_nominal(one_call.table, *row))
+    assert expected and [e.to_json() for e in got] == [e.to_json() for e in expected]
+    assert det_one.counters == det_two.counters and det_one.n_samples == len(t)
+    counts = {name: reasons.count(name) for name in ('low_speed_band',
+                                                     'outside_calibrated_range')}
+    assert min(counts.values()) > 0
+    assert one_call.not_tested == two_calls.not_tested == counts

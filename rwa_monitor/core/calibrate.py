@@ -25,13 +25,12 @@ tracker.
 
 from __future__ import annotations
 
-import bisect
-import math
 from typing import Any, Mapping, Sequence
 
 import numpy as np
 from scipy import stats
 
+from rwa_monitor.core import llr_kernel
 from rwa_monitor.exceptions import ConfigError
 
 VERSION = 1
@@ -47,7 +46,9 @@ MIN_EXCESS = 1.1
 SPEED_KINDS = ('stribeck', 'asymmetric_coulomb', 'drag', 'smooth_speed')
 # Speed step (rad/s) of the nominal model's table (NominalWheel); knots are added to it.
 TABLE_STEP_RAD_S = 0.01
-_INF = math.inf
+# Reasons of a sample not tested, by the code of llr_kernel.nominal_residual.
+_REASONS = (None, 'low_speed_band', 'outside_calibrated_range')
+_nominal_residual = llr_kernel.nominal_residual
 # Relative singular-value cut-off of the refit outside the low-speed band.
 REFIT_RCOND = 1.0e-9
 # Speeds above this fraction of the largest |speed| seen form the reference region.
@@ -444,9 +445,11 @@ class NominalWheel:
         knots = [float(k) for e in self.friction_model.get('effects') or []
                  for k in (e.get('params') or {}).get('knots_rad_s', [])]
         self._tables = {side: self._table(side, knots) for side in (1.0, -1.0)}
-        self._above = _lookup(*self._tables[1.0])
-        self._below = _lookup(*self._tables[-1.0])
         self.at_zero = float(nominal_prediction(self.friction_model, np.zeros(1))[0])
+        # Both sides packed for the compiled lookup (also LLRDetector.update_nominal's).
+        self.table = llr_kernel.pack_table(
+            self.band_rad_s, self.speed_range, self.at_zero, 1.0 / TABLE_STEP_RAD_S,
+            _lookup(*self._tables[1.0]), _lookup(*self._tables[-1.0]))
 
     def _table(self, side: float, knots: list[float]
                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -523,40 +526,37 @@ class NominalWheel:
                      ) -> tuple[float, str | None]:
         """Return (friction - nominal, reason not tested or None) of one sample.
 
-        The same arithmetic as :meth:`residual` on one sample, in plain floats (a node's
-        per-sample call: a bisection in a list, no numpy).
+        The same arithmetic as :meth:`residual` on one sample (a node's per-sample call):
+        core/llr_kernel.py ``nominal_residual`` on :attr:`table`, which also counts the
+        samples not tested by reason (:attr:`not_tested`).
         """
-        if not (-_INF < speed < _INF and -_INF < friction < _INF and -_INF < time < _INF):
-            return math.nan, None
-        mag = abs(speed)
-        if mag < self.band_rad_s:
-            return math.nan, 'low_speed_band'
-        lo, hi = self.speed_range
-        if speed < lo or speed > hi:
-            return math.nan, 'outside_calibrated_range'
-        if speed == 0.0:
-            return friction - self.at_zero, None
-        grid, values, slope, first, scale = self._above if speed > 0.0 else self._below
-        if mag < grid[0] or mag > grid[-1]:
-            return math.nan, None
-        b = int((mag - grid[0]) * scale)
-        j = bisect.bisect_right(grid, mag, first[b], first[b + 3]) - 1
-        return friction - (values[j] + (mag - grid[j]) * slope[j]), None
+        table = self.table
+        try:
+            out = _nominal_residual(table, time, speed, friction)
+        except TypeError:
+            out = _nominal_residual(table, float(time), float(speed), float(friction))
+        code = table[0]
+        return out, (None if code == 0.0 else _REASONS[int(code)])
+
+    @property
+    def not_tested(self) -> dict[str, int]:
+        """Samples not tested since construction, by reason, through :attr:`table`."""
+        return {name: int(self.table[llr_kernel.T_COUNTS + code - 1])
+                for code, name in enumerate(_REASONS) if code}
 
 
 def _lookup(grid: np.ndarray, values: np.ndarray, slope: np.ndarray) -> tuple:
-    """Return one side's table as Python lists with a bucket index for the bisection.
+    """Return one side's table with a bucket index for the binary search.
 
     ``first[b]`` counts the grid points at or below ``grid[0] + (b - 1) h`` (``h`` =
     TABLE_STEP_RAD_S); a speed ``m`` on the table falls in bucket ``b = int((m - grid[0]) /
     h)`` (within one bucket after rounding), so its interval lies between ``first[b]`` and
-    ``first[b + 3]``: the bisection sees a few points, with the answer of a full one.
+    ``first[b + 3]``: the search sees a few points, with the answer of a full one.
     """
     count = int((grid[-1] - grid[0]) / TABLE_STEP_RAD_S) + 6   # b + 3 < count on the table
     edges = grid[0] + (np.arange(count) - 1.0) * TABLE_STEP_RAD_S
     first = np.searchsorted(grid, edges, side='right')
-    return (grid.tolist(), values.tolist(), slope.tolist(), first.tolist(),
-            1.0 / TABLE_STEP_RAD_S)
+    return grid, values, slope, first
 
 
 def diagnose_fss(block: Mapping[str, Any], time: np.ndarray, speed: np.ndarray,

@@ -32,6 +32,7 @@ from rwa_monitor.core.params import AUTO
 _INF = math.inf
 _PREF = slice(kern.F_PREF, kern.F_PREF + 6)
 _step = kern.step
+_step_calibrated = kern.step_calibrated
 _KERNEL_COUNTERS = (('nonfinite', kern.I_NONFINITE), ('out_of_range', kern.I_OUT_OF_RANGE),
                     ('non_increasing_time', kern.I_NON_INCREASING),
                     ('ill_conditioned', kern.I_ILL))
@@ -352,6 +353,28 @@ class LLRDetector:
                 return []
         self._last_t = t
         return self.ingest_row(row, t, f, h, w)
+
+    def update_nominal(self, table: np.ndarray, t: float, speed: float, friction: float
+                       ) -> list[AnomalyEvent]:
+        """Process one calibrated sample: ``update(t, speed, friction - nominal(speed))``.
+
+        ``table``: a wheel's nominal lookup (core/calibrate.py ``NominalWheel.table``, which
+        counts the samples not tested; their residual is NaN, dropped and counted here as
+        non-finite, as through ``NominalWheel.residual_one``). The lookup and the sample
+        are one compiled call (core/llr_kernel.py ``step_calibrated``); same events.
+        """
+        if self._fast:
+            try:
+                flags = _step_calibrated(self._fs, self._ints, table, t, speed, friction)
+            except TypeError:
+                pass
+            else:
+                return self._after(flags) if flags else []
+        try:
+            residual = kern.nominal_residual(table, float(t), float(speed), float(friction))
+        except (TypeError, ValueError):
+            return self.update(t, speed, friction)
+        return self.update(t, speed, residual)
 
     def _update_converted(self, t: Any, speed: Any, friction: Any) -> list[AnomalyEvent]:
         """:meth:`update` of the fast path for values the kernel does not take as floats."""
