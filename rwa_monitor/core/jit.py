@@ -4,7 +4,7 @@
 order, so compiled and plain Python give the same floats; ``cache=True`` keeps the machine
 code next to the module, compiled once per machine). Without numba, or with
 ``NUMBA_DISABLE_JIT=1``, the decorated functions run as the plain Python they are: one
-implementation either way (docs/llr.md "Compiled per-sample path").
+implementation either way (docs/architecture.md "Compiled kernels").
 """
 
 from __future__ import annotations

@@ -9,8 +9,10 @@ skip bound does not rule it out) and all categorisation stay in Python: the kern
 flags and leaves ``y``, ``tr``, ``dm`` in ``fs``.
 
 Compiled by :mod:`rwa_monitor.core.jit` (numba, no fast-math: the same IEEE operations in
-the same order as the batch path and the golden files; docs/llr.md "Compiled per-sample
-path"); plain Python functions when numba is absent or disabled.
+the same order as the batch path and the golden files; docs/architecture.md "Compiled
+kernels"); plain Python functions when numba is absent or disabled. Also here: the
+calibrated nominal lookup (:func:`nominal_residual`) and both in one call
+(:func:`step_calibrated`).
 """
 
 from __future__ import annotations
