@@ -6,6 +6,7 @@ import pathlib
 
 import numpy as np
 
+from bench import fss_base_dry
 from bench.report import table
 
 STATUSES = ('nominal', 'dry', 'viscous', 'fss1', 'fss2')
@@ -386,6 +387,8 @@ def sizes_markdown(sizes: dict, paper: dict) -> list[str]:
     lines += ['References (N m, N m s/rad): ' + '; '.join(
                   f'{k}: base dry {r["base_dry_nm"]:.3g}, viscous {r["viscous_nms"]:.3g}, '
                   f'noise {r["noise_std_nm"]:.3g}' for k, r in refs.items()) + '.', '']
+    if 'base_dry_information' in paper:
+        lines += fss_base_dry.markdown(paper['base_dry_information'])
     return lines
 
 

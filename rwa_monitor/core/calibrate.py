@@ -225,7 +225,8 @@ def refit_outside_band(model: dict[str, Any], speed: np.ndarray, friction: np.nd
 
 
 def fss_reference(speed: np.ndarray, friction: np.ndarray, friction_model: Mapping[str, Any],
-                  noise: Mapping[str, Any]) -> dict[str, Any]:
+                  noise: Mapping[str, Any], window_samples: int | None = None
+                  ) -> dict[str, Any]:
     """Return the window diagnoser's nominal reference of one wheel.
 
     The diagnoser knows model (1) and the FSSs (the FSS paper's eq. (4)); what the wheel's
@@ -244,10 +245,18 @@ def fss_reference(speed: np.ndarray, friction: np.ndarray, friction_model: Mappi
     calibration data given as :func:`fss_inputs` gives a window, so that a nominal window
     is judged against the same estimator's nominal values. ``model1_*``: the plain
     least-squares fit of model (1) outside the low-speed band (for reading only).
+
+    A record of two or more diagnosed windows (``window_samples``, default the node's
+    ``window_length``) gets the median of the base dry of each window-long piece
+    (``base_dry_windows`` pieces, their std ``base_dry_window_std_nm``): Algorithm 1's
+    base is an estimate of one window's length, and on a longer record its running sums
+    of jumps drift down with every jump given to the wrong FSS (docs/fss.md,
+    "Calibrated": a three-window record read 0.54 x the true base dry).
     """
     from rwa_monitor.core.fss.pipeline import extract, FssConfig, normalise
     from rwa_monitor.core.fss.segments import fit_extra_columns
     from rwa_monitor.core.identify.model import regressors_from_config
+    from rwa_monitor.core.schema import FSS
     speed = np.asarray(speed, dtype=float)
     friction = np.asarray(friction, dtype=float)
     band = float(noise['low_speed_band']['speed_abs_below_rad_s'])
@@ -278,7 +287,17 @@ def fss_reference(speed: np.ndarray, friction: np.ndarray, friction_model: Mappi
             {'effects': block.get('effects') or [], 'weights': weights}, safe), np.nan)
     ext = extract(*normalise(speed, given, config), config)
     tq = config.torque_scale_nm
-    ref.update(base_dry_nm=float(ext.base_dry * tq),
+    base = ext.base_dry
+    length = int(window_samples or FSS['window_length'].default)
+    pieces = speed.size // length
+    if pieces >= 2:
+        bases = [extract(*normalise(speed[k * length:(k + 1) * length],
+                                    given[k * length:(k + 1) * length], config),
+                         config).base_dry for k in range(pieces)]
+        base = float(np.median(bases))
+        ref.update(base_dry_windows=pieces,
+                   base_dry_window_std_nm=float(np.std(bases, ddof=1) * tq))
+    ref.update(base_dry_nm=float(base * tq),
                viscous_nms=float(ext.viscous * tq / config.speed_scale_rad_s),
                viscous_se_nms=float(ext.viscous_se * tq / config.speed_scale_rad_s)
                if np.isfinite(ext.viscous_se) else float('nan'),
