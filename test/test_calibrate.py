@@ -323,6 +323,24 @@ def test_fss_reference_of_a_long_record_is_the_median_of_window_long_pieces(pape
     assert ref['viscous_nms'] == whole['viscous_nms']
 
 
+def test_fss_reference_drops_refitted_columns_that_take_the_dry_friction(paper_block,
+                                                                         monkeypatch):
+    # A refit whose extra part holds -3 x the dry friction (as ill-conditioned columns
+    # did on a record with few sign changes left outside a wide low-speed band) would
+    # leave a negative base dry: the reference is then model (1)'s, and says so.
+    from rwa_monitor.core.fss import segments
+    block, (t, w, f) = paper_block
+    monkeypatch.setattr(segments, 'fit_extra_columns',
+                        lambda *a, **k: (np.zeros(a[3].shape[1]), np.array([-6.0e-4, 0.0])))
+    ref = core.fss_reference(w, f, block['friction_model'], block['noise'])
+    model1 = core.fss_reference(w, f, {'effects': [], 'weights': {'dry': 2.0e-4,
+                                                                  'viscous': 5.0e-7}},
+                                block['noise'])
+    assert ref['extra_refit_dropped'] and 'extra_refit_dropped' not in block['fss']
+    assert not any(ref['extra_weights'].values())
+    assert ref['base_dry_nm'] == model1['base_dry_nm'] > 0
+
+
 def test_paper_example_pair_judged_against_a_one_window_calibration(paper_block):
     from rwa_monitor.core.fss.pipeline import FssConfig
     from rwa_monitor.telemetry.fss_model import load_model

@@ -251,7 +251,9 @@ def fss_reference(speed: np.ndarray, friction: np.ndarray, friction_model: Mappi
     (``base_dry_windows`` pieces, their std ``base_dry_window_std_nm``): Algorithm 1's
     base is an estimate of one window's length, and on a longer record its running sums
     of jumps drift down with every jump given to the wrong FSS (docs/fss.md,
-    "Calibrated": a three-window record read 0.54 x the true base dry).
+    "Calibrated": a three-window record read 0.54 x the true base dry). When the refitted
+    columns leave no positive base dry (they took the dry friction itself), they are
+    dropped and ``extra_refit_dropped`` is set: the reference is model (1) alone.
     """
     from rwa_monitor.core.fss.pipeline import extract, FssConfig, normalise
     from rwa_monitor.core.fss.segments import fit_extra_columns
@@ -286,6 +288,14 @@ def fss_reference(speed: np.ndarray, friction: np.ndarray, friction_model: Mappi
         given = np.where(out, friction - nominal_prediction(
             {'effects': block.get('effects') or [], 'weights': weights}, safe), np.nan)
     ext = extract(*normalise(speed, given, config), config)
+    if extra and not ext.base_dry > 0.0:
+        # The refitted columns took the dry friction itself (nearly collinear with the
+        # interval levels when few intervals hold both signs of the speed): a reference
+        # with no positive base dry is never right, so the nominal is model (1) alone.
+        weights = dict.fromkeys(names, 0.0)
+        given = np.where(out, friction, np.nan)
+        ext = extract(*normalise(speed, given, config), config)
+        ref['extra_refit_dropped'] = True
     tq = config.torque_scale_nm
     base = ext.base_dry
     length = int(window_samples or FSS['window_length'].default)
