@@ -248,10 +248,12 @@ def fss_reference(speed: np.ndarray, friction: np.ndarray, friction_model: Mappi
 
     A record of two or more diagnosed windows (``window_samples``, default the node's
     ``window_length``) gets the median of the base dry of each window-long piece
-    (``base_dry_windows`` pieces, their std ``base_dry_window_std_nm``): Algorithm 1's
-    base is an estimate of one window's length, and on a longer record its running sums
-    of jumps drift down with every jump given to the wrong FSS (docs/fss.md,
-    "Calibrated": a three-window record read 0.54 x the true base dry). When the refitted
+    (``base_dry_windows`` pieces, their std ``base_dry_window_std_nm``) and the mean of
+    their viscous coefficients (standard error from theirs): the reference is that of a
+    window, as the diagnosed ones are. Algorithm 1's base is a one-window estimate, and
+    on a longer record its running sums of jumps drift down with every jump given to the
+    wrong FSS (docs/fss.md, "Calibrated": a three-window record read 0.54 x the true
+    base dry). When the refitted
     columns leave no positive base dry (they took the dry friction itself), they are
     dropped and ``extra_refit_dropped`` is set: the reference is model (1) alone.
     """
@@ -297,20 +299,23 @@ def fss_reference(speed: np.ndarray, friction: np.ndarray, friction_model: Mappi
         ext = extract(*normalise(speed, given, config), config)
         ref['extra_refit_dropped'] = True
     tq = config.torque_scale_nm
-    base = ext.base_dry
+    base, viscous, viscous_se = ext.base_dry, ext.viscous, ext.viscous_se
     length = int(window_samples or FSS['window_length'].default)
     pieces = speed.size // length
     if pieces >= 2:
-        bases = [extract(*normalise(speed[k * length:(k + 1) * length],
-                                    given[k * length:(k + 1) * length], config),
-                         config).base_dry for k in range(pieces)]
+        parts = [extract(*normalise(speed[k * length:(k + 1) * length],
+                                    given[k * length:(k + 1) * length], config), config)
+                 for k in range(pieces)]
+        bases = [p.base_dry for p in parts]
         base = float(np.median(bases))
+        viscous = float(np.mean([p.viscous for p in parts]))
+        viscous_se = float(np.sqrt(np.sum([p.viscous_se ** 2 for p in parts]))) / pieces
         ref.update(base_dry_windows=pieces,
                    base_dry_window_std_nm=float(np.std(bases, ddof=1) * tq))
     ref.update(base_dry_nm=float(base * tq),
-               viscous_nms=float(ext.viscous * tq / config.speed_scale_rad_s),
-               viscous_se_nms=float(ext.viscous_se * tq / config.speed_scale_rad_s)
-               if np.isfinite(ext.viscous_se) else float('nan'),
+               viscous_nms=float(viscous * tq / config.speed_scale_rad_s),
+               viscous_se_nms=float(viscous_se * tq / config.speed_scale_rad_s)
+               if np.isfinite(viscous_se) else float('nan'),
                noise_std_nm=float(ext.sigma * tq), extra_weights=weights,
                samples=int(np.count_nonzero(out)))
     return ref
