@@ -23,12 +23,17 @@ import time
 from typing import Any
 
 import numpy as np
+from scipy import stats
 
 # Fixed before any result of this session was seen. Earlier acceptance runs used
-# calibration seed 1000 / evaluation 3000-3009, then 4020 / 4000-4019: those are spent
-# (seen while developing) and are development seeds now, like every seed below 100.
-CALIBRATION_SEED = 6020
-EVAL_SEEDS = tuple(range(6000, 6020))
+# calibration seed 1000 / evaluation 3000-3009, then 4020 / 4000-4019, then 6020 /
+# 6000-6019: those are spent (seen while developing) and are development seeds now, like
+# every seed below 100.
+# 40 runs, 10 per fault, so that one miss in a fault still reads 90 % (with 5 runs per
+# fault the 90 % goal allowed no miss at all).
+CALIBRATION_SEED = 7020
+EVAL_SEEDS = tuple(range(7000, 7020)) + tuple(range(7100, 7120))
+SPENT_SEEDS = '3000-3009, 4000-4020 and 6000-6020'
 STREAMING_GOAL = 300_000.0   # samples/s, issue 12 item 3 (model (1) throughput kept)
 BATCH_GOAL = 3_000_000.0
 SPEED_REPEATS = 5
@@ -205,9 +210,33 @@ def score(results: list[dict[str, Any]], mode: str, hours: float = HOURS
            'faulty_wheels': len(fss_faulty),
            'faulty_right_flag': sum(bool(x['flags'].get(r['expected'])) for r, x in fss_faulty),
            'faulty_unknown': sum(x.get('status') == 'unknown' for _, x in fss_faulty)}
+    after_hours = len(results) * (len(WHEELS) - 1) * (hours - FAULT_TIME_S / 3600.0)
+    rate_elsewhere = (false_alarms - other_wheel) / (healthy_hours - after_hours)
+    chance = rate_elsewhere * after_hours
     return {'healthy_wheel_hours': healthy_hours, 'false_alarms': false_alarms, 'fss': fss,
+            'other_wheels_after_fault_chance': chance,
+            'other_wheels_after_fault_p': float(stats.poisson.sf(other_wheel - 1, chance)),
             'false_alarms_per_wheel_hour': false_alarms / healthy_hours,
             'other_wheels_after_fault': other_wheel, 'per_fault': per_fault}
+
+
+def _chance(mode: dict[str, Any]) -> str:
+    """Return the expected count and Poisson P(>= observed) at the rate elsewhere."""
+    if 'other_wheels_after_fault_chance' not in mode:
+        return 'not computed'
+    return (f'{mode["other_wheels_after_fault_chance"]:.1f}, P(>= '
+            f'{mode["other_wheels_after_fault"]}) = {mode["other_wheels_after_fault_p"]:.2f}')
+
+
+def _ranges(seeds: list[int]) -> str:
+    """Return seeds as runs of consecutive values, e.g. '7000-7019, 7100-7119'."""
+    runs: list[list[int]] = []
+    for s in seeds:
+        if runs and s == runs[-1][-1] + 1:
+            runs[-1].append(s)
+        else:
+            runs.append([s])
+    return ', '.join(f'{r[0]}-{r[-1]}' if len(r) > 1 else f'{r[0]}' for r in runs)
 
 
 def _met(ok: bool, gap: str = '') -> str:
@@ -228,7 +257,8 @@ def markdown(acc: dict[str, Any], r: float, rate_hz: float) -> list[str]:
             ['declarations on the other wheels after the fault',
              cal['other_wheels_after_fault'], raw['other_wheels_after_fault'], '0',
              _met(cal['other_wheels_after_fault'] == 0,
-                  f'{cal["other_wheels_after_fault"]} in {len(seeds)} runs')],
+                  f'{cal["other_wheels_after_fault"]} in {len(seeds)} runs; by chance at '
+                  f'the rate elsewhere {_chance(cal)}')],
             ['FSS (whole 3-h run): healthy wheels flagged',
              _fss_cell(cal['fss']), _fss_cell(raw['fss']), '0',
              _met(cal['fss']['healthy_flagged'] == 0,
@@ -261,9 +291,9 @@ def markdown(acc: dict[str, Any], r: float, rate_hz: float) -> list[str]:
              f'Default guidance and null speed (wheels cross zero). Calibration: one '
              f'fault-free {acc["calibration"]["hours"]:g}-hour run, seed '
              f'{acc["calibration"]["seed"]} (`rwa-monitor calibrate`). Evaluation: '
-             f'{len(seeds)} fresh {HOURS:g}-hour runs, seeds {seeds[0]}-{seeds[-1]} (fixed '
+             f'{len(seeds)} fresh {HOURS:g}-hour runs, seeds {_ranges(seeds)} (fixed '
              f'before any result was seen; development used seeds below 100 and the seeds of '
-             f'earlier acceptance runs, 3000-3009 and 4000-4020), one fault '
+             f'earlier acceptance runs, {SPENT_SEEDS}), one fault '
              f'per run on one wheel at {FAULT_TIME_S:g} s (steps: dry +3e-4 N m, viscous '
              f'+3e-6 N m s/rad; ramps to the same sizes over {RAMP_S:g} s), '
              f'{len(seeds) // len(FAULTS)} runs per fault. LLR parameters of '
@@ -278,7 +308,11 @@ def markdown(acc: dict[str, Any], r: float, rate_hz: float) -> list[str]:
               f'wheels would draw {bound * 3 * (HOURS - FAULT_TIME_S / 3600.0) * len(seeds):.1f}'
               ' declarations after the faults of these runs by chance alone: the goal 0 '
               'asks for a false-alarm rate well below r, as the detector has on white noise '
-              '(section "LLR friction detector", Fig. 5).', '']
+              '(section "LLR friction detector", Fig. 5). "By chance at the rate elsewhere": '
+              'the declarations expected on those wheel-hours at the calibrated false-alarm '
+              'rate of all other healthy wheel-hours (before the faults, and healthy wheels '
+              'before them), with the Poisson probability of at least the count seen; a '
+              'small probability would mean the fault leaks into the other wheels.', '']
     ramps = {n: e for n, e in cal['per_fault'].items() if 'ramp' in n and e['detected']}
     if ramps:
         lines += ['Ramps: at the first declaration the ramp had reached '

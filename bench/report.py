@@ -12,6 +12,8 @@ from typing import Any
 
 import numpy as np
 
+from rwa_monitor.telemetry.atomic import write_text_atomic
+
 REPO = pathlib.Path(__file__).resolve().parents[1]
 RESULTS_MD = REPO / 'docs' / 'results.md'
 RESULTS_DIR = REPO / 'bench' / 'results'
@@ -42,7 +44,8 @@ def write_json(out_dir: pathlib.Path, name: str, results: dict[str, Any]) -> pat
     """Write ``results`` (with machine facts) to ``out_dir/<name>.json``; return the path."""
     out_dir.mkdir(parents=True, exist_ok=True)
     path = out_dir / f'{name}.json'
-    path.write_text(json.dumps(_plain({'machine': machine(), **results}), indent=2) + '\n')
+    text = json.dumps(_plain({'machine': machine(), **results}), indent=2) + '\n'
+    write_text_atomic(path, text)
     return path
 
 
@@ -54,8 +57,7 @@ def update_section(name: str, markdown: str, path: pathlib.Path = RESULTS_MD) ->
     pattern = re.compile(re.escape(begin) + r'.*?' + re.escape(end), re.S)
     text = pattern.sub(lambda _: block, text) if pattern.search(text) else (
         text.rstrip() + '\n\n' + block + '\n')
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(text)
+    write_text_atomic(path, text)
 
 
 def table(header: list[str], rows: list[list[Any]]) -> str:

@@ -41,11 +41,13 @@ import numpy as np
 from numpy.polynomial.legendre import leggauss
 from scipy import integrate, optimize, special
 
+from rwa_monitor.core.jit import njit
+
 CUT = 40.0
 _GL_ORDER = 32
 _x, _w = leggauss(_GL_ORDER)
-_NODES = [float(v) for v in (_x + 1.0) / 2.0]
-_WEIGHTS = [float(v) for v in _w / 2.0]
+_NODES = tuple(float(v) for v in (_x + 1.0) / 2.0)
+_WEIGHTS = tuple(float(v) for v in _w / 2.0)
 _NODES_ARR = (_x + 1.0) / 2.0
 _WEIGHTS_ARR = _w / 2.0
 _LOG_2_OVER_PI = math.log(2.0 / math.pi)
@@ -53,8 +55,9 @@ _LOG_2_OVER_SQRT_PI = math.log(2.0 / math.sqrt(math.pi))
 _HALF_PI = math.pi / 2.0
 
 
+@njit('float64(float64, float64, float64)', cache=True)
 def log_sf2(x: float, w1: float, w2: float) -> float:
-    """Return log P(w1 Z1^2 + w2 Z2^2 > x) for the central two-term case (pure Python).
+    """Return log P(w1 Z1^2 + w2 Z2^2 > x) for the central two-term case (compiled).
 
     Lemma 1 / Algorithm 2 line 5 of the llr-realtime paper. Exact up to the quadrature
     error (see the module docstring). ``w1``, ``w2`` >= 0 in any order; ``x <= 0`` gives 0
@@ -72,20 +75,18 @@ def log_sf2(x: float, w1: float, w2: float) -> float:
     excess = a - CUT * rho
     end = math.atan(math.sqrt(CUT / excess)) if excess > 0.0 else _HALF_PI
     total = 0.0
-    sin = math.sin
-    cos = math.cos
-    exp = math.exp
-    for u, wt in zip(_NODES, _WEIGHTS):
-        psi = end * u
-        s = sin(psi)
-        c = cos(psi)
+    for i in range(_GL_ORDER):
+        psi = end * _NODES[i]
+        s = math.sin(psi)
+        c = math.cos(psi)
         s2 = s * s
-        total += wt * exp(-a * s2 / (c * c + rho * s2))
+        total += _WEIGHTS[i] * math.exp(-a * s2 / (c * c + rho * s2))
     return -b + math.log(total * end) + _LOG_2_OVER_PI
 
 
+@njit('float64(float64, float64, float64, float64)', cache=True)
 def log_sf2_t(x: float, w1: float, w2: float, dof: float) -> float:
-    """Return log P(w1 Z1^2 + w2 Z2^2 > x S), S ~ chi2_dof / dof independent (pure Python).
+    """Return log P(w1 Z1^2 + w2 Z2^2 > x S), S ~ chi2_dof / dof independent (compiled).
 
     The studentised tail of Lemma 1 when the noise variance is estimated with ``dof``
     residual degrees of freedom independently of the statistic. Averaging the integrand
@@ -113,16 +114,12 @@ def log_sf2_t(x: float, w1: float, w2: float, dof: float) -> float:
         if rho * big < 1.0:
             end = math.atan(math.sqrt(big / (1.0 - rho * big)))
     total = 0.0
-    sin = math.sin
-    cos = math.cos
-    log1p = math.log1p
-    exp = math.exp
-    for u, wt in zip(_NODES, _WEIGHTS):
-        psi = end * u
-        s = sin(psi)
-        c = cos(psi)
+    for i in range(_GL_ORDER):
+        psi = end * _NODES[i]
+        s = math.sin(psi)
+        c = math.cos(psi)
         s2 = s * s
-        total += wt * exp(-half * log1p(ap * s2 / (c * c + rho * s2)))
+        total += _WEIGHTS[i] * math.exp(-half * math.log1p(ap * s2 / (c * c + rho * s2)))
     return lead + math.log(total * end) + _LOG_2_OVER_PI
 
 
@@ -148,6 +145,7 @@ def _log_sf2_array(x: np.ndarray, w1: float, w2: float) -> np.ndarray:
     return out
 
 
+@njit('float64(float64)', cache=True)
 def log_lower_bound(b: float) -> float:
     """Return a lower bound of ``log erfc(sqrt(b))`` (closed form, b >= 0).
 
@@ -167,6 +165,7 @@ def log_lower_bound_array(b: np.ndarray) -> np.ndarray:
     return -b + _LOG_2_OVER_SQRT_PI - np.log(np.sqrt(b) + np.sqrt(b + 2.0))
 
 
+@njit('float64(float64)', cache=True)
 def skip_threshold(log_p: float) -> float:
     """Return ``y`` >= 0 such that ``b < y`` implies ``log_lower_bound(b) > log_p``.
 

@@ -16,7 +16,7 @@ from typing import Any, Mapping
 import numpy as np
 from scipy import linalg
 
-from rwa_monitor.core import llr_batch, llr_stats
+from rwa_monitor.core import llr_batch, llr_kernel as kern, llr_stats
 from rwa_monitor.core.events import AnomalyEvent
 from rwa_monitor.core.friction import RegressorSet
 from rwa_monitor.core.gchi2 import (gchi2_logsf_general, log_sf2, log_sf2_t,
@@ -30,11 +30,32 @@ from rwa_monitor.core.llr_common import (candidate_log_p2, checkpoints, COUNTER_
 from rwa_monitor.core.params import AUTO
 
 _INF = math.inf
-_FLOOR_ABS = llr_stats.NOISE_FLOOR_ABS
-_FLOOR_REL = llr_stats.NOISE_FLOOR_REL
+_PREF = slice(kern.F_PREF, kern.F_PREF + 6)
+_step = kern.step
+_KERNEL_COUNTERS = (('nonfinite', kern.I_NONFINITE), ('out_of_range', kern.I_OUT_OF_RANGE),
+                    ('non_increasing_time', kern.I_NON_INCREASING),
+                    ('ill_conditioned', kern.I_ILL))
 
 __all__ = ['candidate_log_p2', 'COUNTER_NAMES', 'detect_batch', 'detect_batch_with_counters',
            'LLRDetector', 'NoiseModel', 'validate_parameters']
+
+
+class _Column:
+    """A 1-D ring of the kernel's state read as Python scalars (row indices, times)."""
+
+    __slots__ = ('_values',)
+
+    def __init__(self, values: np.ndarray) -> None:
+        self._values = values
+
+    def __len__(self) -> int:
+        return len(self._values)
+
+    def __getitem__(self, i: int) -> Any:
+        return self._values[i].item()
+
+    def __setitem__(self, i: int, value: Any) -> None:
+        self._values[i] = value
 
 
 class LLRDetector:
@@ -128,7 +149,11 @@ class LLRDetector:
     @property
     def counters(self) -> dict[str, int]:
         """Rejected samples and skipped tests by reason."""
-        return dict(self._counters)
+        counters = dict(self._counters)
+        ints = self._ints
+        for name, slot in _KERNEL_COUNTERS:
+            counters[name] += int(ints[slot])
+        return counters
 
     @property
     def p_min(self) -> float:
@@ -215,39 +240,82 @@ class LLRDetector:
         width = llr_stats.width(self._p)
         zero = (0.0,) * 6 if self._p == 2 else np.zeros(width)
         self._zero = zero
-        self._rows = 0
-        self._pos = 0
-        self._last_t = -math.inf
-        self._c = 0
-        self._c_row = -1
-        self._pref = zero
+        # The state of the per-sample path lives in two arrays (core/llr_kernel.py); the
+        # attributes below that name it (_pos, _c, _pref, the rings...) are views of them.
+        fs, ints = kern.allocate(self._L, width, 3 if self._p == 2 else width,
+                                 self._ar_max if self._p == 2 else 0)
+        self._fs, self._ints = fs, ints
+        fs[kern.F_LAST_T] = -math.inf
+        fs[kern.F_LOGR] = self._logr
+        fs[kern.F_MIN_EXC] = self._min_exc
+        fs[kern.F_NOISE_VAR] = math.nan if self._noise_var is None else self._noise_var
+        fs[kern.F_MAX_W] = self._max_w
+        fs[kern.F_MAX_F] = self._max_f
+        fs[kern.F_FLOOR_REL] = llr_stats.NOISE_FLOOR_REL
+        fs[kern.F_FLOOR_ABS] = llr_stats.NOISE_FLOOR_ABS
+        ints[kern.I_W] = self._w
+        ints[kern.I_KVERIF] = self._kverif
+        ints[kern.I_R] = -1 if self._R is None else self._R
+        ints[kern.I_ESTIMATED] = self._noise_var is None
+        ints[kern.I_C_ROW] = -1
+        ints[kern.I_CHECKPOINT] = -1
+        self._pref_general = zero
         # Rings of the last L accepted samples: (h1, h2, f) for p = 2 (a restart recomputes
-        # the same products from them) or the terms for p > 2; row index; time.
-        self._rterm: list[Any] = [None] * self._L
-        self._rrow = [0] * self._L
-        self._rtime = [0.0] * self._L
-        self._rpref = [None] * self._L
-        self._rpref[0] = zero
-        self._logpmin = 0.0
-        self._kmin = 0
-        self._ystar = 0.0
+        # the same products from them) or the terms for p > 2; prefix rows; row index; time.
+        L = self._L
+        self._rpref = fs[ints[kern.I_O_RPREF]:ints[kern.I_O_RTERM]].reshape(L, width)
+        self._rterm = fs[ints[kern.I_O_RTERM]:ints[kern.I_O_RTIME]].reshape(L, -1)
+        self._rtime = _Column(fs[ints[kern.I_O_RTIME]:ints[kern.I_O_AR]])
+        self._rrow = _Column(ints[kern.I_SCALARS:])
         self._last_y = math.nan
         self._counters = {name: 0 for name in COUNTER_NAMES}
         self._checks: list[int] = []
         self._cat: dict[str, Any] | None = None
-        self._checkpoint = -1
         self._noise: NoiseModel | None = None
-        self._ar: tuple[float, ...] = ()
         self._speed_std: tuple[float, float, float] | None = None
         self._wlow = math.inf
         self._whigh = 0.0
         self._next_fit: int | None = None
         self._lags: list[tuple[Any, ...]] = []
-        self._ar_order = 0
+        self._ar: tuple[float, ...] = ()
         self._fitting = self._ar_max > 0 or self._speed_model
         self._buffer: list[tuple[int, float, float, Any]] = []
         self._fast = self._default and not self._fitting
         self._last_event: AnomalyEvent | None = None
+
+    # Scalars of the per-sample state (views of the kernel's arrays).
+    _rows = property(lambda self: int(self._ints[kern.I_ROWS]),
+                     lambda self, v: self._ints.__setitem__(kern.I_ROWS, v))
+    _pos = property(lambda self: int(self._ints[kern.I_POS]),
+                    lambda self, v: self._ints.__setitem__(kern.I_POS, v))
+    _c = property(lambda self: int(self._ints[kern.I_C]),
+                  lambda self, v: self._ints.__setitem__(kern.I_C, v))
+    _c_row = property(lambda self: int(self._ints[kern.I_C_ROW]),
+                      lambda self, v: self._ints.__setitem__(kern.I_C_ROW, v))
+    _kmin = property(lambda self: int(self._ints[kern.I_KMIN]),
+                     lambda self, v: self._ints.__setitem__(kern.I_KMIN, v))
+    _checkpoint = property(lambda self: int(self._ints[kern.I_CHECKPOINT]),
+                           lambda self, v: self._ints.__setitem__(kern.I_CHECKPOINT, v))
+    _last_t = property(lambda self: float(self._fs[kern.F_LAST_T]),
+                       lambda self, v: self._fs.__setitem__(kern.F_LAST_T, v))
+    _logpmin = property(lambda self: float(self._fs[kern.F_LOGPMIN]),
+                        lambda self, v: self._fs.__setitem__(kern.F_LOGPMIN, v))
+    _ystar = property(lambda self: float(self._fs[kern.F_YSTAR]),
+                      lambda self, v: self._fs.__setitem__(kern.F_YSTAR, v))
+
+    @property
+    def _pref(self) -> Any:
+        """Prefix sums of the reference up to the last sample (a tuple for p = 2)."""
+        if self._p == 2:
+            return tuple(self._fs[_PREF].tolist())
+        return self._pref_general
+
+    @_pref.setter
+    def _pref(self, value: Any) -> None:
+        if self._p == 2:
+            self._fs[_PREF] = value
+        else:
+            self._pref_general = value
 
     def update(self, t: float, speed: float, friction: float,
                aux: Mapping[str, float] | None = None) -> list[AnomalyEvent]:
@@ -256,62 +324,25 @@ class LLRDetector:
         Non-finite values (or a missing auxiliary channel of the model) and times not after
         the last accepted one are dropped and counted; they never enter the sums.
         """
-        row = self._rows
-        self._rows = row + 1
+        if self._fast:
+            # The paper's model (whitened when an AR noise model is fitted): one compiled
+            # call per sample (core/llr_kernel.py step), which takes Python and numpy
+            # numbers as floats; anything else is converted here first.
+            try:
+                flags = _step(self._fs, self._ints, t, speed, friction)
+            except TypeError:
+                return self._update_converted(t, speed, friction)
+            return self._after(flags) if flags else []
         try:
             t = float(t)
             w = float(speed)
             f = float(friction)
         except (TypeError, ValueError):
+            self._ints[kern.I_ROWS] += 1
             self._counters['nonfinite'] += 1
             return []
-        max_w = self._max_w
-        max_f = self._max_f
-        if not (-max_w < w < max_w and -max_f < f < max_f and self._last_t < t < _INF):
-            # Something is wrong with the sample: count it by the first failed check.
-            self._reject(t, w, f)
-            return []
-        if self._fast:
-            # The paper's model without a speed noise model, whitened inline when an AR
-            # noise model is fitted (same floats as _ingest_fitted, _whiten and _add2, one
-            # call instead of four per sample; test_llr checks that both agree exactly).
-            self._last_t = t
-            h1 = -1.0 if w > 0.0 else (1.0 if w < 0.0 else 0.0)
-            h2 = -w
-            if self._ar:
-                lags = self._lags
-                fw, g1, g2 = f, h1, h2
-                for a, (lf, l1, l2) in zip(self._ar, lags):
-                    fw = fw - a * lf
-                    g1 = g1 - a * l1
-                    g2 = g2 - a * l2
-                lags.insert(0, (f, h1, h2))
-                if len(lags) > self._ar_order:
-                    lags.pop()
-                f, h1, h2 = fw, g1, g2
-            P = self._pref
-            P = (P[0] + h1 * h1, P[1] + h1 * h2, P[2] + h2 * h2, P[3] + h1 * f, P[4] + h2 * f,
-                 P[5] + f * f)
-            self._pref = P
-            j = self._pos
-            self._pos = j + 1
-            if j == 0:
-                self._c_row = row
-            L = self._L
-            s = j % L
-            self._rterm[s] = (h1, h2, f)
-            self._rrow[s] = row
-            self._rtime[s] = t
-            self._rpref[(j + 1) % L] = P
-            if j == self._checkpoint:
-                events = self._revise(j)
-                k = j - self._w + 1
-                if k > self._c + self._w and self._test2(k, P):
-                    events.extend(self._declare(j))
-                return events
-            k = j - self._w + 1
-            if k > self._c + self._w and self._test2(k, P):
-                return self._declare(j)
+        row = kern.accept(self._fs, self._ints, t, w, f)
+        if row < 0:
             return []
         if self._default:
             h = (-1.0 if w > 0.0 else (1.0 if w < 0.0 else 0.0), -w)
@@ -322,14 +353,39 @@ class LLRDetector:
         self._last_t = t
         return self.ingest_row(row, t, f, h, w)
 
-    def _reject(self, t: float, w: float, f: float) -> None:
-        """Count a sample that is not accepted, by the first check it fails."""
-        if (t - t) + (w - w) + (f - f) != 0.0:
+    def _update_converted(self, t: Any, speed: Any, friction: Any) -> list[AnomalyEvent]:
+        """:meth:`update` of the fast path for values the kernel does not take as floats."""
+        try:
+            t = float(t)
+            w = float(speed)
+            f = float(friction)
+        except (TypeError, ValueError):
+            self._ints[kern.I_ROWS] += 1
             self._counters['nonfinite'] += 1
-        elif not (-self._max_w < w < self._max_w and -self._max_f < f < self._max_f):
-            self._counters['out_of_range'] += 1
-        else:
-            self._counters['non_increasing_time'] += 1
+            return []
+        flags = _step(self._fs, self._ints, t, w, f)
+        return self._after(flags) if flags else []
+
+    def _after(self, flags: int) -> list[AnomalyEvent]:
+        """Act on the flags of a kernel call: revise, finish the test, declare."""
+        j = self._pos - 1
+        events = self._revise(j) if flags & kern.REVISE else []
+        if flags & kern.DECLARE or flags & kern.EXACT and self._exact():
+            events.extend(self._declare(j))
+        return events
+
+    def _exact(self) -> bool:
+        """Finish the test the kernel left at EXACT: eq. (7) tail, new minimum, decision."""
+        fs, ints = self._fs, self._ints
+        k = int(ints[kern.I_K])
+        dof = int(ints[kern.I_DOF])
+        logpmin = float(fs[kern.F_LOGPMIN])
+        logp = candidate_log_p2(float(fs[kern.F_Y]), float(fs[kern.F_TR]),
+                                float(fs[kern.F_DM]), logpmin,
+                                None if dof < 0 else float(dof))
+        if logp is not None and logp < logpmin:
+            self._record(k, logp)
+        return self._logpmin <= self._logr and k > self._kmin + self._kverif
 
     def ingest_row(self, row: int, t: float, f: float, h, speed: float) -> list[AnomalyEvent]:
         """Process an accepted sample whose regressor row ``h`` is already computed.
@@ -372,7 +428,10 @@ class LLRDetector:
         self._fitting = False
         self._noise = model
         self._ar = model.ar
-        self._ar_order = len(model.ar)
+        if self._p == 2:
+            ints = self._ints
+            ints[kern.I_AR_ORDER] = len(model.ar)
+            self._fs[ints[kern.I_O_AR]:ints[kern.I_O_AR] + len(model.ar)] = model.ar
         self._speed_std = model.speed_std
         self._fast = self._default and self._speed_std is None
         events: list[AnomalyEvent] = []
@@ -389,112 +448,40 @@ class LLRDetector:
                 h = (float(h[0]) / level, float(h[1]) / level)
             else:
                 h = np.asarray(h, dtype=float) / level
+        if self._p == 2:
+            flags = kern.ingest(self._fs, self._ints, row, t, f, float(h[0]), float(h[1]))
+            return self._after(flags) if flags else []
         if self._ar:
             f, h = self._whiten(f, h)
-        if self._p == 2:
-            return self._add2(row, t, f, float(h[0]), float(h[1]))
         return self._update_general(row, t, f, np.asarray(h, dtype=float))
 
-    def _whiten(self, f: float, h) -> tuple[float, Any]:
+    def _whiten(self, f: float, h: np.ndarray) -> tuple[float, np.ndarray]:
         """Apply the AR filter ``v_l - sum_i a_i v_(l-1-i)`` to one sample (missing lags omitted).
 
-        Same operations in the same order as :func:`llr_common.whiten` (batch path).
+        Same operations in the same order as :func:`llr_common.whiten` (batch path); p > 2
+        (the paper's model is whitened in the kernel, core/llr_kernel.py ``ingest``).
         """
         lags = self._lags
         fw = f
-        if self._p == 2:
-            h1, h2 = float(h[0]), float(h[1])
-            for a, (lf, l1, l2) in zip(self._ar, lags):
-                fw = fw - a * lf
-                h1 = h1 - a * l1
-                h2 = h2 - a * l2
-            lags.insert(0, (f, float(h[0]), float(h[1])))
-            hw: Any = (h1, h2)
-        else:
-            h = np.asarray(h, dtype=float)
-            hw = h
-            for a, (lf, lh) in zip(self._ar, lags):
-                fw = fw - a * lf
-                hw = hw - a * lh
-            lags.insert(0, (f, h))
+        h = np.asarray(h, dtype=float)
+        hw = h
+        for a, (lf, lh) in zip(self._ar, lags):
+            fw = fw - a * lf
+            hw = hw - a * lh
+        lags.insert(0, (f, h))
         del lags[len(self._ar):]
         return fw, hw
 
-    def _add2(self, row: int, t: float, f: float, h1: float, h2: float
-              ) -> list[AnomalyEvent]:
-        """Add one accepted sample to the sums and ring, then test (p = 2)."""
-        P = self._pref
-        P = (P[0] + h1 * h1, P[1] + h1 * h2, P[2] + h2 * h2, P[3] + h1 * f, P[4] + h2 * f,
-             P[5] + f * f)
-        self._pref = P
-        j = self._pos
-        self._pos = j + 1
-        if j == 0:
-            self._c_row = row
-        L = self._L
-        s = j % L
-        self._rterm[s] = (h1, h2, f)
-        self._rrow[s] = row
-        self._rtime[s] = t
-        self._rpref[(j + 1) % L] = P
-        events = self._revise(j) if j == self._checkpoint else []
-        k = j - self._w + 1
-        if k > self._c + self._w and self._test2(k, P):
-            events.extend(self._declare(j))
-        return events
-
-    def _test2(self, k: int, P: tuple) -> bool:
+    def _test2(self, k: int, P) -> bool:
         """Algorithm 1 lines 9-18 at candidate ``k`` (p = 2); return True to declare.
 
-        ``P`` is the prefix row at ``k + w`` (T_k), the one at ``k`` (P_k) is in the ring.
-        Statistic: eq. (5) as ``d^T Pi_P d / sigma^2`` with ``d = x_T - x_P = Pi_T^-1 (q_W -
-        Pi_W x_P)`` (the window's residual against the reference fit: no difference of
-        two nearly equal estimates). Skips (counted) when ``Pi_P`` is ill-conditioned.
+        ``P`` is the prefix row at ``k + w`` (T_k), the one at ``k`` (P_k) is in the ring:
+        core/llr_kernel.py ``test`` (eq. (5)), then :meth:`_exact` when the skip bound does
+        not rule ``k`` out. For a restart's catch-up; the per-sample path tests in the
+        kernel call.
         """
-        A, B, C, U, V, E = self._rpref[k % self._L]
-        At, Bt, Ct, Ut, Vt, _ = P
-        R = self._R
-        if R is not None and k - R > self._c:
-            # Sliding reference: P_k = [k - R, k - 1] (docs/llr.md, "Slow drifts").
-            b0, b1, b2, b3, b4, b5 = self._rpref[(k - R) % self._L]
-            A, B, C, U, V, E = A - b0, B - b1, C - b2, U - b3, V - b4, E - b5
-            At, Bt, Ct, Ut, Vt = At - b0, Bt - b1, Ct - b2, Ut - b3, Vt - b4
-            n_p = R
-        else:
-            n_p = k - self._c
-        ac = A * C
-        det = ac - B * B
-        dett = At * Ct - Bt * Bt
-        if det > self._min_exc * ac and dett > 0.0:
-            x1 = (C * U - B * V) / det
-            x2 = (A * V - B * U) / det
-            s2 = self._noise_var
-            dof = None
-            if s2 is None:
-                # Dividing by the int n_p - 2 gives the quotient by float(n_p - 2).
-                s2 = (E - (x1 * U + x2 * V)) / (n_p - 2)
-                floor = _FLOOR_REL * E / n_p + _FLOOR_ABS
-                if not s2 > floor:
-                    s2 = floor
-                dof = n_p - 2
-            Aw = At - A
-            Bw = Bt - B
-            Cw = Ct - C
-            g1 = (Ut - U) - (Aw * x1 + Bw * x2)
-            g2 = (Vt - V) - (Bw * x1 + Cw * x2)
-            d1 = (Ct * g1 - Bt * g2) / dett
-            d2 = (At * g2 - Bt * g1) / dett
-            y = (A * d1 * d1 + 2.0 * B * d1 * d2 + C * d2 * d2) / s2
-            tr = (Ct * Aw - 2.0 * Bt * Bw + At * Cw) / dett
-            if tr > 0.0 and y > 0.0 and not y / tr < self._ystar:
-                dm = (Aw * Cw - Bw * Bw) / dett
-                logp = candidate_log_p2(y, tr, dm, self._logpmin,
-                                        None if dof is None else float(dof))
-                if logp is not None and logp < self._logpmin:
-                    self._record(k, logp)
-        else:
-            self._counters['ill_conditioned'] += 1
-        return self._logpmin <= self._logr and k > self._kmin + self._kverif
+        flags = kern.test_row(self._fs, self._ints, k, np.asarray(P, dtype=float))
+        return bool(flags & kern.DECLARE) or bool(flags & kern.EXACT) and self._exact()
 
     def _row(self, t: float, w: float, aux: Mapping[str, float] | None):
         if aux is not None:

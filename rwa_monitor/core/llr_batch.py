@@ -22,9 +22,9 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from rwa_monitor.core import llr_stats
+from rwa_monitor.core import llr_kernel, llr_stats
 from rwa_monitor.core.events import AnomalyEvent
-from rwa_monitor.core.gchi2 import log_lower_bound_array, skip_threshold
+from rwa_monitor.core.gchi2 import skip_threshold
 from rwa_monitor.core.llr_common import (candidate_log_p2, checkpoints, declaration,
                                          fit_noise_model, make_event, ramp_points,
                                          reference_base, revision_due, speed_fit_done,
@@ -33,8 +33,8 @@ from rwa_monitor.core.llr_common import (candidate_log_p2, checkpoints, declarat
 
 CHUNK = 1 << 13
 # A candidate's exact p_k is computed only if its lower bound is within this relative
-# margin above the running minimum (candidate_log_p2 tests 1e-9; rounding is ~1e-15).
-_SKIP_REL = 1e-7
+# margin above the running minimum (the streaming path's rule, core/llr_kernel.py).
+_SKIP_REL = llr_kernel.SKIP_REL
 _LOWER_AT_0 = math.log(2.0 / math.sqrt(math.pi)) - math.log(2.0)
 
 
@@ -267,24 +267,16 @@ def _candidates(ks, cand, y, tr, dm, dof, state: dict, kverif: int, logr: float,
 
 def _lower_bounds(y: np.ndarray, tr: np.ndarray, dm: np.ndarray, dof: np.ndarray | None
                   ) -> np.ndarray:
-    """Return the lower bound of log p_k that :func:`candidate_log_p2` tests, vectorised.
+    """Return the lower bound of log p_k that :func:`candidate_log_p2` tests, per candidate.
 
-    Same formula (eigenvalues of ``Pi_T^-1 Pi_W`` from trace and determinant, clamped;
-    Gaussian or studentised bound) in numpy: equal to the scalar one up to rounding, far
-    below the relative margin ``_SKIP_REL`` with which it is used.
+    core/llr_kernel.py ``lower_bound`` (the streaming path's test uses the same): equal to
+    the scalar one up to rounding, far below the relative margin ``_SKIP_REL`` with which
+    it is used.
     """
-    with np.errstate(all='ignore'):
-        half = 0.5 * tr
-        disc = half * half - dm
-        lam1 = half + np.sqrt(np.maximum(disc, 0.0))
-        lam2 = np.clip(dm / lam1, 0.0, lam1)
-        b = y / (2.0 * lam1)
-        rho = lam2 / lam1
-        a = b * (1.0 - rho)
-        if dof is None:
-            return log_lower_bound_array(a) - b * rho
-        big_a = dof * a / (dof + 2.0 * b)
-        return -0.5 * dof * np.log1p(2.0 * b / dof) + big_a + log_lower_bound_array(big_a)
+    y = np.ascontiguousarray(y, dtype=float)
+    dof = np.full(y.size, -1.0) if dof is None else np.ascontiguousarray(dof, dtype=float)
+    return llr_kernel.lower_bounds(y, np.ascontiguousarray(tr, dtype=float),
+                                   np.ascontiguousarray(dm, dtype=float), dof)
 
 
 def paper_h1(speed: np.ndarray) -> np.ndarray:

@@ -235,9 +235,12 @@ def categorise(before: np.ndarray, n_before: int, after: np.ndarray, p: int,
     the same torque rate would have been found (:func:`ramp_growth`, the guard of
     :func:`separable`), it replaces it, with ``shape`` ``ramp`` and the step estimate
     ``dx`` of that kind; a confirmed single step kind refuted by a significant growth of
-    the other kind is withdrawn (:func:`refuted`). A step has no growth: a true single
-    step is named the other kind only through a false significance of that kind's growth
-    at the category level.
+    the other kind is withdrawn (:func:`refuted`). A step verdict that stands is not
+    confirmed when the after segment grows (:func:`grows`): the step model it rests on is
+    rejected, and a step fit of a growing level shares the rise between the directions
+    (``undecided``, guess the better single kind). A step has no growth: a true single
+    step is named the other kind, or loses its confirmation, only through a false
+    significance at the category level.
     """
     before = np.asarray(before, dtype=float)
     after = np.asarray(after, dtype=float)
@@ -278,14 +281,52 @@ def categorise(before: np.ndarray, n_before: int, after: np.ndarray, p: int,
     fits = ramp_fits(before, after, shapes, p)
     best = fits.max(axis=0)
     named = ramp_kind(best, s2, z_threshold)
+    if named is not None and step.kind == KINDS[named]:
+        return step
+    if named is not None and separable(dx, named, detectable, mean_speed):
+        return Category(KINDS[named], dx[named].copy(), (z_d, z_v), s2, True, KINDS[named],
+                        detectable, SHAPES[1])
     if named is None:
-        return refuted(step, ramp_statistics(best, s2), ramp_limits(1, z_threshold)[0], dx)
-    if step.kind == KINDS[named]:
-        return step
-    if not separable(dx, named, detectable, mean_speed):
-        return step
-    return Category(KINDS[named], dx[named].copy(), (z_d, z_v), s2, True, KINDS[named],
-                    detectable, SHAPES[1])
+        step = refuted(step, ramp_statistics(best, s2), ramp_limits(1, z_threshold)[0], dx)
+    growing = step.confirmed and step.shape == SHAPES[0] and grows(
+        after, shapes, s2, p, z_threshold)
+    if growing:
+        h = 0 if explained[0] >= explained[1] else 1
+        return step._replace(kind=UNDECIDED, dx=dx[h].copy(), confirmed=False,
+                             guess=KINDS[h])
+    return step
+
+
+def growth_statistic(after: np.ndarray, shapes: np.ndarray, noise_var: float, p: int
+                     ) -> float:
+    """Return ``max`` over the time shapes of ``(RSS_step - RSS_growth) / sigma^2``.
+
+    Not in the paper (docs/llr.md "Kinds on ramps", the step check). The after segment
+    fitted on its own with its offsets only (a step: constant level after the change)
+    against the offsets plus a growth ``r(u) h_dry + r(u) h_viscous`` (two more columns)
+    for each candidate shape ``r`` (rows of :func:`ramp_shapes`).
+    """
+    gram, rhs = _ramp_after(after, shapes, p)
+    full = _explained(gram, rhs)
+    offsets = _explained(gram[..., :p, :p], rhs[..., :p])
+    return max(float(np.max(full - offsets)), 0.0) / noise_var
+
+
+def grows(after: np.ndarray, shapes: np.ndarray, noise_var: float, p: int,
+          z_threshold: float) -> bool:
+    """Return True if the step model of the after segment is rejected (the change grows).
+
+    Not in the paper (docs/llr.md "Kinds on ramps"). :func:`growth_statistic` against the
+    ``chi2_2`` quantile at the category level divided by the number of candidate shapes
+    (Bonferroni: a step, whatever the shape tried, is called growing with probability at
+    most the category level). The step categorisation assumes a constant level after the
+    change: when it grows, a step fit shares the rise between the two directions wherever
+    ``|w|`` trends, so its single-kind or ``both`` verdict is not confirmed.
+    """
+    shapes = np.atleast_2d(shapes)
+    from scipy import special
+    level = math.erfc(z_threshold / math.sqrt(2.0)) / shapes.shape[0]
+    return growth_statistic(after, shapes, noise_var, p) > float(special.chdtri(2, level))
 
 
 def refuted(step: Category, chi: tuple[float, float], reject: float, dx: np.ndarray

@@ -1,0 +1,57 @@
+"""The compiled per-sample path (core/llr_kernel.py) gives the detector's events exactly."""
+
+import json
+import os
+import subprocess
+import sys
+
+import numpy as np
+from test_llr import friction_signal, stream
+
+from rwa_monitor.core.llr import LLRDetector
+
+SCRIPT = '''
+import json, sys
+import numpy as np
+sys.path.insert(0, {test_dir!r})
+from test_llr import friction_signal, stream
+from rwa_monitor.core.llr import LLRDetector
+t, w, f = friction_signal(4000, 61, ((2000, 0.6, 0.0),), profile='crossing')
+det = LLRDetector('rw1', window=150)
+print(json.dumps([e.to_json() for e in stream(det, t, w, f)] + [det.counters]))
+'''
+
+
+def test_inputs_other_than_floats_give_the_events_of_floats():
+    # Python ints, numpy scalars and numeric strings take the kernel's conversion or the
+    # fallback through float(); None is counted as non-finite, as before.
+    t, w, f = friction_signal(3000, 62, ((1500, 0.6, 0.0),))
+    plain = LLRDetector('rw1', window=120)
+    mixed = LLRDetector('rw1', window=120)
+    expected = stream(plain, t, w, f)
+    got = []
+    for i, (a, b, c) in enumerate(zip(t.tolist(), w.tolist(), f.tolist())):
+        if i % 3 == 0:
+            a, b, c = np.float64(a), np.float64(b), str(c)
+        elif i % 3 == 1:
+            a = int(a) if a == int(a) else a
+        got.extend(mixed.update(a, b, c))
+    assert [e.to_json() for e in got] == [e.to_json() for e in expected]
+    assert mixed.counters == plain.counters
+    assert mixed.update(None, 1.0, 0.0) == [] and mixed.counters['nonfinite'] == 1
+    assert mixed.update(t[-1] + 1.0, 'x', 0.0) == [] and mixed.counters['nonfinite'] == 2
+    assert mixed.n_samples == plain.n_samples + 2
+
+
+def test_uncompiled_kernel_gives_the_same_events():
+    # NUMBA_DISABLE_JIT runs the kernel's functions as plain Python: one implementation.
+    t, w, f = friction_signal(4000, 61, ((2000, 0.6, 0.0),), profile='crossing')
+    det = LLRDetector('rw1', window=150)
+    compiled = [e.to_json() for e in stream(det, t, w, f)] + [det.counters]
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    script = SCRIPT.format(test_dir=os.path.join(root, 'test'))
+    out = subprocess.run([sys.executable, '-c', script], check=True, capture_output=True,
+                         text=True, timeout=300,
+                         env=dict(os.environ, NUMBA_DISABLE_JIT='1'))
+    assert len(compiled) > 1
+    assert json.loads(out.stdout.strip().splitlines()[-1]) == json.loads(json.dumps(compiled))
