@@ -6,6 +6,7 @@ import pathlib
 
 import numpy as np
 
+from bench import fss_base_dry
 from bench.report import table
 
 STATUSES = ('nominal', 'dry', 'viscous', 'fss1', 'fss2')
@@ -385,7 +386,12 @@ def sizes_markdown(sizes: dict, paper: dict) -> list[str]:
                   'one-window base-dry estimate over the windows of the case.', '']
     lines += ['References (N m, N m s/rad): ' + '; '.join(
                   f'{k}: base dry {r["base_dry_nm"]:.3g}, viscous {r["viscous_nms"]:.3g}, '
-                  f'noise {r["noise_std_nm"]:.3g}' for k, r in refs.items()) + '.', '']
+                  f'noise {r["noise_std_nm"]:.3g}'
+                  + (' (refitted columns dropped: they took the dry friction)'
+                     if r.get('extra_refit_dropped') else '')
+                  for k, r in refs.items()) + '.', '']
+    if 'base_dry_information' in paper:
+        lines += fss_base_dry.markdown(paper['base_dry_information'])
     return lines
 
 

@@ -305,6 +305,48 @@ def test_fss_reference_is_the_extraction_not_the_identified_extras(paper_block):
         raw.viscous * config.torque_scale_nm / config.speed_scale_rad_s, rel=0.01)
 
 
+def test_fss_reference_of_a_long_record_is_that_of_its_window_long_pieces(paper_block):
+    # The calibration window as a record of four diagnosed windows of 20,000 samples: the
+    # reference's base dry is the median of the pieces' own references (a model-(1)
+    # nominal: nothing refitted, each piece is extracted as it would be alone), their std
+    # kept, the viscous coefficient their mean with its standard error. One window: no
+    # split.
+    block, (t, w, f) = paper_block
+    model1 = {'effects': [], 'weights': {'dry': 2.0e-4, 'viscous': 5.0e-7}}
+    ref = core.fss_reference(w, f, model1, block['noise'], window_samples=20_000)
+    pieces = [core.fss_reference(w[k:k + 20_000], f[k:k + 20_000], model1, block['noise'],
+                                 window_samples=20_000)
+              for k in range(0, 80_000, 20_000)]
+    whole = core.fss_reference(w, f, model1, block['noise'])
+    assert ref['base_dry_windows'] == 4 and 'base_dry_windows' not in whole
+    bases = [p['base_dry_nm'] for p in pieces]
+    assert ref['base_dry_nm'] == pytest.approx(np.median(bases), rel=1e-12)
+    assert ref['base_dry_window_std_nm'] == pytest.approx(np.std(bases, ddof=1), rel=1e-12)
+    assert ref['viscous_nms'] == pytest.approx(np.mean([p['viscous_nms'] for p in pieces]),
+                                               rel=1e-12)
+    assert ref['viscous_se_nms'] == pytest.approx(
+        np.sqrt(np.sum([p['viscous_se_nms'] ** 2 for p in pieces])) / 4, rel=1e-12)
+    assert ref['noise_std_nm'] == whole['noise_std_nm']
+
+
+def test_fss_reference_drops_refitted_columns_that_take_the_dry_friction(paper_block,
+                                                                         monkeypatch):
+    # A refit whose extra part holds -3 x the dry friction (as ill-conditioned columns
+    # did on a record with few sign changes left outside a wide low-speed band) would
+    # leave a negative base dry: the reference is then model (1)'s, and says so.
+    from rwa_monitor.core.fss import segments
+    block, (t, w, f) = paper_block
+    monkeypatch.setattr(segments, 'fit_extra_columns',
+                        lambda *a, **k: (np.zeros(a[3].shape[1]), np.array([-6.0e-4, 0.0])))
+    ref = core.fss_reference(w, f, block['friction_model'], block['noise'])
+    model1 = core.fss_reference(w, f, {'effects': [], 'weights': {'dry': 2.0e-4,
+                                                                  'viscous': 5.0e-7}},
+                                block['noise'])
+    assert ref['extra_refit_dropped'] and 'extra_refit_dropped' not in block['fss']
+    assert not any(ref['extra_weights'].values())
+    assert ref['base_dry_nm'] == model1['base_dry_nm'] > 0
+
+
 def test_paper_example_pair_judged_against_a_one_window_calibration(paper_block):
     from rwa_monitor.core.fss.pipeline import FssConfig
     from rwa_monitor.telemetry.fss_model import load_model

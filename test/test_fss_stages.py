@@ -7,10 +7,11 @@ import pytest
 from scipy import stats
 
 from rwa_monitor.core.fss.assign import (assign_bruteforce, assign_changepoints,
-                                         friction_levels, score_assignment)
+                                         base_dry_weights, friction_levels,
+                                         score_assignment)
 from rwa_monitor.core.fss.classify import histogram, WindowClassifier
 from rwa_monitor.core.fss.model import EXAMPLE_1, EXAMPLE_2, LOG_FLOOR, SwitchingSystem
-from rwa_monitor.core.fss.segments import fit_extra_columns, fit_intervals
+from rwa_monitor.core.fss.segments import combination_se, fit_extra_columns, fit_intervals
 from rwa_monitor.core.fss.wglr import detect_changepoints, run_maxima, wglr
 from rwa_monitor.telemetry.fss_model import load_model, save_model
 
@@ -302,3 +303,31 @@ def test_viscous_standard_error_is_the_scatter_of_the_estimate():
     reported = np.mean([f.viscous_se for f in fits])
     assert scatter == pytest.approx(reported, rel=0.14)
     assert fit_intervals(clean, np.full(n, 0.5), np.array([1000])).viscous_se == np.inf
+
+
+def test_base_dry_standard_error_is_the_scatter_of_algorithm_1():
+    # Levels 1, 1.3 (FSS 1 up), 1.05 (FSS 1 down), 1.55 (FSS 2 up) on a speed crossing zero
+    # (each minimum clear of the noise, so that the same intervals hold it in every draw):
+    # Algorithm 1's base is a fixed combination of the interval coefficients; over 400
+    # noise draws its std is the reported standard error (4 sigma of a std from 400
+    # draws: 14 %), and the combination reproduces friction_levels' base exactly.
+    n, sigma = 4000, 0.05
+    x = 0.2 + 0.6 * np.sin(np.arange(n) / 400.0)
+    cps, inputs = np.array([1000, 1500, 2500]), np.array([1, 1, 2])
+    level = np.select([np.arange(n) < k for k in cps], [1.0, 1.3, 1.05], 1.55)
+    clean = level * np.sign(x) + 1.0 * x
+    configs = np.array([[0, 0], [1, 0], [0, 0], [0, 1]])
+    rng = np.random.default_rng(6)
+    bases, ses = [], []
+    for _ in range(400):
+        y = clean + rng.normal(0.0, sigma, n)
+        fit = fit_intervals(y, x, cps)
+        weights = base_dry_weights(fit.dry, inputs, 2)
+        base = friction_levels(fit.dry, inputs, configs, 2)[0]
+        assert weights @ fit.dry == pytest.approx(base, abs=1e-12)
+        bases.append(base)
+        ses.append(combination_se(fit, y, x, weights))
+    assert np.mean(bases) == pytest.approx(1.0, abs=4 * np.mean(ses) / np.sqrt(400))
+    assert np.std(bases, ddof=1) == pytest.approx(np.mean(ses), rel=0.14)
+    with pytest.raises(ValueError, match='one per interval'):
+        combination_se(fit, y, x, weights[:2])

@@ -226,7 +226,8 @@ def refit_outside_band(model: dict[str, Any], speed: np.ndarray, friction: np.nd
 
 
 def fss_reference(speed: np.ndarray, friction: np.ndarray, friction_model: Mapping[str, Any],
-                  noise: Mapping[str, Any]) -> dict[str, Any]:
+                  noise: Mapping[str, Any], window_samples: int | None = None
+                  ) -> dict[str, Any]:
     """Return the window diagnoser's nominal reference of one wheel.
 
     The diagnoser knows model (1) and the FSSs (the FSS paper's eq. (4)); what the wheel's
@@ -245,10 +246,22 @@ def fss_reference(speed: np.ndarray, friction: np.ndarray, friction_model: Mappi
     calibration data given as :func:`fss_inputs` gives a window, so that a nominal window
     is judged against the same estimator's nominal values. ``model1_*``: the plain
     least-squares fit of model (1) outside the low-speed band (for reading only).
+
+    A record of two or more diagnosed windows (``window_samples``, default the node's
+    ``window_length``) gets the median of the base dry of each window-long piece
+    (``base_dry_windows`` pieces, their std ``base_dry_window_std_nm``) and the mean of
+    their viscous coefficients (standard error from theirs): the reference is that of a
+    window, as the diagnosed ones are. Algorithm 1's base is a one-window estimate, and
+    on a longer record its running sums of jumps drift down with every jump given to the
+    wrong FSS (docs/fss.md, "Calibrated": a three-window record read 0.54 x the true
+    base dry). When the refitted
+    columns leave no positive base dry (they took the dry friction itself), they are
+    dropped and ``extra_refit_dropped`` is set: the reference is model (1) alone.
     """
     from rwa_monitor.core.fss.pipeline import extract, FssConfig, normalise
     from rwa_monitor.core.fss.segments import fit_extra_columns
     from rwa_monitor.core.identify.model import regressors_from_config
+    from rwa_monitor.core.schema import FSS
     speed = np.asarray(speed, dtype=float)
     friction = np.asarray(friction, dtype=float)
     band = float(noise['low_speed_band']['speed_abs_below_rad_s'])
@@ -278,11 +291,32 @@ def fss_reference(speed: np.ndarray, friction: np.ndarray, friction_model: Mappi
         given = np.where(out, friction - nominal_prediction(
             {'effects': block.get('effects') or [], 'weights': weights}, safe), np.nan)
     ext = extract(*normalise(speed, given, config), config)
+    if extra and not ext.base_dry > 0.0:
+        # The refitted columns took the dry friction itself (nearly collinear with the
+        # interval levels when few intervals hold both signs of the speed): a reference
+        # with no positive base dry is never right, so the nominal is model (1) alone.
+        weights = dict.fromkeys(names, 0.0)
+        given = np.where(out, friction, np.nan)
+        ext = extract(*normalise(speed, given, config), config)
+        ref['extra_refit_dropped'] = True
     tq = config.torque_scale_nm
-    ref.update(base_dry_nm=float(ext.base_dry * tq),
-               viscous_nms=float(ext.viscous * tq / config.speed_scale_rad_s),
-               viscous_se_nms=float(ext.viscous_se * tq / config.speed_scale_rad_s)
-               if np.isfinite(ext.viscous_se) else float('nan'),
+    base, viscous, viscous_se = ext.base_dry, ext.viscous, ext.viscous_se
+    length = int(window_samples or FSS['window_length'].default)
+    pieces = speed.size // length
+    if pieces >= 2:
+        parts = [extract(*normalise(speed[k * length:(k + 1) * length],
+                                    given[k * length:(k + 1) * length], config), config)
+                 for k in range(pieces)]
+        bases = [p.base_dry for p in parts]
+        base = float(np.median(bases))
+        viscous = float(np.mean([p.viscous for p in parts]))
+        viscous_se = float(np.sqrt(np.sum([p.viscous_se ** 2 for p in parts]))) / pieces
+        ref.update(base_dry_windows=pieces,
+                   base_dry_window_std_nm=float(np.std(bases, ddof=1) * tq))
+    ref.update(base_dry_nm=float(base * tq),
+               viscous_nms=float(viscous * tq / config.speed_scale_rad_s),
+               viscous_se_nms=float(viscous_se * tq / config.speed_scale_rad_s)
+               if np.isfinite(viscous_se) else float('nan'),
                noise_std_nm=float(ext.sigma * tq), extra_weights=weights,
                samples=int(np.count_nonzero(out)))
     return ref

@@ -228,3 +228,24 @@ def friction_levels(dry: np.ndarray, inputs: np.ndarray, configs: np.ndarray,
         levels[s] = [v - low for v in levels[s]]
         base += low
     return base, levels, qs
+
+
+def base_dry_weights(dry: np.ndarray, inputs: np.ndarray, n_systems: int) -> np.ndarray:
+    """Return c with c @ dry equal to Algorithm 1's base dry friction (:func:`friction_levels`).
+
+    Line 18 takes F-hat_1 plus, per FSS, its running sum of jumps at its minimum: with the
+    minimising intervals held fixed that is a linear combination of the interval
+    coefficients, so its least-squares standard error follows from theirs
+    (``core/fss/segments.py`` ``combination_se``).
+    """
+    dry = np.asarray(dry, dtype=float)
+    inputs = np.asarray(inputs, dtype=int)
+    weights = np.zeros(dry.size)
+    weights[0] = 1.0
+    for s in range(1, n_systems + 1):
+        mine = np.flatnonzero(inputs == s) + 1       # intervals entered by its jumps
+        running = np.concatenate(([0.0], np.cumsum(dry[mine] - dry[mine - 1])))
+        taken = mine[:int(np.argmin(running))]
+        np.add.at(weights, taken, 1.0)
+        np.add.at(weights, taken - 1, -1.0)
+    return weights

@@ -15,10 +15,11 @@ from typing import Sequence
 
 import numpy as np
 
-from rwa_monitor.core.fss.assign import assign_changepoints, friction_levels
+from rwa_monitor.core.fss.assign import (assign_changepoints, base_dry_weights,
+                                         friction_levels)
 from rwa_monitor.core.fss.classify import WindowClassifier
 from rwa_monitor.core.fss.model import DEFAULT_SYSTEMS, SwitchingSystem
-from rwa_monitor.core.fss.segments import fit_intervals
+from rwa_monitor.core.fss.segments import combination_se, fit_intervals
 from rwa_monitor.core.fss.wglr import detect_changepoints
 from rwa_monitor.core.params import check_int, check_real
 
@@ -67,6 +68,7 @@ class Extraction:
     exact: bool
     identifiable: bool
     viscous_se: float = float('inf')    # least-squares standard error of ``viscous``
+    base_dry_se: float = float('inf')   # least-squares standard error of ``base_dry``
     timings: dict[str, float] = field(default_factory=dict)       # wall time (s)
     cpu_timings: dict[str, float] = field(default_factory=dict)   # this thread's CPU (s)
 
@@ -111,6 +113,9 @@ def extract(speed: np.ndarray, friction: np.ndarray, config: FssConfig = FssConf
     inputs = assignment.inputs[keep]
     configs = np.vstack([assignment.configs[0], assignment.configs[1:][keep]])
     base, levels, qs = friction_levels(refit.dry, inputs, configs, len(config.systems))
+    base_se = combination_se(refit, friction, speed,
+                             base_dry_weights(refit.dry, inputs, len(config.systems)),
+                             dk_error=config.dk_error)
     t3, c3 = _time.perf_counter(), _time.thread_time()
     timings.update(changepoints=t1 - t0, least_squares=t2 - t1, assignment=t3 - t2)
     cpu = {'changepoints': c1 - c0, 'least_squares': c2 - c1, 'assignment': c3 - c2}
@@ -120,6 +125,7 @@ def extract(speed: np.ndarray, friction: np.ndarray, config: FssConfig = FssConf
                       rmse=refit.rmse, rejected=int(np.sum(assignment.inputs == 0)),
                       iterations=assignment.iterations, exact=assignment.exact,
                       identifiable=refit.identifiable, viscous_se=refit.viscous_se,
+                      base_dry_se=base_se,
                       timings=timings, cpu_timings=cpu)
 
 

@@ -102,6 +102,36 @@ def fit_intervals(y: np.ndarray, x: np.ndarray, changepoints: np.ndarray, *,
                        viscous_se=se)
 
 
+def combination_se(fit: IntervalFit, y: np.ndarray, x: np.ndarray, weights: np.ndarray, *,
+                   dk_error: int = 10, min_samples: int = 3) -> float:
+    """Return the least-squares standard error of ``weights @ fit.dry`` (white noise).
+
+    ``fit``: :func:`fit_intervals` of ``y`` on speed ``x`` with the same ``dk_error``
+    and ``min_samples``. Cov(F-hat) = sigma^2 (A^-1 + A^-1 b b^T A^-1 / S) with A the diagonal
+    of H^T H for the dry coefficients, b the per-interval sums of sign(w) w and S the
+    Schur complement of the viscous coefficient (sigma^2 A^-1 when it is not identified):
+    the Cramer-Rao bound of the combination under eq. (14) with Gaussian noise, the
+    changepoints and the assignment taken as known.
+    """
+    x = np.asarray(x, dtype=float)
+    weights = np.asarray(weights, dtype=float)
+    a = fit.hth
+    if weights.shape != a.shape:
+        raise ValueError(f'weights must have {a.size} entries (one per interval)')
+    if np.any((a <= 0) & (weights != 0)):
+        return float('inf')
+    a_safe = np.where(a > 0, a, 1.0)
+    var = float(np.sum(weights ** 2 / a_safe))
+    if fit.identifiable:
+        label = _labels(x.size, fit.changepoints, dk_error, min_samples)
+        use = np.isfinite(np.asarray(y, dtype=float)) & np.isfinite(x) & (label >= 0)
+        s = np.sign(x[use])
+        b = np.bincount(label[use], weights=s * x[use], minlength=a.size)
+        denom = float(np.sum(x[use] ** 2)) - float(np.sum(b * b / a_safe))
+        var += float(np.sum(weights * b / a_safe)) ** 2 / denom
+    return float(np.sqrt(fit.sigma2 * var))
+
+
 # fit_extra_columns: least usable samples, and least part of a column beyond model (1).
 MIN_EXTRA_SAMPLES = 100
 MIN_EXTRA_PART = 1.0e-3
