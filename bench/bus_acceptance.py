@@ -7,7 +7,8 @@ seeds below 100). Run i injects fault FAULTS[i % 4] on wheel WHEELS[(i + i // 4)
 FAULT_TIME_S. The LLR pipeline runs on each run with and without the calibration.
 
 Throughput (:func:`throughput`): on the first evaluation run, per wheel, the streaming
-path (a node's: per-sample calibrated residual, then ``LLRDetector.update``) and the batch
+path (llr_detector's: ``LLRDetector.update_nominal``, the nominal lookup and the sample in
+one compiled call; nodes/calibration.py) and the batch
 path (``NominalWheel.residual`` + ``detect_batch``), with and without calibration,
 SPEED_REPEATS times each in the main process after the pool has finished; medians of
 samples per CPU second of the process (the shared machine's load inflates wall time).
@@ -337,8 +338,10 @@ def markdown(acc: dict[str, Any], r: float, rate_hz: float) -> list[str]:
     if speed:
         lines += [f'Throughput: {speed["wheels"]} wheels x {speed["samples_per_wheel"]} '
                   f'samples of evaluation seed {seeds[0]}, {speed["repeats"]} repeats, '
-                  'medians; streaming = per-sample calibrated residual (the node table '
-                  'lookup) + `LLRDetector.update`, batch = `NominalWheel.residual` + '
+                  "medians; streaming = llr_detector's per-sample call "
+                  '`LLRDetector.update_nominal` (nominal lookup and sample in one compiled '
+                  'call, docs/architecture.md "Compiled kernels"), batch = '
+                  '`NominalWheel.residual` + '
                   '`detect_batch`; "without calibration" = the same detector on the raw '
                   f'friction. Batch events equal streaming events: {_same_text(speed)}. '
                   'CPU time of '
@@ -410,8 +413,9 @@ def throughput(tele, cal_path: str, params: dict[str, Any],
                 found = []
                 start = time.process_time()
                 if mode:
+                    table = nominal.table
                     for t_k, w_k, f_k in zip(t, w, f):
-                        out = detector.update(t_k, w_k, nominal.residual_one(t_k, w_k, f_k)[0])
+                        out = detector.update_nominal(table, t_k, w_k, f_k)
                         if out:
                             found.extend(out)
                 else:

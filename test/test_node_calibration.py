@@ -165,3 +165,29 @@ def test_fss_and_vsadc_nodes_announce_a_calibration_change(tmp_path, name):
         assert event.details[keys.CALIBRATION_FILE] == str(other)
         assert event.details[keys.PREVIOUS_CALIBRATION] == str(cal)
         assert node.calibration.path == str(other)
+
+
+def test_samples_not_tested_are_counted_across_calibration_reloads(tmp_path):
+    from rwa_monitor.core.llr import LLRDetector
+    from rwa_monitor.nodes.calibration import CalibrationInForce
+    cal, _, _ = _files(tmp_path)
+    holder = CalibrationInForce(str(cal))
+    low, high = holder.block('rw1')['speed_range_rad_s']
+    inside = 0.5 * (low + high)
+    detector = LLRDetector('rw1', window=200)
+
+    def feed(start, speeds):
+        for k, w in enumerate(speeds):
+            holder.update('rw1', detector, start + 0.1 * k, w, 1e-3)
+
+    feed(0.0, [inside] * 5 + [high + 50.0] * 3 + [low - 50.0] * 4)
+    assert holder.not_tested('rw1') == {'low_speed_band': 0, 'outside_calibrated_range': 7}
+    holder.set(str(cal))    # a reload starts new tables; the counts go on
+    feed(10.0, [high + 50.0] * 2)
+    assert holder.not_tested('rw1') == {'low_speed_band': 0, 'outside_calibrated_range': 9}
+    assert holder.values('rw1')['not_tested_outside_calibrated_range'] == 9
+    assert detector.counters['nonfinite'] == 9   # not tested = dropped as non-finite
+    holder.set('')          # no calibration: the friction itself is tested
+    feed(20.0, [high + 50.0] * 2)
+    assert holder.not_tested('rw1')['outside_calibrated_range'] == 9
+    assert detector.counters['nonfinite'] == 9

@@ -26,6 +26,7 @@ from diagnostic_msgs.msg import DiagnosticStatus
 from rwa_monitor.core import keys
 from rwa_monitor.core.calibrate import NominalWheel
 from rwa_monitor.core.events import AnomalyEvent
+from rwa_monitor.core.llr import LLRDetector
 from rwa_monitor.telemetry.calibration_file import load
 from rwa_monitor.telemetry.codecs import key_values
 
@@ -58,7 +59,7 @@ class CalibrationInForce:
         self.document: dict[str, Any] | None = None
         self.loads = 0
         self._wheels: dict[str, NominalWheel] = {}
-        self.not_tested: dict[str, dict[str, int]] = {}
+        self._carried: dict[str, dict[str, int]] = {}   # counts of calibrations replaced
         self.set(path)
 
     def set(self, path: str) -> str:
@@ -69,6 +70,8 @@ class CalibrationInForce:
         document = load(path) if path else None
         wheels = ({w: NominalWheel(b) for w, b in document['wheels'].items()}
                   if document else {})
+        for wheel_id in self._wheels:
+            self._carried[wheel_id] = self.not_tested(wheel_id)
         self.previous = self.path
         self.path, self.document, self._wheels = path, document, wheels
         self.sha256 = _sha256(path) if path else ''
@@ -96,22 +99,28 @@ class CalibrationInForce:
         """Return the wheel's calibration block, or None (no calibration or wheel)."""
         return None if self.document is None else self.document['wheels'].get(wheel_id)
 
-    def residual(self, wheel_id: str, t: float, speed: float, friction: float) -> float:
-        """Return the friction to test: itself, or the residual against the nominal.
+    def update(self, wheel_id: str, detector: LLRDetector, t: float, speed: float,
+               friction: float) -> list[AnomalyEvent]:
+        """Give one sample to ``detector``: the friction itself, or its calibrated residual.
 
-        The residual is NaN inside the low-speed band or outside the calibrated speed
-        range (counted per reason).
+        With a calibration of the wheel, the nominal lookup and the detector's sample are
+        one compiled call (``LLRDetector.update_nominal``; the same events as the residual
+        then ``update``). Samples inside the low-speed band or outside the calibrated speed
+        range are not tested; the nominal's table counts them per reason.
         """
         nominal = self._wheels.get(wheel_id)
         if nominal is None:
-            return friction
-        out, reason = nominal.residual_one(t, speed, friction)
-        counts = self.not_tested.get(wheel_id)
-        if counts is None:   # first sample of the wheel: its counts start at 0
-            counts = self.not_tested[wheel_id] = dict.fromkeys(REASONS, 0)
-        if reason is not None:
-            counts[reason] += 1
-        return out
+            return detector.update(t, speed, friction)
+        return detector.update_nominal(nominal.table, t, speed, friction)
+
+    def not_tested(self, wheel_id: str) -> dict[str, int]:
+        """Return the wheel's samples not tested, per reason, over every calibration loaded."""
+        counts = dict(self._carried.get(wheel_id, dict.fromkeys(REASONS, 0)))
+        nominal = self._wheels.get(wheel_id)
+        if nominal is not None:
+            for reason, n in nominal.not_tested.items():
+                counts[reason] += n
+        return counts
 
     def values(self, wheel_id: str | None = None) -> dict[str, Any]:
         """Return the diagnostics KeyValues of the calibration (per wheel if given)."""
@@ -121,8 +130,9 @@ class CalibrationInForce:
                                keys.CALIBRATION_LOADS: self.loads,
                                keys.CALIBRATION_WHEELS: ','.join(self._wheels)}
         if wheel_id is not None:
-            for reason, n in self.not_tested.get(wheel_id, {}).items():
-                out[f'not_tested_{reason}'] = n
+            if wheel_id in self._wheels or wheel_id in self._carried:
+                for reason, n in self.not_tested(wheel_id).items():
+                    out[f'not_tested_{reason}'] = n
         return out
 
     def change_event(self, detector: str, time_s: float) -> AnomalyEvent:

@@ -267,8 +267,7 @@ class LLRDetectorNode(Node):
             return
         wheel.samples += 1
         try:
-            friction = self.calibration.residual(wheel_id, seconds, speed, friction)
-            found = wheel.detector.update(seconds, speed, friction)
+            found = self.calibration.update(wheel_id, wheel.detector, seconds, speed, friction)
         except Exception as err:  # noqa: BLE001 - one wheel's failure never stops the node
             self._detector_failed(wheel_id, wheel, err)
             return
