@@ -100,7 +100,10 @@ def markdown(r: dict[str, Any]) -> str:
     """Return the llr section of docs/results.md."""
     s = r['settings']
     out = ['## LLR friction detector (llr-realtime paper)', '',
-           f'`python -m bench llr` on code {r["code"]}, {r["bench_seconds"]:.0f} s; '
+           f'`python -m bench llr` on code {r["code"]}, {r["bench_seconds"]:.0f} s'
+           + (f' (throughput and memory re-measured alone on code '
+              f'{r["throughput_memory_code"]})' if r.get('throughput_memory_code') else '')
+           + '; '
            'scaled units (noise std 1, '
            'given to both detectors), change at k = 1500 of 3000-sample runs; a change is '
            'detected by a declaration whose estimated step is within +-500 samples. '
