@@ -59,6 +59,18 @@ class _Column:
         self._values[i] = value
 
 
+def _int_slot(slot: int) -> property:
+    """Return an attribute that reads and writes ``self._ints[slot]`` (kernel state)."""
+    return property(lambda self: int(self._ints[slot]),
+                    lambda self, v: self._ints.__setitem__(slot, v))
+
+
+def _float_slot(slot: int) -> property:
+    """Return an attribute that reads and writes ``self._fs[slot]`` (kernel state)."""
+    return property(lambda self: float(self._fs[slot]),
+                    lambda self, v: self._fs.__setitem__(slot, v))
+
+
 class LLRDetector:
     """Streaming LLR detector of friction changes for one wheel (Algorithm 1).
 
@@ -285,24 +297,15 @@ class LLRDetector:
         self._last_event: AnomalyEvent | None = None
 
     # Scalars of the per-sample state (views of the kernel's arrays).
-    _rows = property(lambda self: int(self._ints[kern.I_ROWS]),
-                     lambda self, v: self._ints.__setitem__(kern.I_ROWS, v))
-    _pos = property(lambda self: int(self._ints[kern.I_POS]),
-                    lambda self, v: self._ints.__setitem__(kern.I_POS, v))
-    _c = property(lambda self: int(self._ints[kern.I_C]),
-                  lambda self, v: self._ints.__setitem__(kern.I_C, v))
-    _c_row = property(lambda self: int(self._ints[kern.I_C_ROW]),
-                      lambda self, v: self._ints.__setitem__(kern.I_C_ROW, v))
-    _kmin = property(lambda self: int(self._ints[kern.I_KMIN]),
-                     lambda self, v: self._ints.__setitem__(kern.I_KMIN, v))
-    _checkpoint = property(lambda self: int(self._ints[kern.I_CHECKPOINT]),
-                           lambda self, v: self._ints.__setitem__(kern.I_CHECKPOINT, v))
-    _last_t = property(lambda self: float(self._fs[kern.F_LAST_T]),
-                       lambda self, v: self._fs.__setitem__(kern.F_LAST_T, v))
-    _logpmin = property(lambda self: float(self._fs[kern.F_LOGPMIN]),
-                        lambda self, v: self._fs.__setitem__(kern.F_LOGPMIN, v))
-    _ystar = property(lambda self: float(self._fs[kern.F_YSTAR]),
-                      lambda self, v: self._fs.__setitem__(kern.F_YSTAR, v))
+    _rows = _int_slot(kern.I_ROWS)
+    _pos = _int_slot(kern.I_POS)
+    _c = _int_slot(kern.I_C)
+    _c_row = _int_slot(kern.I_C_ROW)
+    _kmin = _int_slot(kern.I_KMIN)
+    _checkpoint = _int_slot(kern.I_CHECKPOINT)
+    _last_t = _float_slot(kern.F_LAST_T)
+    _logpmin = _float_slot(kern.F_LOGPMIN)
+    _ystar = _float_slot(kern.F_YSTAR)
 
     @property
     def _pref(self) -> Any:
