@@ -337,14 +337,10 @@ class LLRDetector:
             except TypeError:
                 return self._update_converted(t, speed, friction)
             return self._after(flags) if flags else []
-        try:
-            t = float(t)
-            w = float(speed)
-            f = float(friction)
-        except (TypeError, ValueError):
-            self._ints[kern.I_ROWS] += 1
-            self._counters['nonfinite'] += 1
+        values = self._floats(t, speed, friction)
+        if values is None:
             return []
+        t, w, f = values
         row = kern.accept(self._fs, self._ints, t, w, f)
         if row < 0:
             return []
@@ -381,16 +377,20 @@ class LLRDetector:
 
     def _update_converted(self, t: Any, speed: Any, friction: Any) -> list[AnomalyEvent]:
         """:meth:`update` of the fast path for values the kernel does not take as floats."""
+        values = self._floats(t, speed, friction)
+        if values is None:
+            return []
+        flags = _step(self._fs, self._ints, *values)
+        return self._after(flags) if flags else []
+
+    def _floats(self, t: Any, speed: Any, friction: Any) -> tuple[float, float, float] | None:
+        """Return the sample as floats, or None (counted as a non-finite row)."""
         try:
-            t = float(t)
-            w = float(speed)
-            f = float(friction)
+            return float(t), float(speed), float(friction)
         except (TypeError, ValueError):
             self._ints[kern.I_ROWS] += 1
             self._counters['nonfinite'] += 1
-            return []
-        flags = _step(self._fs, self._ints, t, w, f)
-        return self._after(flags) if flags else []
+            return None
 
     def _after(self, flags: int) -> list[AnomalyEvent]:
         """Act on the flags of a kernel call: revise, finish the test, declare."""
