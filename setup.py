@@ -6,8 +6,16 @@ colcon and rosdep users are unaffected); requirements.txt pins the tested set in
 them (test/test_dependencies.py checks that the two agree). Rule of the ranges: from the
 tested minor release up to the next major one, or to the next minor one for releases
 below 1.0, whose minor releases may change their API.
+
+colcon (ament_python) installs the package with ``setup.py install`` or ``develop``; pip
+and every other PEP 517 front end build a wheel. Under those two commands the metadata
+keeps the ROS habit (``setuptools`` only): a ROS install takes its dependencies from
+package.xml through rosdep (Debian packages of other versions, ROS packages without pip
+metadata), and declared pip requirements would make any ``pkg_resources`` import in a
+node fail its check of the console script's ``__requires__``.
 """
 from glob import glob
+import sys
 
 from setuptools import find_packages, setup
 
@@ -50,6 +58,8 @@ EXTRAS_REQUIRE = {
             'river>=0.26.1,<0.27', 'colcon-common-extensions>=0.3.0,<0.4'],
 }
 
+ROS_BUILD = bool({'install', 'develop'} & set(sys.argv[1:]))
+
 # Each node as ``ros2 run rwa_monitor NODE_NAME`` runs it, and as a pip user's command.
 NODES = {
     'telemetry_replay': ('rwa-monitor-replay', 'replay'),
@@ -76,8 +86,8 @@ setup(
     ],
     package_data={package_name: ['config/*.yaml', 'data/*']},
     python_requires='>=3.11',
-    install_requires=INSTALL_REQUIRES,
-    extras_require=EXTRAS_REQUIRE,
+    install_requires=['setuptools'] if ROS_BUILD else INSTALL_REQUIRES,
+    extras_require={} if ROS_BUILD else EXTRAS_REQUIRE,
     zip_safe=True,
     maintainer='rwa_monitor maintainers',
     maintainer_email='rwa-monitor@example.org',

@@ -3,6 +3,7 @@
 import os
 import re
 import runpy
+import sys
 from unittest import mock
 import xml.etree.ElementTree as ET
 
@@ -23,17 +24,23 @@ ROSDEP_KEYS = {
 NO_ROSDEP_KEY = {'threadpoolctl', 'mcap', 'foxglove-sdk'}
 
 
-@pytest.fixture(scope='module')
-def declared():
-    """Return the keyword arguments setup.py gives to setup()."""
+def _setup_kwargs(*argv):
+    """Return the keyword arguments setup.py gives to setup() when run with ``argv``."""
     here = os.getcwd()
     os.chdir(REPO)  # setup.py globs its data files relative to the repository
     try:
-        with mock.patch('setuptools.setup') as setup:
+        with mock.patch('setuptools.setup') as setup, \
+                mock.patch.object(sys, 'argv', ['setup.py', *argv]):
             runpy.run_path('setup.py', run_name='__main__')
     finally:
         os.chdir(here)
     return setup.call_args.kwargs
+
+
+@pytest.fixture(scope='module')
+def declared():
+    """Return setup()'s arguments as pip's build of a wheel sees them."""
+    return _setup_kwargs('bdist_wheel', '--dist-dir', 'dist')
 
 
 def _pins(name):
@@ -133,3 +140,15 @@ def test_every_node_is_installed_under_its_node_name_and_its_command(declared):
         commands = [s for s, t in scripts.items() if t == target and s.startswith('rwa-monitor-')]
         assert len(commands) == 1, (module.stem, commands)
     assert len(scripts) == 1 + 2 * 7
+
+
+@pytest.mark.parametrize('argv', [
+    ('egg_info', '--egg-base', 'b', 'build', '--build-base', 'b', 'install', '--prefix', 'p',
+     '--single-version-externally-managed'),                     # colcon build
+    ('develop', '--editable', '--build-directory', 'b', '--no-deps'),  # --symlink-install
+])
+def test_a_colcon_build_keeps_the_ros_style_metadata(argv, declared):
+    ros = _setup_kwargs(*argv)
+    assert ros['install_requires'] == ['setuptools'] and ros['extras_require'] == {}
+    assert ros['entry_points'] == declared['entry_points']
+    assert _setup_kwargs('egg_info')['install_requires'] == declared['install_requires']
