@@ -3,6 +3,7 @@
 import json
 import pathlib
 import re
+import socket
 import struct
 import time
 
@@ -16,6 +17,7 @@ from websockets.exceptions import InvalidStatus
 from websockets.sync.client import connect
 
 from rwa_monitor.core.events import AnomalyEvent
+from rwa_monitor.exceptions import ConfigError
 from rwa_monitor.nodes import foxglove_bridge as fb
 from rwa_monitor.nodes import foxglove_front as front
 from rwa_monitor.nodes import messages
@@ -204,3 +206,13 @@ def test_the_bridge_applies_its_allowed_origins_parameter():
             connect(f'ws://127.0.0.1:{bridge.port}', subprotocols=['foxglove.websocket.v1'],
                     open_timeout=5, origin='https://attacker.example')
         assert bridge.front.refused == 1
+
+
+def test_a_port_in_use_is_a_config_error_naming_it():
+    with socket.socket() as taken:
+        taken.bind(('127.0.0.1', 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        with RosWorld() as world:
+            with pytest.raises(ConfigError, match=f'host/port: cannot serve on 127.0.0.1:{port}'):
+                world.node(fb.FoxgloveBridge, parameter_overrides=[Parameter('port', value=port)])

@@ -70,9 +70,9 @@ class WebSocketFront:
         self.refused = 0
         self._upstream = f'ws://127.0.0.1:{upstream_port}'
         self._warn = warn
+        # a client's messages are control requests: websockets' 1 MiB limit applies to them
         self._server = serve(self._relay, host, port, subprotocols=list(SUBPROTOCOLS),
-                             process_request=self._check_origin, compression=None,
-                             max_size=None)
+                             process_request=self._check_origin, compression=None)
         self.port: int = self._server.socket.getsockname()[1]
         self._thread = threading.Thread(target=self._server.serve_forever,
                                         name='foxglove-front', daemon=True)
