@@ -24,7 +24,7 @@ ROSDEP_KEYS = {
 NO_ROSDEP_KEY = {'threadpoolctl', 'mcap', 'foxglove-sdk'}
 
 
-def _setup_kwargs(*argv):
+def setup_kwargs(*argv):
     """Return the keyword arguments setup.py gives to setup() when run with ``argv``."""
     here = os.getcwd()
     os.chdir(REPO)  # setup.py globs its data files relative to the repository
@@ -40,7 +40,7 @@ def _setup_kwargs(*argv):
 @pytest.fixture(scope='module')
 def declared():
     """Return setup()'s arguments as pip's build of a wheel sees them."""
-    return _setup_kwargs('bdist_wheel', '--dist-dir', 'dist')
+    return setup_kwargs('bdist_wheel', '--dist-dir', 'dist')
 
 
 def _pins(name):
@@ -148,7 +148,7 @@ def test_every_node_is_installed_under_its_node_name_and_its_command(declared):
     ('develop', '--editable', '--build-directory', 'b', '--no-deps'),  # --symlink-install
 ])
 def test_a_colcon_build_keeps_the_ros_style_metadata(argv, declared):
-    ros = _setup_kwargs(*argv)
+    ros = setup_kwargs(*argv)
     assert ros['install_requires'] == ['setuptools'] and ros['extras_require'] == {}
     assert ros['entry_points'] == declared['entry_points']
-    assert _setup_kwargs('egg_info')['install_requires'] == declared['install_requires']
+    assert setup_kwargs('egg_info')['install_requires'] == declared['install_requires']
