@@ -67,7 +67,8 @@ class WebSocketFront:
         """Start serving in a daemon thread (``port`` 0: a free port, see :attr:`port`)."""
         self.allowed_origins = list(allowed_origins)
         self.loopback = is_loopback(host)
-        self.refused = 0
+        self.refused = 0   # clients refused for their Origin
+        self._refused_lock = threading.Lock()
         self._upstream = f'ws://127.0.0.1:{upstream_port}'
         self._warn = warn
         # a client's messages are control requests: websockets' 1 MiB limit applies to them
@@ -84,7 +85,8 @@ class WebSocketFront:
         origin = origins[0] if len(origins) == 1 else None
         if len(origins) <= 1 and origin_allowed(origin, self.allowed_origins, self.loopback):
             return None
-        self.refused += 1
+        with self._refused_lock:   # handshakes run in one thread per client
+            self.refused += 1
         if len(origins) > 1:
             rule = 'a request may carry one Origin only'
         elif self.allowed_origins:
