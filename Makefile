@@ -18,7 +18,8 @@ $(STAMP): requirements.txt setup.py setup.cfg
 demo: $(STAMP)
 	$(VENV)/bin/rwa-monitor demo
 
-# Readers the project did not write (npm), for the interop tests; skipped without npm.
+# Readers and clients the project did not write (npm), for the interop tests; skipped
+# without npm.
 INTEROP := test/interop/node_modules/.installed
 
 test: $(STAMP) interop
@@ -26,7 +27,7 @@ test: $(STAMP) interop
 
 interop:
 	@if command -v npm >/dev/null 2>&1; then $(MAKE) --no-print-directory $(INTEROP); \
-	else echo 'npm not found: the @mcap/core interop test will be skipped'; fi
+	else echo 'npm not found: the @mcap/core and @foxglove/ws-protocol interop tests will be skipped'; fi
 
 $(INTEROP): test/interop/package.json test/interop/package-lock.json
 	cd test/interop && npm ci --no-audit --no-fund --silent

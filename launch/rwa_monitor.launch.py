@@ -24,12 +24,12 @@ def generate_launch_description():
     params_arg = DeclareLaunchArgument('params_file', default_value=params,
                                        description='parameter file')
     replay = Node(
-        package='rwa_monitor', executable='rwa-monitor-replay', name='telemetry_replay',
+        package='rwa_monitor', executable='telemetry_replay', name='telemetry_replay',
         parameters=[LaunchConfiguration('params_file'),
                     {'file': LaunchConfiguration('file'),
                      'rate': LaunchConfiguration('rate')}],
         output='screen')
     detector = Node(
-        package='rwa_monitor', executable='rwa-monitor-llr', name='llr_detector',
+        package='rwa_monitor', executable='llr_detector', name='llr_detector',
         parameters=[LaunchConfiguration('params_file')], output='screen')
     return LaunchDescription([file_arg, rate_arg, params_arg, detector, replay])

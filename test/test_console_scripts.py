@@ -20,6 +20,9 @@ from rwa_monitor.telemetry import write_telemetry
 
 NODES = ('rwa-monitor-llr', 'rwa-monitor-vsadc', 'rwa-monitor-fss', 'rwa-monitor-replay',
          'rwa-monitor-bus', 'rwa-monitor-record', 'rwa-monitor-foxglove')
+# The same nodes under their node names, as `ros2 run rwa_monitor NAME` runs them.
+NODE_NAMES = ('llr_detector', 'vsadc_detector', 'fss_diagnoser', 'telemetry_replay',
+              'basilisk_bus', 'recorder', 'foxglove_bridge')
 
 
 def _script(name):
@@ -29,7 +32,7 @@ def _script(name):
     return path
 
 
-@pytest.mark.parametrize('name', NODES + ('rwa-monitor',))
+@pytest.mark.parametrize('name', NODES + NODE_NAMES + ('rwa-monitor',))
 def test_help_lists_parameters_and_exits_0(name):
     result = subprocess.run([_script(name), '--help'], capture_output=True, text=True,
                             timeout=60)
@@ -43,7 +46,7 @@ def test_every_console_script_is_checked():
     from importlib.metadata import entry_points
     scripts = {e.name for e in entry_points(group='console_scripts')
                if e.value.startswith('rwa_monitor.')}
-    assert scripts == set(NODES) | {'rwa-monitor'}
+    assert scripts == set(NODES) | set(NODE_NAMES) | {'rwa-monitor'}
 
 
 @pytest.mark.parametrize('command', ['calibrate', 'dashboard', 'demo', 'detect', 'diagnose',

@@ -1,8 +1,9 @@
-"""The Foxglove bridge: a WebSocket client the project did not write receives an anomaly."""
+"""The Foxglove bridge: a WebSocket client receives an anomaly; the front's names and origins."""
 
 import json
 import pathlib
 import re
+import socket
 import struct
 import time
 
@@ -12,10 +13,13 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from ros_harness import RosWorld
 from sensor_msgs.msg import JointState
+from websockets.exceptions import InvalidStatus
 from websockets.sync.client import connect
 
 from rwa_monitor.core.events import AnomalyEvent
+from rwa_monitor.exceptions import ConfigError
 from rwa_monitor.nodes import foxglove_bridge as fb
+from rwa_monitor.nodes import foxglove_front as front
 from rwa_monitor.nodes import messages
 from rwa_monitor.nodes.common import EVENTS_QOS, telemetry_qos
 
@@ -45,18 +49,39 @@ def _data(ws, subscription, timeout=5.0):
     raise AssertionError('no message data')
 
 
+EVENT = AnomalyEvent(detector='llr', component='rw2', kind='dry', time=12.5, index=125,
+                     declared_time=20.0, declared_index=200, p_value=1e-7)
+
+
+def start_bridge(world, *overrides):
+    """Return (bridge on a free port, wheels publisher, anomalies publisher) in ``world``."""
+    bridge = world.node(fb.FoxgloveBridge, parameter_overrides=[
+        Parameter('port', value=0), Parameter('use_sim_time', value=False), *overrides])
+    source = world.node(Node, 'detector')
+    wheels = source.create_publisher(JointState, 'telemetry/wheels', telemetry_qos())
+    anomalies = source.create_publisher(DiagnosticArray, 'anomalies', EVENTS_QOS)
+    return bridge, wheels, anomalies
+
+
+def wheel_sample():
+    """Return the wheel sample the tests publish: rw1 and rw2 at t = 19.9 s."""
+    return messages.joint_state(19.9, ['rw1', 'rw2'], [10.0, 20.0], [1e-3, 2e-3])
+
+
+def anomaly_array():
+    """Return the DiagnosticArray of :data:`EVENT` as llr_detector publishes it."""
+    array = DiagnosticArray(status=[messages.event_status(EVENT, 'llr_detector')])
+    array.header.stamp = messages.to_stamp(20.0)
+    return array
+
+
 def test_a_websocket_client_subscribes_and_receives_an_anomaly():
-    event = AnomalyEvent(detector='llr', component='rw2', kind='dry', time=12.5, index=125,
-                         declared_time=20.0, declared_index=200, p_value=1e-7)
     with RosWorld() as world:
-        bridge = world.node(fb.FoxgloveBridge, parameter_overrides=[
-            Parameter('port', value=0), Parameter('use_sim_time', value=False)])
+        bridge, wheels, anomalies = start_bridge(world)
         assert bridge.port > 0 and bridge.params['host'] == '127.0.0.1'
-        source = world.node(Node, 'detector')
-        wheels = source.create_publisher(JointState, 'telemetry/wheels', telemetry_qos())
-        anomalies = source.create_publisher(DiagnosticArray, 'anomalies', EVENTS_QOS)
         with connect(f'ws://127.0.0.1:{bridge.port}', open_timeout=5,
                      subprotocols=['foxglove.sdk.v1', 'foxglove.websocket.v1']) as ws:
+            assert ws.subprotocol == 'foxglove.sdk.v1'
             channels = {c['topic']: c for c in _text(ws, 'advertise')['channels']}
             assert set(channels) >= {fb.WHEELS, fb.GYRO, fb.ANOMALIES, fb.ANOMALY_LOG,
                                      fb.HEALTH}
@@ -66,12 +91,9 @@ def test_a_websocket_client_subscribes_and_receives_an_anomaly():
             world.wait_until(lambda: bridge.channels[fb.ANOMALIES].has_sinks()
                              and bridge.channels[fb.WHEELS].has_sinks(), 5.0, 'subscribed')
             world.wait_for_subscribers(wheels)
-            wheels.publish(messages.joint_state(19.9, ['rw1', 'rw2'], [10.0, 20.0],
-                                                [1e-3, 2e-3]))
-            array = DiagnosticArray(status=[messages.event_status(event, 'llr_detector')])
-            array.header.stamp = messages.to_stamp(20.0)
+            wheels.publish(wheel_sample())
             world.wait_until(lambda: bridge.counters['wheels'] == 1, 5.0, 'wheel sample')
-            anomalies.publish(array)
+            anomalies.publish(anomaly_array())
             world.wait_until(lambda: bridge.counters['anomalies'] == 1, 5.0, 'anomaly')
             log_time, got = _data(ws, 1)
     assert log_time == 20_000_000_000
@@ -92,3 +114,105 @@ def test_the_shipped_layout_uses_only_served_channels():
     for wheel in ('rw1', 'rw2', 'rw3', 'rw4'):
         assert f'wheels.{wheel}.friction_nm' in text and f'wheels.{wheel}.speed_rad_s' in text
         assert f'component=="{wheel}"' in text
+
+
+@pytest.mark.parametrize('origin, allowed, loopback, expected', [
+    (None, [], False, True),                       # not a browser: always served
+    ('https://viewer.example', [], True, True),    # empty list on a loopback host: any
+    ('https://viewer.example', [], False, False),  # empty list beyond it: none
+    ('https://viewer.example', ['https://viewer.example'], False, True),
+    ('https://other.example', ['https://viewer.example'], True, False),  # a list applies
+    ('https://other.example', ['*'], False, True),
+])
+def test_origin_rule(origin, allowed, loopback, expected):
+    assert front.origin_allowed(origin, allowed, loopback) is expected
+
+
+@pytest.mark.parametrize('host, loopback', [('127.0.0.1', True), ('localhost', True),
+                                            ('::1', True), ('127.0.0.2', True),
+                                            ('0.0.0.0', False), ('192.0.2.7', False),
+                                            ('ground-station', False)])
+def test_loopback_hosts(host, loopback):
+    assert front.is_loopback(host) is loopback
+
+
+@pytest.fixture
+def sdk_front():
+    """Yield (front, warnings): the front on a free loopback port before an SDK server."""
+    import foxglove
+    context = foxglove.Context()
+    channel = foxglove.Channel('/t', schema={'type': 'object'}, context=context)
+    server = foxglove.start_server(host='127.0.0.1', port=0, context=context)
+    warnings = []
+    gate = front.WebSocketFront('127.0.0.1', 0, server.port, ['http://localhost:8080'],
+                                warnings.append)
+    try:
+        yield gate, warnings, channel
+    finally:
+        gate.stop()
+        server.stop()
+
+
+@pytest.mark.parametrize('offered', [['foxglove.websocket.v1'], ['foxglove.sdk.v1'],
+                                     ['foxglove.websocket.v1', 'foxglove.sdk.v1']])
+def test_either_subprotocol_name_gets_the_sdk_server(sdk_front, offered):
+    gate, warnings, channel = sdk_front
+    with connect(f'ws://127.0.0.1:{gate.port}', subprotocols=offered, open_timeout=5) as ws:
+        expected = 'foxglove.sdk.v1' if 'foxglove.sdk.v1' in offered else offered[0]
+        assert ws.subprotocol == expected
+        assert 'capabilities' in _text(ws, 'serverInfo')
+        (advertised,) = _text(ws, 'advertise')['channels']
+        ws.send(json.dumps({'op': 'subscribe', 'subscriptions': [
+            {'id': 7, 'channelId': advertised['id']}]}))
+        deadline = time.monotonic() + 5.0
+        while not channel.has_sinks() and time.monotonic() < deadline:
+            time.sleep(0.02)
+        channel.log(b'{"x": 1}', log_time=5)
+        assert _data(ws, 7) == (5, {'x': 1})
+    assert warnings == []
+
+
+def test_a_client_offering_no_known_subprotocol_is_refused(sdk_front):
+    gate = sdk_front[0]
+    for offered in ([], ['foxglove.websocket.v2']):
+        with pytest.raises(InvalidStatus) as refused:
+            connect(f'ws://127.0.0.1:{gate.port}', subprotocols=offered, open_timeout=5)
+        assert refused.value.response.status_code == 400
+
+
+def test_origins_outside_the_list_are_refused_with_a_log_line(sdk_front):
+    gate, warnings, _ = sdk_front
+    url = f'ws://127.0.0.1:{gate.port}'
+    with pytest.raises(InvalidStatus) as refused:
+        connect(url, subprotocols=['foxglove.websocket.v1'], open_timeout=5,
+                origin='https://attacker.example')
+    assert refused.value.response.status_code == 403
+    assert gate.refused == 1 and len(warnings) == 1
+    assert "Origin 'https://attacker.example'" in warnings[0]
+    assert "allowed_origins ['http://localhost:8080']" in warnings[0]
+    for origin in ('http://localhost:8080', None):  # listed, or not a browser
+        with connect(url, subprotocols=['foxglove.websocket.v1'], open_timeout=5,
+                     origin=origin) as ws:
+            assert _text(ws, 'serverInfo')
+    assert gate.refused == 1
+
+
+def test_the_bridge_applies_its_allowed_origins_parameter():
+    with RosWorld() as world:
+        bridge = start_bridge(world, Parameter('allowed_origins',
+                                               value=['http://localhost:8080']))[0]
+        assert bridge.front.allowed_origins == ['http://localhost:8080']
+        with pytest.raises(InvalidStatus):
+            connect(f'ws://127.0.0.1:{bridge.port}', subprotocols=['foxglove.websocket.v1'],
+                    open_timeout=5, origin='https://attacker.example')
+        assert bridge.front.refused == 1
+
+
+def test_a_port_in_use_is_a_config_error_naming_it():
+    with socket.socket() as taken:
+        taken.bind(('127.0.0.1', 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        with RosWorld() as world:
+            with pytest.raises(ConfigError, match=f'host/port: cannot serve on 127.0.0.1:{port}'):
+                world.node(fb.FoxgloveBridge, parameter_overrides=[Parameter('port', value=port)])

@@ -3,16 +3,15 @@
 import ast
 import pathlib
 
+from test_dependencies import setup_kwargs
+
 REPO = pathlib.Path(__file__).resolve().parents[1]
 LAUNCH = REPO / 'launch' / 'rwa_monitor.launch.py'
 
 
 def _console_scripts():
-    tree = ast.parse((REPO / 'setup.py').read_text())
-    scripts = next(node for node in ast.walk(tree) if isinstance(node, ast.Dict) and any(
-        isinstance(k, ast.Constant) and k.value == 'console_scripts' for k in node.keys))
-    entries = scripts.values[0]
-    return {ast.literal_eval(e).split('=')[0].strip() for e in entries.elts}
+    scripts = setup_kwargs('bdist_wheel')['entry_points']['console_scripts']
+    return {entry.split('=')[0].strip() for entry in scripts}
 
 
 def test_launch_file_compiles_and_names_installed_executables():

@@ -10,6 +10,13 @@ from conftest import REPO
 import pytest
 
 
+def copy_sources(dest: pathlib.Path) -> None:
+    """Copy the repository's sources to ``dest``, as a fresh clone holds them."""
+    shutil.copytree(REPO, dest, ignore=shutil.ignore_patterns(
+        '.venv*', '.git', 'build', 'install', 'log', 'bench', '*.egg-info', '__pycache__',
+        'node_modules'))
+
+
 def test_core_never_imports_rclpy():
     code = ('import importlib, pkgutil, sys, rwa_monitor.core as c\n'
             'for m in pkgutil.walk_packages(c.__path__, "rwa_monitor.core."):\n'
@@ -24,24 +31,44 @@ def test_cli_help_lists_commands():
     assert 'simulate' in out and 'detect' in out and 'bench' not in out
 
 
+ROS_NODE_NAMES = ('telemetry_replay', 'llr_detector', 'vsadc_detector', 'fss_diagnoser',
+                  'basilisk_bus', 'recorder', 'foxglove_bridge')
+
+
 @pytest.mark.slow
 def test_colcon_build_installs_console_scripts_where_ros2_run_looks(tmp_path):
     colcon = pathlib.Path(sys.executable).parent / 'colcon'
     if not colcon.exists():
         colcon = shutil.which('colcon')
     assert colcon, 'colcon-common-extensions is in requirements.txt'
-    src = tmp_path / 'ws' / 'src' / 'rwa_monitor'
-    shutil.copytree(REPO, src, ignore=shutil.ignore_patterns(
-        '.venv*', '.git', 'build', 'install', 'log', 'bench', '*.egg-info', '__pycache__'))
+    copy_sources(tmp_path / 'ws' / 'src' / 'rwa_monitor')
     env = dict(os.environ, PATH=f'{pathlib.Path(sys.executable).parent}:{os.environ["PATH"]}')
     result = subprocess.run([str(colcon), 'build', '--packages-select', 'rwa_monitor'],
                             cwd=tmp_path / 'ws', capture_output=True, text=True, env=env,
                             timeout=600)
     assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
     install = tmp_path / 'ws' / 'install' / 'rwa_monitor'
-    scripts = {p.name for p in (install / 'lib' / 'rwa_monitor').iterdir()}
+    lib = install / 'lib' / 'rwa_monitor'
+    scripts = {p.name for p in lib.iterdir()}
     assert {'rwa-monitor', 'rwa-monitor-replay', 'rwa-monitor-llr', 'rwa-monitor-vsadc',
-            'rwa-monitor-fss', 'rwa-monitor-bus'} <= scripts
+            'rwa-monitor-fss', 'rwa-monitor-bus', 'rwa-monitor-record',
+            'rwa-monitor-foxglove'} <= scripts
+    # `ros2 run rwa_monitor NAME` runs lib/rwa_monitor/NAME: each node under its own name
+    for node in ROS_NODE_NAMES:
+        assert node in scripts, node
+        assert os.access(lib / node, os.X_OK), node
+    # the installed executables run from the install space, as ros2 run starts them after
+    # `source install/setup.bash` (which puts the install's site-packages first)
+    (site,) = install.glob('lib/python3*/site-packages')
+    # rosdep brings the dependencies (package.xml): the metadata names none of pip's
+    (requires,) = site.glob('rwa_monitor-*.egg-info/requires.txt')
+    assert requires.read_text().split() == ['setuptools']
+    sourced = dict(env, PYTHONPATH=os.pathsep.join(
+        [str(site)] + [p for p in [os.environ.get('PYTHONPATH')] if p]))
+    for node in ('llr_detector', 'foxglove_bridge'):
+        run = subprocess.run([str(lib / node), '--help'], capture_output=True, text=True,
+                             env=sourced, timeout=120, cwd=tmp_path)
+        assert run.returncode == 0 and 'parameters' in run.stdout, run.stderr
     share = install / 'share' / 'rwa_monitor'
     assert (share / 'package.xml').is_file()
     assert (share / 'config' / 'rwa_monitor.yaml').is_file()

@@ -1,7 +1,11 @@
 """Node ``foxglove_bridge``: serve wheels, gyro, anomalies and health to the Foxglove app.
 
 A Foxglove WebSocket server (foxglove-sdk) on ``host``:``port`` (default 127.0.0.1:8765;
-port 0 takes a free one, see :attr:`FoxgloveBridge.port`). The node subscribes to the
+port 0 takes a free one, see :attr:`FoxgloveBridge.port`), reached through a front that
+speaks both subprotocol names, ``foxglove.sdk.v1`` and ``foxglove.websocket.v1``, and
+refuses browser pages from origins not in ``allowed_origins``
+(:mod:`rwa_monitor.nodes.foxglove_front`). Needs the extra ``foxglove``
+(``pip install 'rwa_monitor[foxglove]'``). The node subscribes to the
 DESIGN.md topics and logs JSON messages on these channels, each stamped (log time) with
 the telemetry time of its source so plots share one time axis:
 
@@ -26,9 +30,6 @@ import json
 from typing import Any, Sequence
 
 from diagnostic_msgs.msg import DiagnosticArray
-import foxglove
-from foxglove.channels import LogChannel
-from foxglove.messages import Log, LogLevel, Timestamp
 from rclpy.node import Node
 from sensor_msgs.msg import Imu, JointState
 
@@ -38,6 +39,17 @@ from rwa_monitor.nodes import messages
 from rwa_monitor.nodes.common import (declare_parameters, DIAGNOSTICS_QOS, ERROR, EVENTS_QOS,
                                       LEVEL_NAMES, OK, ParamSpec, qos_event_callbacks,
                                       run_node, STALE, telemetry_qos, WARN)
+
+try:  # the extra `foxglove`: without it the node says what to install (ConfigError)
+    import foxglove
+    from foxglove.channels import LogChannel
+    from foxglove.messages import Log, LogLevel, Timestamp
+
+    from rwa_monitor.nodes.foxglove_front import WebSocketFront
+except ImportError as missing:
+    _MISSING_EXTRA: ImportError | None = missing
+else:
+    _MISSING_EXTRA = None
 
 NODE_NAME = 'foxglove_bridge'
 WHEELS = '/rwa_monitor/wheels'
@@ -51,6 +63,10 @@ PARAMETERS = (
               low=0, high=65535, read_only=True),
     ParamSpec('host', '127.0.0.1', 'Address the server binds to (0.0.0.0 serves every '
               'interface: only on a trusted network).', read_only=True),
+    ParamSpec('allowed_origins', [], 'Browser origins (scheme://host[:port]) whose pages may '
+              'connect; * allows any. Empty: any on a loopback host, none beyond it. '
+              'Clients that send no Origin (not browsers) are always served.',
+              kind=list, read_only=True),
 )
 
 _NUMBER = {'type': 'number'}
@@ -72,8 +88,6 @@ _SCHEMAS = {
             'level': {'type': 'string'}, 'message': {'type': 'string'},
             'values': {'type': 'object'}}}}}},
 }
-_LOG_LEVELS = {OK: LogLevel.Info, WARN: LogLevel.Warning, ERROR: LogLevel.Error,
-               STALE: LogLevel.Warning}
 
 
 def _finite(value: float) -> float | None:
@@ -88,18 +102,26 @@ class FoxgloveBridge(Node):
         """Create the node, the channels and the WebSocket server."""
         super().__init__(NODE_NAME, **kwargs)
         self.params = declare_parameters(self, PARAMETERS)
+        if _MISSING_EXTRA is not None:
+            raise ConfigError(f'the live view needs the extra foxglove (pip install '
+                              f'"rwa_monitor[foxglove]"): {_MISSING_EXTRA}')
         self.foxglove = foxglove.Context()
         self.channels = {topic: foxglove.Channel(topic, schema=schema, context=self.foxglove)
                          for topic, schema in _SCHEMAS.items()}
         self.log_channel = LogChannel(ANOMALY_LOG, context=self.foxglove)
+        self._log_levels = {OK: LogLevel.Info, WARN: LogLevel.Warning, ERROR: LogLevel.Error,
+                            STALE: LogLevel.Warning}
+        self.server = foxglove.start_server(name='rwa_monitor', host='127.0.0.1', port=0,
+                                            context=self.foxglove)
         try:
-            self.server = foxglove.start_server(
-                name='rwa_monitor', host=self.params['host'], port=self.params['port'],
-                context=self.foxglove)
-        except (RuntimeError, ValueError, OSError) as err:
+            self.front = WebSocketFront(self.params['host'], self.params['port'],
+                                        self.server.port, self.params['allowed_origins'],
+                                        self.get_logger().warning)
+        except OSError as err:
+            self.server.stop()
             raise ConfigError(f'parameters host/port: cannot serve on '
                               f'{self.params["host"]}:{self.params["port"]}: {err}') from None
-        self.port = self.server.port
+        self.port = self.front.port
         self._last_wheel: dict[str, tuple[float | None, float | None]] = {}
         self.counters = {'wheels': 0, 'gyro': 0, 'anomalies': 0, 'health': 0}
         qos = telemetry_qos()
@@ -112,8 +134,11 @@ class FoxgloveBridge(Node):
         self.create_subscription(DiagnosticArray, '/diagnostics', self.on_diagnostics,
                                  DIAGNOSTICS_QOS,
                                  event_callbacks=qos_event_callbacks(self, '/diagnostics'))
+        origins = (', '.join(self.front.allowed_origins) or
+                   ('any' if self.front.loopback else 'none (set allowed_origins)'))
         self.get_logger().info(f'Foxglove WebSocket server on ws://{self.params["host"]}:'
-                               f'{self.port} (open it in the Foxglove app, docs/usage.md)')
+                               f'{self.port} (open it in the Foxglove app, docs/usage.md); '
+                               f'browser origins allowed: {origins}')
 
     def _log(self, topic: str, message: dict[str, Any], stamp_ns: int) -> None:
         self.channels[topic].log(json.dumps(message, allow_nan=False).encode(),
@@ -163,7 +188,7 @@ class FoxgloveBridge(Node):
             self._log(ANOMALIES, event, stamp_ns)
             self.log_channel.log(Log(
                 timestamp=Timestamp(sec=max(stamp[0], 0), nsec=stamp[1]),
-                level=_LOG_LEVELS.get(status.level, LogLevel.Unknown),
+                level=self._log_levels.get(status.level, LogLevel.Unknown),
                 message=f'{component}: {status.message}', name=status.name),
                 log_time=max(stamp_ns, 0))
             self.counters['anomalies'] += 1
@@ -177,10 +202,12 @@ class FoxgloveBridge(Node):
         self._log(HEALTH, {'statuses': rows}, _ns(msg.header.stamp))
 
     def destroy_node(self) -> None:
-        """Stop the WebSocket server, then destroy the node."""
-        server = getattr(self, 'server', None)
+        """Stop the front and the WebSocket server, then destroy the node."""
+        front, server = getattr(self, 'front', None), getattr(self, 'server', None)
+        self.front = self.server = None
+        if front is not None:
+            front.stop()
         if server is not None:
-            self.server = None
             server.stop()
         super().destroy_node()
 
