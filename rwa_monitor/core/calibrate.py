@@ -615,6 +615,10 @@ def diagnose_fss(block: Mapping[str, Any], time: np.ndarray, speed: np.ndarray,
     from rwa_monitor.core.fss.pipeline import diagnose
     given, scales = fss_inputs(block, speed, friction)
     result = diagnose(speed, given, time, classifier, replace(config, **scales))
+    skipped = int(np.sum(~np.isfinite(given) & np.isfinite(np.asarray(friction, float))))
+    if result.get('status') == 'unknown':   # mostly not tested: no relative verdict
+        result['calibration'] = {**scales, 'samples_not_tested': skipped}
+        return result
     spec = getattr(classifier, 'spec', None) or {}
     bound = noise_ratio_bound(spec.get('noise_ratio'))
     est, ref = result['estimates'], block['fss']
@@ -630,7 +634,6 @@ def diagnose_fss(block: Mapping[str, Any], time: np.ndarray, speed: np.ndarray,
     result['status'] = status
     if reason:
         result['unknown_reason'] = reason
-    skipped = int(np.sum(~np.isfinite(given) & np.isfinite(np.asarray(friction, float))))
     result['calibration'] = {**scales, 'samples_not_tested': skipped,
                              'viscous_z': z if np.isfinite(z) else None}
     return result
