@@ -61,3 +61,15 @@ def test_dashboard_row_of_a_mostly_rejected_axis_reads_unknown():
         'fields': {'kind': 'healthy', **judge(9600, 1199, 240).fields()}}
     row = [line for line in render(board).splitlines() if line.startswith('gyro_y')][0]
     assert 'unknown' in row and 'healthy' not in row and '1199 of 9600' in row
+
+
+def test_window_with_no_tested_sample_keeps_the_keys_a_node_reads():
+    import numpy as np
+
+    from rwa_monitor.core.fss.pipeline import diagnose
+    from rwa_monitor.telemetry.fss_model import load_model
+    nan = np.full(1000, np.nan)
+    result = diagnose(nan, nan, np.arange(1000.0), load_model(None))
+    assert result['status'] == 'unknown' and not any(result['anomalies'].values())
+    assert set(result['estimates']) >= {'base_dry_nm', 'viscous_nms', 'noise_std_nm'}
+    assert result['coverage']['usable_samples'] == 0

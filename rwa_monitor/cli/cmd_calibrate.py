@@ -3,7 +3,7 @@
 Writes ``DIR/calibration.yaml`` (docs/contracts.md, section Calibration) and
 ``DIR/report.md`` with one plot per wheel. A friction change found in the data is a
 warning naming the wheel and the time (``--strict``: an error, nothing written). A
-low-speed band holding more than MOSTLY_UNTESTED_SHARE of a wheel's data (core/schema.py)
+low-speed band holding more than MOSTLY_UNTESTED_SHARE of a wheel's data (core/coverage.py)
 is refused with a units hint (``--allow-untested``: a loud warning). Exit 3 when a wheel
 had too few usable samples to be calibrated (``not_examined`` in calibration.yaml).
 """

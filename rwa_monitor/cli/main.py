@@ -58,7 +58,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return EXIT_ERROR
     except KeyboardInterrupt:
         return 130
-    except Exception as err:             # noqa: B902 - any other failure is an error (2)
+    except Exception as err:             # any other failure: exit 2, one line
         kind = type(err).__qualname__
         if type(err).__module__ != 'builtins':
             kind = f'{type(err).__module__}.{kind}'

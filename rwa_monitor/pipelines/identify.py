@@ -91,8 +91,9 @@ def _enough_samples(wheel: str, *columns: np.ndarray) -> None:
                                     for c in columns])
     usable = int(np.count_nonzero(finite))
     if usable < samples.MIN_SAMPLES:
-        raise TooFewSamplesError(f'{wheel}: {usable} usable samples of {finite.size}; the '
-                                 f'identification needs at least {samples.MIN_SAMPLES}')
+        raise TooFewSamplesError(f'{wheel}: too few usable samples: {usable} of '
+                                 f'{finite.size}; the identification needs at least '
+                                 f'{samples.MIN_SAMPLES}')
 
 
 def identify_wheel(tele: Telemetry, wheel: str | None, inertia: float | None = None,

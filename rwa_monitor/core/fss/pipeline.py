@@ -165,14 +165,16 @@ def diagnose(speed_rad_s: np.ndarray, friction_nm: np.ndarray, time_s: np.ndarra
     A window most of whose samples are not tested (non-finite, or left out by a
     calibration) is ``status: unknown`` with every flag False, ``unknown_reason`` and
     ``coverage`` (core/coverage.py): never a nominal answer; with fewer tested samples
-    than :func:`samples_needed` the stages do not run.
+    than :func:`samples_needed` the stages do not run (estimates None).
     """
     speed, friction = normalise(speed_rad_s, friction_nm, config)
     time_s = np.asarray(time_s, dtype=float)
     coverage = window_coverage(speed, friction, config)
     if coverage.verdict == NOT_EXAMINED:
+        estimates = dict.fromkeys(('base_dry_nm', 'viscous_nms', 'noise_std_nm'))
         return _unknown({'anomalies': dict.fromkeys(classifier_flags(classifier), False),
-                         'estimates': {}, 'changepoints': [], 'timings_s': {}}, coverage)
+                         'estimates': estimates, 'changepoints': [], 'timings_s': {}},
+                        coverage)
     ext = extract(speed, friction, config)
     t0 = _time.perf_counter()
     flags = classifier.predict(ext.features())
