@@ -211,6 +211,17 @@ def too_short_identify_calibrate(folder: pathlib.Path) -> str:
     return 'identify 3, calibrate 3 (19 rows and header only), nothing written'
 
 
+def too_short_gyro_calibrate(folder: pathlib.Path) -> str:
+    """Check 30 s of gyro (fewer steps than the gyro calibration needs): exit 3."""
+    path = folder / 'aocs.csv'
+    code, _, err = _run('simulate', 'aocs', '--seconds', '30', '--seed', '7', '-o', str(path))
+    _expect(code, 0, 'simulate aocs', err)
+    code, _, err = _run('calibrate', str(path), '-o', str(folder / 'cal'))
+    _expect(code, NOT_EXAMINED, 'calibrate on 30 s of gyro', err)
+    assert 'gyro calibration needs at least' in err and not (folder / 'cal').exists(), err
+    return 'calibrate 3: ' + err.strip().splitlines()[-1].split('not examined: ')[-1][:100]
+
+
 def unexpected_exception(folder: pathlib.Path) -> str:
     """Check a 200 KB header cell: exit 2 and one line on stderr; --debug adds the traceback."""
     source = _wheels(folder, 30).read_text().splitlines()
@@ -246,6 +257,7 @@ CASES: list[tuple[str, Callable[[pathlib.Path], str]]] = [
     ('normalised-units commissioning file (calibrate)', normalised_units_calibrate),
     ('window mostly untested (diagnose, detect)', untested_window_diagnose),
     ('too-short file (identify, calibrate)', too_short_identify_calibrate),
+    ('too-short gyro record (calibrate)', too_short_gyro_calibrate),
     ('unexpected exception (200 KB header cell)', unexpected_exception),
     ('package error (missing file)', package_error),
 ]

@@ -72,8 +72,14 @@ def commission(records: Sequence[Telemetry]
         warnings += found
         arrays[name] = {'time': t, 'speed': w, 'friction': f}
     first = records[0]
-    gyro = core.calibrate_gyro(first.time, _stack(first, 'gyro'), _stack(first, 'q'),
-                               _stack(first, 'ref'))
+    gyro_verdict = gyro_coverage(first)
+    gyro: dict[str, Any] = {}
+    if gyro_verdict is not None and gyro_verdict.verdict == NOT_EXAMINED:
+        not_examined['gyro'] = gyro_verdict.reason
+        warnings.append(f'gyro: not calibrated: {gyro_verdict.reason}')
+    else:
+        gyro = core.calibrate_gyro(first.time, _stack(first, 'gyro'), _stack(first, 'q'),
+                                   _stack(first, 'ref'))
     sources = [{'file': str(r.source), 'time_s': [float(r.time[0]), float(r.time[-1])],
                 'samples': len(r)} for r in records]
     document = {'calibration': {'version': core.VERSION, 'sources': sources,
@@ -101,6 +107,23 @@ def wheel_coverage(time: np.ndarray, speed: np.ndarray, friction: np.ndarray) ->
     usable = int(np.count_nonzero(np.isfinite(time) & np.isfinite(speed)
                                   & np.isfinite(friction)))
     return judge(time.size, usable, samples_needed(), 'the calibration (its LLR self-check)')
+
+
+def gyro_coverage(tele: Telemetry) -> Coverage | None:
+    """Return whether the record's gyro is enough to calibrate (None: no gyro to calibrate).
+
+    The gyro calibration (core/gyro_calibration.py) needs ``2 DETREND_BLOCKS`` blocks of
+    ``DEFAULT_BLOCK`` gyro/star-tracker steps on every axis; usable rows: time, the
+    quaternion and the axis all finite (the worst axis counts).
+    """
+    gyro, quat = _stack(tele, 'gyro'), _stack(tele, 'q')
+    if gyro is None or quat is None:
+        return None
+    from rwa_monitor.core.gyro_calibration import DEFAULT_BLOCK, DETREND_BLOCKS
+    rows = np.isfinite(np.asarray(tele.time, dtype=float)) & np.all(np.isfinite(quat), axis=1)
+    usable = int(np.min(np.count_nonzero(rows[:, None] & np.isfinite(gyro), axis=0)))
+    needed = 2 * DETREND_BLOCKS * DEFAULT_BLOCK + 1
+    return judge(len(tele), usable, needed, 'the gyro calibration')
 
 
 def untested_shares(document: Mapping[str, Any],
