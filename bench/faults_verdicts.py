@@ -211,6 +211,21 @@ def too_short_identify_calibrate(folder: pathlib.Path) -> str:
     return 'identify 3, calibrate 3 (19 rows and header only), nothing written'
 
 
+def rejected_wheel_identify(folder: pathlib.Path) -> str:
+    """Check identify --wheel all with rw2 all NaN: rw1 identified, rw2 named, exit 3."""
+    path = _wheels(folder, 240)
+    tele = read_telemetry(path)
+    tele.wheels['rw2'].friction[:] = np.nan
+    write_telemetry(path, tele)
+    out = folder / 'id'
+    code, _, err = _run('identify', str(path), '--wheel', 'all', '-o', str(out))
+    _expect(code, NOT_EXAMINED, 'identify --wheel all with rw2 all NaN', err)
+    summary = json.loads((out / 'wheels.json').read_text())
+    assert set(summary['not_examined']) == {'rw2'} and (out / 'rw1' / 'report.json').exists()
+    assert not (out / 'rw2').exists() and 'NOT EXAMINED rw2' in (out / 'wheels.md').read_text()
+    return 'identify --wheel all 3: rw1 identified; ' + summary['not_examined']['rw2'][:80]
+
+
 def too_short_gyro_calibrate(folder: pathlib.Path) -> str:
     """Check 30 s of gyro (fewer steps than the gyro calibration needs): exit 3."""
     path = folder / 'aocs.csv'
@@ -257,6 +272,7 @@ CASES: list[tuple[str, Callable[[pathlib.Path], str]]] = [
     ('normalised-units commissioning file (calibrate)', normalised_units_calibrate),
     ('window mostly untested (diagnose, detect)', untested_window_diagnose),
     ('too-short file (identify, calibrate)', too_short_identify_calibrate),
+    ('all-rejected wheel in identify --wheel all', rejected_wheel_identify),
     ('too-short gyro record (calibrate)', too_short_gyro_calibrate),
     ('unexpected exception (200 KB header cell)', unexpected_exception),
     ('package error (missing file)', package_error),

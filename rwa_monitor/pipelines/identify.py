@@ -96,6 +96,21 @@ def _enough_samples(wheel: str, *columns: np.ndarray) -> None:
                                  f'{samples.MIN_SAMPLES}')
 
 
+def examinable(tele: Telemetry, wheels: list[str]) -> tuple[list[str], dict[str, str]]:
+    """Return (the wheels with enough usable samples, wheel -> why not for the others)."""
+    keep, skipped = [], {}
+    for wheel in wheels:
+        channels = tele.wheels[wheel]
+        try:
+            if channels.friction is not None:
+                _enough_samples(wheel, tele.time, channels.speed, channels.friction)
+        except TooFewSamplesError as err:
+            skipped[wheel] = str(err)
+        else:
+            keep.append(wheel)
+    return keep, skipped
+
+
 def identify_wheel(tele: Telemetry, wheel: str | None, inertia: float | None = None,
                    torque_constant: float | None = None, half_width: int | str = 'auto',
                    alpha: float = 1e-3, jumps: bool = True) -> tuple[Selection, dict]:
