@@ -606,7 +606,8 @@ def diagnose_fss(block: Mapping[str, Any], time: np.ndarray, speed: np.ndarray,
     (``viscous_z`` > the one-sided quantile at VISCOUS_LEVEL, both standard errors of
     least squares): the classifier's threshold is a size (x1.14 on the shipped model),
     learned where the estimate is ten times more precise than on a 3-hour bus record;
-    ``calibration.viscous_z`` keeps the value.
+    ``calibration.viscous_z`` keeps the value. A window mostly not tested (band, range)
+    is ``unknown`` from ``diagnose`` already (its coverage) and keeps that answer.
     """
     from dataclasses import replace
 
