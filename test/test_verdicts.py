@@ -73,3 +73,17 @@ def test_window_with_no_tested_sample_keeps_the_keys_a_node_reads():
     assert result['status'] == 'unknown' and not any(result['anomalies'].values())
     assert set(result['estimates']) >= {'base_dry_nm', 'viscous_nms', 'noise_std_nm'}
     assert result['coverage']['usable_samples'] == 0
+
+
+def test_star_tracker_invalid_for_most_of_a_record_leaves_every_axis_unknown():
+    import numpy as np
+
+    from rwa_monitor.pipelines import vsadc
+    from rwa_monitor.sim.aocs import simulate_aocs
+    tele = simulate_aocs(2400.0, seed=7)
+    tele.attitude[tele.time >= 600.0] = np.nan          # 75 % of the rows
+    _, summary = vsadc.run_with_summary(tele, {})
+    for axis in 'xyz':
+        entry = summary[f'gyro_{axis}']
+        assert entry['verdict'] == 'unknown' and entry['final_state'] == 'unknown', entry
+        assert entry['samples'] == len(tele) - 1 and entry['usable_samples'] < len(tele) / 2

@@ -111,7 +111,8 @@ def run_with_summary(tele: Telemetry, config: Mapping[str, Any],
     for i, axis in enumerate(det.axes):
         channel = det.channels[i]
         counters = det.counters
-        verdict = axis_coverage(counters['rows'] - counters['held'], channel)
+        offered = counters['rows'] - counters['held'] + counters['invalid_quaternions']
+        verdict = axis_coverage(offered, channel)
         # An axis that never became ready, or whose samples were mostly rejected, was not
         # examined: its state is unknown, never "healthy" (issues 17, 24).
         state = STATE_NAMES[int(labels[-1, i])] if verdict.examined else UNKNOWN
@@ -140,8 +141,9 @@ def axis_coverage(rows: int, channel: Any) -> Coverage:
     """Return the verdict of one axis: ``rows`` offered, the channel's samples used.
 
     Rows offered: every gyro row but those held for want of a star-tracker sample to pair
-    with (in a multi-rate record most gyro rows are, by design). An axis that never
-    became ready is not examined whatever its count.
+    with (in a multi-rate record most gyro rows are, by design); a row held because its
+    quaternion was invalid is offered and unusable. An axis that never became ready is
+    not examined whatever its count.
     """
     verdict = judge(rows, channel.samples, samples_needed(channel), 'the gyro diagnosis')
     if not channel.ready and verdict.verdict != NOT_EXAMINED:
