@@ -33,3 +33,11 @@ class NotIdentifiableError(RwaMonitorError, ValueError):
 
 class OutputError(RwaMonitorError, OSError):
     """An output that cannot be written safely (names the path and the reason)."""
+
+
+class NotExaminedError(RwaMonitorError):
+    """Too few usable samples for any verdict (core/coverage.py): a command exits 3."""
+
+
+class TooFewSamplesError(NotIdentifiableError, NotExaminedError):
+    """Too few valid samples to identify a model: not identifiable, and not examined."""

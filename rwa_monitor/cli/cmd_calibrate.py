@@ -2,7 +2,10 @@
 
 Writes ``DIR/calibration.yaml`` (docs/contracts.md, section Calibration) and
 ``DIR/report.md`` with one plot per wheel. A friction change found in the data is a
-warning naming the wheel and the time (``--strict``: an error, nothing written).
+warning naming the wheel and the time (``--strict``: an error, nothing written). A
+low-speed band holding more than MOSTLY_UNTESTED_SHARE of a wheel's data (core/coverage.py)
+is refused with a units hint (``--allow-untested``: a loud warning). Exit 3 when a wheel
+had too few usable samples to be calibrated (``not_examined`` in calibration.yaml).
 """
 
 from __future__ import annotations
@@ -11,7 +14,8 @@ import argparse
 import pathlib
 import sys
 
-from rwa_monitor.exceptions import ConfigError
+from rwa_monitor.cli.main import EXIT_NOT_EXAMINED
+from rwa_monitor.exceptions import ConfigError, NotExaminedError
 from rwa_monitor.telemetry import read_telemetry
 
 
@@ -28,6 +32,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help='output directory')
     parser.add_argument('--strict', action='store_true',
                         help='refuse data in which a friction change is found')
+    parser.add_argument('--allow-untested', action='store_true',
+                        help='write a calibration whose low-speed band leaves most of the '
+                             'data untested (default: refuse it, exit 2)')
     parser.set_defaults(func=run)
 
 
@@ -41,8 +48,19 @@ def run(args: argparse.Namespace) -> int:
     if args.strict and any('friction change' in m for m in warnings):
         raise ConfigError('friction changes in the calibration data (--strict): '
                           + '; '.join(warnings))
+    not_examined = document['calibration'].get('not_examined', {})
     if not document['calibration']['wheels']:
+        if not_examined:
+            raise NotExaminedError('; '.join(f'{w}: {r}' for w, r in not_examined.items()))
         raise ConfigError('no wheel with speed and friction columns to calibrate')
+    swallowed = calibrated.untested_shares(document)
+    if swallowed and not args.allow_untested:
+        raise ConfigError('; '.join(swallowed) + ' (--allow-untested writes it anyway)')
+    for message in swallowed:
+        print(f'rwa-monitor calibrate: WARNING: {message}', file=sys.stderr)
+        document['calibration']['warnings'].append(message)
     for path in calibrated.write(document, arrays, args.output):
         print(f'wrote {path}')
-    return 0
+    for wheel, reason in not_examined.items():
+        print(f'not examined: {wheel}: {reason}', file=sys.stderr)
+    return EXIT_NOT_EXAMINED if not_examined else 0

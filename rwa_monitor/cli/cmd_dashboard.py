@@ -23,6 +23,8 @@ import sys
 import time
 from typing import Any, TextIO
 
+from rwa_monitor.core.coverage import NOT_EXAMINED, UNKNOWN
+
 LEVEL_NAMES = {0: 'OK', 1: 'WARN', 2: 'ERROR', 3: 'STALE', 4: 'LOST'}
 LOST = 4
 ROOT = '/'
@@ -121,6 +123,20 @@ def _number(value: Any) -> float:
     return float(value) if isinstance(value, (int, float)) else float('nan')
 
 
+def unexamined_note(fields: dict[str, Any]) -> str | None:
+    """Return a note for a status whose component was not examined, else None.
+
+    Its ``verdict`` (core/coverage.py ``Coverage.fields``) is ``unknown`` (mostly
+    untested) or ``not_examined``: ``'unknown: U of N samples usable'``.
+    """
+    verdict = fields.get('verdict')
+    if verdict not in (UNKNOWN, NOT_EXAMINED):
+        return None
+    counts = (f'{fields["usable_samples"]} of {fields["samples"]} samples usable'
+              if 'usable_samples' in fields and 'samples' in fields else 'no counts')
+    return f'{str(verdict).replace("_", " ")}: {counts}'
+
+
 def render(board: Board, *, title: str = 'rwa_monitor', progress: str | None = None,
            colour: bool = False, max_log: int = 10) -> str:
     """Return the view as text: progress line, then per namespace health and anomalies."""
@@ -142,6 +158,9 @@ def render(board: Board, *, title: str = 'rwa_monitor', progress: str | None = N
             change = fields.get('change_time_s', fields.get('latched_change_time_s', ''))
             node = name.split(':', 1)[0].rsplit('/', 1)[-1] if ':' in name else ''
             level, message = board.aged(item)
+            note = unexamined_note(fields)
+            if note:
+                kind, message = 'unknown', f'{message} [{note}]'
             row = (f'{hardware_id or name:<18} {node:<16} {LEVEL_NAMES.get(level, "?"):<6} '
                    f'{str(kind):<9} {_seconds(change):>10}  {message}')
             lines.append(_paint(row, level, colour))

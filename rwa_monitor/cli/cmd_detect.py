@@ -10,8 +10,9 @@ ConfigError naming the pipeline and the parameter (exit code 2).
 
 Exit codes (docs/usage.md): 0 every component of the file was examined and nothing was
 found; 1 an anomaly was found; 3 nothing found, but not everything could be examined (no
-detector could run, a wheel has no friction column, or a component had no usable sample
-or never became ready: the summary's ``not_examined`` says which and why); 2 error. The
+detector could run, a wheel has no friction column, or a component had too few usable
+samples or never became ready, or most of its samples were rejected or untested: the
+summary's ``not_examined`` says which and why); 2 error. The
 summary's ``detectors`` lists each detector as ``ran`` or the reason it could not.
 Outputs never destroy data (:mod:`rwa_monitor.cli.output`).
 """
@@ -25,8 +26,10 @@ import sys
 from typing import Any
 
 from rwa_monitor import pipelines
+from rwa_monitor.cli.main import EXIT_ANOMALY, EXIT_NOT_EXAMINED, EXIT_NOTHING_FOUND
 from rwa_monitor.cli.options import add_topics, INPUT_HELP
 from rwa_monitor.cli.output import check_output, quiet_broken_pipe, STDOUT, write_output
+from rwa_monitor.core.coverage import EXAMINED, UNKNOWN
 from rwa_monitor.core.events import AnomalyEvent
 from rwa_monitor.core.schema import help_text, LLR, SCHEMAS, VSADC
 from rwa_monitor.pipelines import detect
@@ -73,10 +76,6 @@ def node_parameters(config: dict[str, Any], node: str) -> dict[str, Any]:
     return block_values(config, SCHEMAS[node])
 
 
-EXIT_NOTHING_FOUND = 0
-EXIT_ANOMALY = 1
-EXIT_ERROR = 2
-EXIT_NOT_EXAMINED = 3
 DETECTOR_NEEDS = {'llr': 'needs <wheel>_speed and <wheel>_friction columns',
                   'vsadc': 'needs gyro_x/y/z and q_x/y/z/w columns'}
 
@@ -85,7 +84,9 @@ def coverage(tele: Any, summary: dict[str, Any]) -> dict[str, Any]:
     """Add to ``summary`` which detectors ran and which components were not examined.
 
     ``detectors``: name -> ``ran`` or why it could not; ``not_examined``: component ->
-    reason (no usable sample, or the detector never became ready). Returns the summary.
+    reason (its ``verdict`` is ``not_examined``: too few usable samples for a first
+    verdict, or ``unknown``: most of its samples rejected or untested; or the detector
+    never became ready). Returns the summary.
     """
     detectors: dict[str, str] = {}
     not_examined: dict[str, str] = {}
@@ -102,17 +103,19 @@ def coverage(tele: Any, summary: dict[str, Any]) -> dict[str, Any]:
         for component, entry in info.get('components', {}).items():
             if not isinstance(entry, dict):
                 continue
-            if entry.get('ready') is False:
+            if entry.get('verdict', EXAMINED) != EXAMINED:   # core/coverage.py
+                not_examined[component] = f'{name}: {verdict_text(entry)}'
+            elif entry.get('ready') is False:
                 not_examined[component] = f'{name}: never ready (learning the nominal class)'
-            rejected = entry.get('rejected')
-            samples = entry.get('samples')
-            if isinstance(rejected, dict) and samples:
-                unusable = sum(v for k, v in rejected.items() if k != 'ill_conditioned')
-                if unusable >= samples:
-                    not_examined[component] = f'{name}: no usable sample'
     summary['detectors'] = detectors
     summary['not_examined'] = not_examined
     return summary
+
+
+def verdict_text(fields: dict[str, Any]) -> str:
+    """Return the reason of a verdict's fields (core/coverage.py), ``unknown: `` first."""
+    prefix = 'unknown: ' if fields.get('verdict') == UNKNOWN else ''
+    return prefix + str(fields.get('verdict_reason', fields.get('verdict')))
 
 
 def exit_code(events: list[AnomalyEvent], summary: dict[str, Any]) -> int:

@@ -1,4 +1,9 @@
-"""``rwa-monitor diagnose FILE -o OUT.json``: FSS window diagnosis of every wheel."""
+"""``rwa-monitor diagnose FILE -o OUT.json``: FSS window diagnosis of every wheel.
+
+Exit codes (docs/usage.md): 0 every wheel diagnosed; 3 a wheel was not examined (no
+friction column, too few tested samples, or most of its window not tested: ``status``
+``unknown``; the JSON's ``not_examined`` says which and why); 2 error.
+"""
 
 from __future__ import annotations
 
@@ -6,8 +11,8 @@ import argparse
 import json
 import sys
 
-import numpy as np
-
+from rwa_monitor.cli.cmd_detect import verdict_text
+from rwa_monitor.cli.main import EXIT_NOT_EXAMINED
 from rwa_monitor.cli.options import add_topics, INPUT_HELP
 from rwa_monitor.cli.output import check_output, quiet_broken_pipe, STDOUT, write_output
 from rwa_monitor.core.schema import FSS, fss_config, help_text
@@ -70,14 +75,13 @@ def run(args: argparse.Namespace) -> int:
         check_wheels(cal, [w for w, ch in tele.wheels.items() if ch.friction is not None],
                      cal_path)
     wheels = {}
+    not_examined = {}
     for wheel_id, wheel in tele.wheels.items():
         if wheel.friction is None:
+            not_examined[wheel_id] = 'no friction column (the diagnosis needs one)'
             continue
         sl = slice(-args.last, None) if args.last else slice(None)
         speed, friction, time = wheel.speed[sl], wheel.friction[sl], tele.time[sl]
-        if np.count_nonzero(np.isfinite(speed) & np.isfinite(friction)) < 4 * config.wglr_window:
-            wheels[wheel_id] = {'error': 'too few finite samples for a diagnosis'}
-            continue
         if cal is not None:
             wheels[wheel_id] = diagnose_fss(cal['wheels'][wheel_id], time, speed, friction,
                                             model, config)
@@ -85,12 +89,19 @@ def run(args: argparse.Namespace) -> int:
             wheels[wheel_id] = diagnose(speed, friction, time, model, config)
     if not wheels:
         raise RwaMonitorError(f'{args.file}: no wheel with both speed and friction columns')
+    # A window mostly not tested is unknown with its counts (core/fss/pipeline.py).
+    not_examined.update({w: verdict_text(r['coverage']) for w, r in wheels.items()
+                         if 'coverage' in r})
+    document = {'wheels': wheels, 'not_examined': not_examined}
     with quiet_broken_pipe():
-        write_output(args.output, json.dumps({'wheels': wheels}, indent=1) + '\n')
+        write_output(args.output, json.dumps(document, indent=1) + '\n')
         out = sys.stderr if args.output == STDOUT else sys.stdout
         for wheel_id, result in wheels.items():
+            if wheel_id in not_examined:
+                print(f'{wheel_id}: not examined ({not_examined[wheel_id]})', file=out)
+                continue
             flags = result.get('anomalies', {})
             found = [k for k, v in flags.items() if v] or ['none']
             status = f' ({result["status"]})' if 'status' in result else ''
             print(f'{wheel_id}: anomalies {", ".join(found)}{status}', file=out)
-    return 0
+    return EXIT_NOT_EXAMINED if not_examined else 0

@@ -22,11 +22,13 @@ from __future__ import annotations
 import argparse
 import json
 import pathlib
+import sys
 
+from rwa_monitor.cli.main import EXIT_NOT_EXAMINED
 from rwa_monitor.cli.options import add_topics, INPUT_HELP
 from rwa_monitor.core.schema import AUTO, default_text, help_text, IDENTIFY, Param
-from rwa_monitor.exceptions import RwaMonitorError
-from rwa_monitor.pipelines.identify import identify_wheel, identify_wheels
+from rwa_monitor.exceptions import NotExaminedError, RwaMonitorError
+from rwa_monitor.pipelines.identify import examinable, identify_wheel, identify_wheels
 from rwa_monitor.pipelines.identify_report import side_by_side, wheels_markdown, write_outputs
 from rwa_monitor.telemetry import read_telemetry
 from rwa_monitor.telemetry.atomic import write_text_atomic
@@ -110,8 +112,15 @@ def run(args: argparse.Namespace) -> int:
         wheels = list(tele.wheels) if args.wheel == 'all' else [args.wheel]
         if args.wheel == 'all' and not wheels:
             _fail('the file has no <id>_speed column: nothing to identify')
+    many = len(wheels) > 1
+    not_examined: dict[str, str] = {}
+    if many:     # a wheel with too few usable samples is left out (exit 3), the rest run
+        wheels, not_examined = examinable(tele, wheels)
+        if not wheels:
+            raise NotExaminedError('; '.join(not_examined.values()))
     title = str(args.file) + (f' [{args.run}]' if args.run else '')
     results = {}
+    agreement = None
     try:
         if len(wheels) > 1:
             found, agreement = identify_wheels(tele, wheels, args.identical_wheels, inertia,
@@ -127,7 +136,7 @@ def run(args: argparse.Namespace) -> int:
             raise
         raise RwaMonitorError(str(err)) from None
     for wheel, (selection, extra) in found.items():
-        out = args.out / wheel if len(wheels) > 1 else args.out
+        out = args.out / wheel if many else args.out
         result = write_outputs(selection, out, title=title, extra=extra)
         results[selection.data.wheel] = result
         speed = result.get('speed_rmse')
@@ -137,12 +146,16 @@ def run(args: argparse.Namespace) -> int:
               f'{", ".join(e["name"] for e in result["effects"]) or "none"}'
               + (f'; speed RMSE {speed["before"]:.4g} -> {speed["after"]:.4g} rad/s'
                  if speed else '') + f'; report in {out}')
-    if len(wheels) > 1:
+    if many:
         summary = side_by_side(results, agreement)
+        if not_examined:
+            summary['not_examined'] = not_examined
         write_text_atomic(args.out / 'wheels.json', json.dumps(summary, indent=2) + '\n')
         write_text_atomic(args.out / 'wheels.md', wheels_markdown(summary))
         print(wheels_markdown(summary))
-    return 0
+    for reason in not_examined.values():
+        print(f'rwa-monitor identify: not examined: {reason}', file=sys.stderr)
+    return EXIT_NOT_EXAMINED if not_examined else 0
 
 
 def _fail(message: str) -> int:

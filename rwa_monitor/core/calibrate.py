@@ -606,7 +606,8 @@ def diagnose_fss(block: Mapping[str, Any], time: np.ndarray, speed: np.ndarray,
     (``viscous_z`` > the one-sided quantile at VISCOUS_LEVEL, both standard errors of
     least squares): the classifier's threshold is a size (x1.14 on the shipped model),
     learned where the estimate is ten times more precise than on a 3-hour bus record;
-    ``calibration.viscous_z`` keeps the value.
+    ``calibration.viscous_z`` keeps the value. A window mostly not tested (band, range)
+    is ``unknown`` from ``diagnose`` already (its coverage) and keeps that answer.
     """
     from dataclasses import replace
 
@@ -615,6 +616,10 @@ def diagnose_fss(block: Mapping[str, Any], time: np.ndarray, speed: np.ndarray,
     from rwa_monitor.core.fss.pipeline import diagnose
     given, scales = fss_inputs(block, speed, friction)
     result = diagnose(speed, given, time, classifier, replace(config, **scales))
+    skipped = int(np.sum(~np.isfinite(given) & np.isfinite(np.asarray(friction, float))))
+    if result.get('status') == 'unknown':   # mostly not tested: no relative verdict
+        result['calibration'] = {**scales, 'samples_not_tested': skipped}
+        return result
     spec = getattr(classifier, 'spec', None) or {}
     bound = noise_ratio_bound(spec.get('noise_ratio'))
     est, ref = result['estimates'], block['fss']
@@ -630,7 +635,6 @@ def diagnose_fss(block: Mapping[str, Any], time: np.ndarray, speed: np.ndarray,
     result['status'] = status
     if reason:
         result['unknown_reason'] = reason
-    skipped = int(np.sum(~np.isfinite(given) & np.isfinite(np.asarray(friction, float))))
     result['calibration'] = {**scales, 'samples_not_tested': skipped,
                              'viscous_z': z if np.isfinite(z) else None}
     return result

@@ -16,9 +16,11 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 from rwa_monitor.core import calibrate as core
+from rwa_monitor.core.coverage import (Coverage, judge, llr_samples_needed,
+                                       MOSTLY_UNTESTED_SHARE, NOT_EXAMINED)
 from rwa_monitor.core.events import AnomalyEvent
 from rwa_monitor.core.identify.model import plain
-from rwa_monitor.exceptions import ConfigError
+from rwa_monitor.exceptions import ConfigError, NotExaminedError
 from rwa_monitor.telemetry import Telemetry
 from rwa_monitor.telemetry.atomic import atomic_write, write_text_atomic
 from rwa_monitor.telemetry.calibration_file import load
@@ -32,10 +34,17 @@ def commission(records: Sequence[Telemetry]
 
     Records are calibrated wheel by wheel; several records of one spacecraft are
     concatenated per wheel (a time gap between them is harmless: the nominal model is
-    static). Every record must have the same wheels (ConfigError naming them).
+    static). Every record must have the same wheels (ConfigError naming them). A wheel
+    with too few usable samples (:func:`wheel_coverage`) is left out and named in the
+    document's ``not_examined``; records without samples add nothing and are left out
+    (NotExaminedError if all are empty).
     """
     if not records:
         raise ConfigError('calibrate: no telemetry file given')
+    if not any(len(r) for r in records):
+        raise NotExaminedError(', '.join(str(r.source) for r in records) + ': no samples; '
+                               f'a calibration needs at least {samples_needed()} per wheel')
+    records = [r for r in records if len(r)]
     names = list(records[0].wheels)
     for tele in records[1:]:
         if list(tele.wheels) != names:
@@ -44,6 +53,7 @@ def commission(records: Sequence[Telemetry]
     wheels: dict[str, Any] = {}
     warnings: list[str] = []
     arrays: dict[str, dict] = {}
+    not_examined: dict[str, str] = {}
     for name in names:
         if records[0].wheels[name].friction is None:
             warnings.append(f'{name}: no friction column; not calibrated')
@@ -52,18 +62,92 @@ def commission(records: Sequence[Telemetry]
         w = np.concatenate([np.asarray(r.wheels[name].speed, dtype=float) for r in records])
         f = np.concatenate([np.asarray(r.wheels[name].friction, dtype=float)
                             for r in records])
+        verdict = wheel_coverage(t, w, f)
+        if verdict.verdict == NOT_EXAMINED:
+            not_examined[name] = verdict.reason
+            warnings.append(f'{name}: not calibrated: {verdict.reason}')
+            continue
         block, found = core.calibrate_wheel(name, t, w, f)
         wheels[name] = block
         warnings += found
         arrays[name] = {'time': t, 'speed': w, 'friction': f}
     first = records[0]
-    gyro = core.calibrate_gyro(first.time, _stack(first, 'gyro'), _stack(first, 'q'),
-                               _stack(first, 'ref'))
+    gyro_verdict = gyro_coverage(first)
+    gyro: dict[str, Any] = {}
+    if gyro_verdict is not None and gyro_verdict.verdict == NOT_EXAMINED:
+        not_examined['gyro'] = gyro_verdict.reason
+        warnings.append(f'gyro: not calibrated: {gyro_verdict.reason}')
+    else:
+        gyro = core.calibrate_gyro(first.time, _stack(first, 'gyro'), _stack(first, 'q'),
+                                   _stack(first, 'ref'))
     sources = [{'file': str(r.source), 'time_s': [float(r.time[0]), float(r.time[-1])],
                 'samples': len(r)} for r in records]
     document = {'calibration': {'version': core.VERSION, 'sources': sources,
                                 'wheels': wheels, 'gyro': gyro, 'warnings': warnings}}
+    if not_examined:
+        document['calibration']['not_examined'] = not_examined
     return document, warnings, arrays
+
+
+def samples_needed() -> int:
+    """Return the finite samples a wheel's calibration needs.
+
+    The calibration checks its own data with the calibrated LLR detector at its default
+    parameters (:func:`rwa_monitor.core.calibrate.calibrate_wheel`), whose first test
+    needs ``2 window + 1`` samples (core/coverage.py ``llr_samples_needed``); the
+    identification needs fewer (core/identify/data.py MIN_SAMPLES).
+    """
+    from rwa_monitor.core.identify.data import MIN_SAMPLES
+    from rwa_monitor.core.schema import LLR
+    return max(MIN_SAMPLES, llr_samples_needed(LLR.defaults()))
+
+
+def wheel_coverage(time: np.ndarray, speed: np.ndarray, friction: np.ndarray) -> Coverage:
+    """Return whether a wheel's commissioning data are enough to calibrate it."""
+    usable = int(np.count_nonzero(np.isfinite(time) & np.isfinite(speed)
+                                  & np.isfinite(friction)))
+    return judge(time.size, usable, samples_needed(), 'the calibration (its LLR self-check)')
+
+
+def gyro_coverage(tele: Telemetry) -> Coverage | None:
+    """Return whether the record's gyro is enough to calibrate (None: no gyro to calibrate).
+
+    The gyro calibration (core/gyro_calibration.py) needs ``2 DETREND_BLOCKS`` blocks of
+    ``DEFAULT_BLOCK`` gyro/star-tracker steps on every axis; usable rows: time, the
+    quaternion and the axis all finite (the worst axis counts).
+    """
+    gyro, quat = _stack(tele, 'gyro'), _stack(tele, 'q')
+    if gyro is None or quat is None:
+        return None
+    from rwa_monitor.core.gyro_calibration import DEFAULT_BLOCK, DETREND_BLOCKS
+    rows = np.isfinite(np.asarray(tele.time, dtype=float)) & np.all(np.isfinite(quat), axis=1)
+    usable = int(np.min(np.count_nonzero(rows[:, None] & np.isfinite(gyro), axis=0)))
+    needed = 2 * DETREND_BLOCKS * DEFAULT_BLOCK + 1
+    return judge(len(tele), usable, needed, 'the gyro calibration')
+
+
+def untested_shares(document: Mapping[str, Any],
+                    share: float = MOSTLY_UNTESTED_SHARE) -> list[str]:
+    """Return one message per wheel whose low-speed band holds more than ``share`` of its data.
+
+    The detectors never test a sample inside the band: a band that swallows most of the
+    commissioning data makes every later verdict ``unknown``, and is the mark of speeds
+    in other units (normalised, or per cent of the top speed), hence the hint.
+    """
+    messages = []
+    for name, block in document['calibration']['wheels'].items():
+        band = block['noise']['low_speed_band']
+        inside, total = int(band.get('samples', 0)), int(block.get('samples', 0))
+        if total and inside > share * total:
+            top = max(abs(v) for v in block['speed_range_rad_s'])
+            hint = (f'speeds reach only {top:.3g} rad/s: is the file in rad/s?'
+                    if top <= core.MAX_BAND_RAD_S else
+                    'commission with data in which the wheels spin')
+            messages.append(
+                f'{name}: the low-speed band |speed| < {band["speed_abs_below_rad_s"]:g} '
+                f'rad/s holds {inside} of {total} samples ({inside / total:.0%}, more than '
+                f'{share:.0%}): the detectors would leave them untested; {hint}')
+    return messages
 
 
 def _stack(tele: Telemetry, prefix: str) -> np.ndarray | None:
@@ -191,4 +275,4 @@ def diagnose_wheel(block: Mapping[str, Any], time: np.ndarray, speed: np.ndarray
     return core.diagnose_fss(block, time, speed, friction, classifier, config)
 
 
-__all__ = ['commission', 'diagnose_wheel', 'load', 'run_llr', 'write']
+__all__ = ['commission', 'diagnose_wheel', 'load', 'run_llr', 'untested_shares', 'write']

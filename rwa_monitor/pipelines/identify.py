@@ -20,7 +20,7 @@ from rwa_monitor.core.identify.data import IdentData
 from rwa_monitor.core.identify.joint import identify_joint
 from rwa_monitor.core.identify.output_error import speed_rmse
 from rwa_monitor.core.identify.select import identify, Selection
-from rwa_monitor.exceptions import NotIdentifiableError
+from rwa_monitor.exceptions import NotIdentifiableError, TooFewSamplesError
 from rwa_monitor.telemetry.schema import Telemetry
 
 # BLAS threads during an identification. Its products are thin (n x a few columns): a
@@ -73,9 +73,42 @@ def prepare(tele: Telemetry, wheel: str | None = None, inertia: float | None = N
     wheel = choose_wheel(tele, wheel)
     aux, signals = wheel_channels(tele, wheel)
     channels = tele.wheels[wheel]
+    if channels.friction is not None:
+        _enough_samples(wheel, tele.time, channels.speed, channels.friction)
     return samples.prepare(tele.time, channels.speed, channels.friction, wheel=wheel,
                            aux=aux, signals=signals, inertia=inertia,
                            torque_constant=torque_constant, half_width=half_width)
+
+
+def _enough_samples(wheel: str, *columns: np.ndarray) -> None:
+    """Raise TooFewSamplesError (exit 3) unless the wheel has MIN_SAMPLES finite rows.
+
+    Checked before the core sees the columns, so that a file with no finite friction
+    sample (only a header, or a dead sensor) is "not examined", never taken for a record
+    without a friction column.
+    """
+    finite = np.logical_and.reduce([np.isfinite(np.asarray(c, dtype=float))
+                                    for c in columns])
+    usable = int(np.count_nonzero(finite))
+    if usable < samples.MIN_SAMPLES:
+        raise TooFewSamplesError(f'{wheel}: too few usable samples: {usable} of '
+                                 f'{finite.size}; the identification needs at least '
+                                 f'{samples.MIN_SAMPLES}')
+
+
+def examinable(tele: Telemetry, wheels: list[str]) -> tuple[list[str], dict[str, str]]:
+    """Return (the wheels with enough usable samples, wheel -> why not for the others)."""
+    keep, skipped = [], {}
+    for wheel in wheels:
+        channels = tele.wheels[wheel]
+        try:
+            if channels.friction is not None:
+                _enough_samples(wheel, tele.time, channels.speed, channels.friction)
+        except TooFewSamplesError as err:
+            skipped[wheel] = str(err)
+        else:
+            keep.append(wheel)
+    return keep, skipped
 
 
 def identify_wheel(tele: Telemetry, wheel: str | None, inertia: float | None = None,

@@ -206,4 +206,6 @@ def wheels_markdown(summary: dict) -> str:
         lines.append(f"FLAG {w}: effects differ from its siblings' (reference "
                      f'{", ".join(c["reference"]) or "none"}): missing '
                      f'{", ".join(d["missing"]) or "-"}, extra {", ".join(d["extra"]) or "-"}.')
+    for reason in summary.get('not_examined', {}).values():
+        lines.append(f'NOT EXAMINED {reason}.')
     return '\n'.join(lines) + '\n'

@@ -12,6 +12,7 @@ from __future__ import annotations
 import time as _time
 from typing import Any, Mapping, NamedTuple
 
+from rwa_monitor.core.coverage import judge, llr_samples_needed
 from rwa_monitor.core.events import AnomalyEvent
 from rwa_monitor.core.friction import RegressorSet
 from rwa_monitor.core.schema import LLR, llr_kwargs
@@ -72,7 +73,7 @@ def run_with_summary(tele: Telemetry, config: Mapping[str, Any]) -> Detection:
     """Run one detector per wheel (batch path); return the events and a per-wheel summary.
 
     The summary per wheel holds the number of events, samples, the detector's counters
-    of rejected samples and its run time.
+    of rejected samples, its run time and its verdict (:func:`judge_wheels`).
     """
     from rwa_monitor.core.llr import detect_batch_with_counters
     values = LLR.validate(config)
@@ -80,7 +81,8 @@ def run_with_summary(tele: Telemetry, config: Mapping[str, Any]) -> Detection:
     tele = tele.only('wheels')  # a multi-rate record: the wheel stream's own samples
     if values[CALIBRATION_KEY]:
         from rwa_monitor.pipelines import calibrated
-        return Detection(*calibrated.run_llr(tele, kwargs, values[CALIBRATION_KEY]))
+        events, summary = calibrated.run_llr(tele, kwargs, values[CALIBRATION_KEY])
+        return Detection(events, judge_wheels(summary, llr_samples_needed(kwargs)))
     refined = friction_model(values[MODEL_KEY], tele)
     events: list[AnomalyEvent] = []
     summary: dict[str, Any] = {}
@@ -97,7 +99,22 @@ def run_with_summary(tele: Telemetry, config: Mapping[str, Any]) -> Detection:
                              'rejected': dict(counters),
                              'runtime_s': _time.perf_counter() - start}
         events.extend(found)
-    return Detection(events, summary)
+    return Detection(events, judge_wheels(summary, llr_samples_needed(kwargs)))
+
+
+def judge_wheels(summary: dict[str, Any], needed: int) -> dict[str, Any]:
+    """Add to each wheel's summary its verdict and counts (core/coverage.py); return it.
+
+    Usable samples: the wheel's samples less those the detector rejected (non-finite, out
+    of range, time not increasing, auxiliary channel missing) and those a calibration
+    left untested (``not_tested``); tests skipped as ill-conditioned still used them.
+    """
+    for entry in summary.values():
+        rejected = sum(v for k, v in entry['rejected'].items() if k != 'ill_conditioned')
+        untested = sum(entry.get('not_tested', {}).values())
+        usable = entry['samples'] - rejected - untested
+        entry.update(judge(entry['samples'], usable, needed, 'the LLR test').fields())
+    return summary
 
 
 def run(tele: Telemetry, config: Mapping[str, Any]) -> list[AnomalyEvent]:

@@ -15,6 +15,7 @@ from typing import Any, Mapping, NamedTuple
 
 import numpy as np
 
+from rwa_monitor.core.coverage import Coverage, judge, NOT_EXAMINED
 from rwa_monitor.core.events import AnomalyEvent
 from rwa_monitor.core.gyro_diagnosis import make_gyro_detector
 from rwa_monitor.core.schema import VSADC, vsadc_kwargs
@@ -99,24 +100,57 @@ def run_with_summary(tele: Telemetry, config: Mapping[str, Any],
     """Run the gyro diagnosis on the three axes; return the events and a per-axis summary.
 
     A bad value of one gyro axis is rejected on that axis only (``bad_axis_<a>``
-    counters); ``final_state`` is ``unknown`` for an axis that never became ready.
+    counters); ``final_state`` is ``unknown`` for an axis that was not examined (never
+    ready, or most of its samples rejected: :func:`axis_coverage`), whose ``verdict`` says
+    which, with the counts.
     """
     start = _time.perf_counter()
     labels, events, det = label_series(tele, config, calibration)
     summary: dict[str, Any] = {}
     runtime = _time.perf_counter() - start
     for i, axis in enumerate(det.axes):
-        ready = det.channels[i].ready
-        # An axis that never became ready was not examined: its state is unknown, never
-        # "healthy" (issue 17).
-        state = STATE_NAMES[int(labels[-1, i])] if ready and len(tele) else UNKNOWN
+        channel = det.channels[i]
+        counters = det.counters
+        offered = counters['rows'] - counters['held'] + counters['invalid_quaternions']
+        verdict = axis_coverage(offered, channel)
+        # An axis that never became ready, or whose samples were mostly rejected, was not
+        # examined: its state is unknown, never "healthy" (issues 17, 24).
+        state = STATE_NAMES[int(labels[-1, i])] if verdict.examined else UNKNOWN
         summary[f'gyro_{axis}'] = {
             'events': sum(e.component == f'gyro_{axis}' for e in events),
-            'final_state': state, 'ready': ready,
-            'samples_used': det.channels[i].samples}
+            'final_state': state, 'ready': channel.ready,
+            'samples_used': channel.samples, **verdict.fields()}
     summary['counters'] = det.counters
     summary['runtime_s'] = runtime
     return Detection(events, summary)
+
+
+def samples_needed(channel: Any) -> int:
+    """Return the usable samples an axis needs before its first verdict.
+
+    The residual feature learns its nominal class from ``nominal_blocks`` blocks of
+    ``block`` samples; the paper's features from the two windows and the sigma window,
+    then ``reference_window`` sigmas (docs/vsadc.md).
+    """
+    if hasattr(channel, 'nominal_blocks'):
+        return int(channel.block * channel.nominal_blocks)
+    return int(2 * channel.window + channel.sigma_window + channel.reference_window - 1)
+
+
+def axis_coverage(rows: int, channel: Any) -> Coverage:
+    """Return the verdict of one axis: ``rows`` offered, the channel's samples used.
+
+    Rows offered: every gyro row but those held for want of a star-tracker sample to pair
+    with (in a multi-rate record most gyro rows are, by design); a row held because its
+    quaternion was invalid is offered and unusable. An axis that never became ready is
+    not examined whatever its count.
+    """
+    verdict = judge(rows, channel.samples, samples_needed(channel), 'the gyro diagnosis')
+    if not channel.ready and verdict.verdict != NOT_EXAMINED:
+        verdict = verdict._replace(
+            verdict=NOT_EXAMINED, reason=f'never ready: {channel.samples} usable samples '
+                                         f'of {rows} did not learn the nominal class')
+    return verdict
 
 
 def run(tele: Telemetry, config: Mapping[str, Any],

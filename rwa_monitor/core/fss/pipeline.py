@@ -15,6 +15,7 @@ from typing import Sequence
 
 import numpy as np
 
+from rwa_monitor.core.coverage import Coverage, judge, NOT_EXAMINED, UNKNOWN
 from rwa_monitor.core.fss.assign import (assign_changepoints, base_dry_weights,
                                          friction_levels)
 from rwa_monitor.core.fss.classify import WindowClassifier
@@ -161,9 +162,19 @@ def diagnose(speed_rad_s: np.ndarray, friction_nm: np.ndarray, time_s: np.ndarra
     ``anomalies``: one boolean per anomaly; ``estimates``: base dry (N m), viscous
     (N m s/rad) and its standard error, noise std (N m), levels per FSS (N m);
     ``changepoints``: time, index, FSS and dry jump (N m) of each accepted changepoint.
+    A window most of whose samples are not tested (non-finite, or left out by a
+    calibration) is ``status: unknown`` with every flag False, ``unknown_reason`` and
+    ``coverage`` (core/coverage.py): never a nominal answer; with fewer tested samples
+    than :func:`samples_needed` the stages do not run (estimates None).
     """
     speed, friction = normalise(speed_rad_s, friction_nm, config)
     time_s = np.asarray(time_s, dtype=float)
+    coverage = window_coverage(speed, friction, config)
+    if coverage.verdict == NOT_EXAMINED:
+        estimates = dict.fromkeys(('base_dry_nm', 'viscous_nms', 'noise_std_nm'))
+        return _unknown({'anomalies': dict.fromkeys(classifier_flags(classifier), False),
+                         'estimates': estimates, 'changepoints': [], 'timings_s': {}},
+                        coverage)
     ext = extract(speed, friction, config)
     t0 = _time.perf_counter()
     flags = classifier.predict(ext.features())
@@ -188,9 +199,40 @@ def diagnose(speed_rad_s: np.ndarray, friction_nm: np.ndarray, time_s: np.ndarra
     changepoints = [{'index': int(k), 'time': float(time_s[k]),
                      'fss': config.systems[int(u) - 1].name, 'delta_dry_nm': float(d) * tq}
                     for k, u, d in zip(ext.accepted, ext.systems_of, ext.deltas)]
-    return {'anomalies': {k: bool(v) for k, v in flags.items()},
-            'estimates': estimates, 'changepoints': changepoints,
-            'timings_s': dict(ext.timings)}
+    result = {'anomalies': {k: bool(v) for k, v in flags.items()},
+              'estimates': estimates, 'changepoints': changepoints,
+              'timings_s': dict(ext.timings)}
+    return result if coverage.examined else _unknown(result, coverage)
+
+
+def samples_needed(config: FssConfig) -> int:
+    """Return the tested samples a window needs: two changepoint windows of 2 w each.
+
+    The stage-1 statistic at a sample compares the ``w`` samples before it with the ``w``
+    after it (wGLR, ``wglr_window``); two such windows give one changepoint test with an
+    interval to fit on each side.
+    """
+    return 4 * config.wglr_window
+
+
+def window_coverage(speed: np.ndarray, friction: np.ndarray, config: FssConfig) -> Coverage:
+    """Return the verdict of a window: its samples, and those tested (both finite)."""
+    tested = int(np.count_nonzero(np.isfinite(speed) & np.isfinite(friction)))
+    return judge(speed.size, tested, samples_needed(config), 'the window diagnosis')
+
+
+def classifier_flags(classifier: WindowClassifier) -> list[str]:
+    """Return the anomaly names the classifier flags (DESIGN.md: dry, viscous, fss1, fss2)."""
+    return list(classifier.names)
+
+
+def _unknown(result: dict, coverage: Coverage) -> dict:
+    """Mark a window that was mostly not tested ``unknown``: flags False, with the counts."""
+    result['anomalies'] = {k: False for k in result['anomalies']}
+    result['status'] = UNKNOWN
+    result['unknown_reason'] = coverage.reason
+    result['coverage'] = coverage.fields()
+    return result
 
 
 class SlidingWindow:

@@ -13,7 +13,7 @@ from rwa_monitor.core.identify.differentiate import local_polynomial_derivative
 from rwa_monitor.core.identify.history import History, history
 from rwa_monitor.core.identify.transients import external_torques
 from rwa_monitor.core.params import check_int, check_real
-from rwa_monitor.exceptions import NotIdentifiableError
+from rwa_monitor.exceptions import NotIdentifiableError, TooFewSamplesError
 
 MIN_SAMPLES = 50
 DEFAULT_HALF_WIDTH = 5
@@ -254,7 +254,7 @@ def _near_sign_change(speed: np.ndarray, half_width: int) -> np.ndarray:
 
 def _need(n: int) -> None:
     if n < MIN_SAMPLES:
-        raise NotIdentifiableError(
+        raise TooFewSamplesError(
             f'too few valid samples: {n}; the identification needs at least {MIN_SAMPLES}')
 
 
