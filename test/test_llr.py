@@ -457,8 +457,9 @@ def test_memory_is_bounded_by_the_windows():
     t, w, f = friction_signal(6000, 16, ((3000, 0.5, 0.0),))
     det = LLRDetector('rw1', window=100, k_verif=30)
     stream(det, t, w, f)
-    sizes = [len(det._rpref), len(det._rterm), len(det._rrow), len(det._rtime)]
-    assert sizes == [2 * 100 + 30 + 2] * 4
+    # Rings of the last samples: the smallest power of two >= 2 w + k_verif + 2 (the kernel
+    # indexes them by mask), whatever the length of the stream.
+    assert [len(ring) for ring in det._rings()] == [256] * 4
 
 
 # -- parameter validation ------------------------------------------------------------------

@@ -106,7 +106,7 @@ def test_llr_streaming_never_raises_and_counts_every_unused_sample(stream):
     events = []
     for a, b, c in zip(t, w, f):
         events.extend(det.update(a, b, c))
-    used = det._pos + len(det._buffer)  # accepted: in the window or waiting for the noise fit
+    used = det.n_accepted  # in the window or waiting for the noise fit
     assert det.n_samples == len(t)
     assert used + sum(det.counters[k] for k in ('nonfinite', 'out_of_range',
                                                 'non_increasing_time')) == len(t)
