@@ -77,8 +77,7 @@ def test_lemma1_nominal_statistic_follows_the_generalised_chi_square(k, w):
         return np.column_stack([np.full(runs, a), np.full(runs, b), np.full(runs, c), u, v, e])
 
     cfg = {'min_excitation': 1e-6, 'noise_std': 1.0}
-    ok, testable, y, tr, dm, _, _ = _stats(sums(k).T, sums(k + w).T, np.full(runs, float(k)),
-                                           cfg)
+    ok, testable, y, tr, dm = _stats(sums(k).T, sums(k + w).T, np.full(runs, float(k)), cfg)
     assert np.all(ok)
     half = 0.5 * tr[0]
     disc = math.sqrt(half * half - dm[0])
@@ -92,8 +91,8 @@ def test_lemma1_nominal_statistic_follows_the_generalised_chi_square(k, w):
     np.testing.assert_allclose(sorted(weights), sorted(lemma), rtol=1e-9)
     # The detector's default: sigma^2 estimated on the reference (k - 2 degrees of
     # freedom, independent of the statistic): studentised tail.
-    _, _, y_est, _, _, _, _ = _stats(sums(k).T, sums(k + w).T, np.full(runs, float(k)),
-                                     {'min_excitation': 1e-6, 'noise_std': None})
+    _, _, y_est, _, _ = _stats(sums(k).T, sums(k + w).T, np.full(runs, float(k)),
+                               {'min_excitation': 1e-6, 'noise_std': None})
     for level in (0.1, 0.01, 0.001):
         bound = 4.5 * math.sqrt(runs * level * (1.0 - level))
         # Binomial(runs, level): 4.5 standard deviations (false failure ~7e-6 per level).
@@ -547,9 +546,9 @@ def test_bounds_never_change_a_decision():
     for event in events:
         pref = np.cumsum(np.concatenate([np.zeros((6, 1)), terms[:, c:]], axis=1), axis=1)
         ks = np.arange(c + window + 1, t.size - window + 1)
-        ok, testable, y, tr, dm, _, _ = _stats(pref[:, ks - c], pref[:, ks + window - c],
-                                               (ks - c).astype(float),
-                                               {'min_excitation': 1e-6, 'noise_std': None})
+        ok, testable, y, tr, dm = _stats(pref[:, ks - c], pref[:, ks + window - c],
+                                         (ks - c).astype(float),
+                                         {'min_excitation': 1e-6, 'noise_std': None})
         log_p_min, k_min = 0.0, c
         for i, k in enumerate(ks):
             if testable[i]:

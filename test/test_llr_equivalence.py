@@ -9,8 +9,8 @@ estimated noise, AR prewhitening, noise growing with speed and a sliding referen
 
 import math
 
-import numpy as np
 from hypothesis import given, HealthCheck, settings, strategies as st
+import numpy as np
 
 from rwa_monitor.core.llr import detect_batch_with_counters, LLRDetector
 

@@ -22,9 +22,10 @@ from __future__ import annotations
 
 from rwa_monitor.core.llr_batch import detect_batch, detect_batch_with_counters
 from rwa_monitor.core.llr_changes import DeclaredChange
-from rwa_monitor.core.llr_common import (candidate_log_p2, COUNTER_NAMES, NoiseModel,
+from rwa_monitor.core.llr_common import (candidate_log_p2, COUNTER_NAMES,
                                          validate_parameters)
 from rwa_monitor.core.llr_detector import LLRDetector
+from rwa_monitor.core.llr_noise import NoiseModel
 
 __all__ = ['candidate_log_p2', 'COUNTER_NAMES', 'DeclaredChange', 'detect_batch',
            'detect_batch_with_counters', 'LLRDetector', 'NoiseModel', 'validate_parameters']

@@ -20,10 +20,9 @@ from rwa_monitor.core import llr_kernel as kern, llr_stats
 from rwa_monitor.core.events import AnomalyEvent
 from rwa_monitor.core.friction import RegressorSet
 from rwa_monitor.core.llr_changes import ChangeRules, DeclaredChange
-from rwa_monitor.core.llr_common import (COUNTER_NAMES, fit_noise_model, NoiseModel,
-                                         speed_fit_done, speed_fit_ready, speed_scale,
-                                         validate_parameters, window_statistics)
+from rwa_monitor.core.llr_common import COUNTER_NAMES, validate_parameters, window_statistics
 from rwa_monitor.core.llr_general import GeneralModel
+from rwa_monitor.core.llr_noise import NoiseFitting, NoiseModel
 from rwa_monitor.core.params import AUTO
 
 _KERNEL_COUNTERS = (('nonfinite', kern.I_NONFINITE), ('out_of_range', kern.I_OUT_OF_RANGE),
@@ -33,7 +32,7 @@ _step = kern.step
 _step_calibrated = kern.step_calibrated
 
 
-class LLRDetector(ChangeRules, GeneralModel):
+class LLRDetector(ChangeRules, GeneralModel, NoiseFitting):
     """Streaming LLR detector of friction changes for one wheel (Algorithm 1).
 
     Parameters
@@ -395,74 +394,3 @@ class LLRDetector(ChangeRules, GeneralModel):
             self._counters['nonfinite'] += 1
             return None
         return h
-
-    def ingest_row(self, row: int, t: float, f: float, h, speed: float) -> list[AnomalyEvent]:
-        """Process an accepted sample whose regressor row ``h`` is already computed.
-
-        For :func:`detect_batch` with a model other than eq. (1): the rows are computed
-        once for the whole file and validated there (finite, increasing time). While the
-        noise model is being fitted the sample is buffered; once fitted the buffer is
-        replayed, and every sample is prewhitened (divided by the modelled noise level at
-        ``|speed|``, then AR-filtered) before it enters the sums.
-        """
-        if self._fitting:
-            self._buffer.append((row, t, f, h, speed))
-            if self._speed_model:
-                aw = abs(speed)
-                self._wlow = min(self._wlow, aw)
-                self._whigh = max(self._whigh, aw)
-                if self._next_fit is None:
-                    if not speed_fit_ready(len(self._buffer), self._fit_n, self._wlow,
-                                           self._whigh):
-                        return []
-                elif len(self._buffer) < self._next_fit:
-                    return []
-            elif len(self._buffer) < self._fit_n:
-                return []
-            return self._fit_and_replay()
-        return self._ingest_fitted(row, t, f, h, speed)
-
-    def _fit_and_replay(self) -> list[AnomalyEvent]:
-        """Fit the noise model on the buffered samples, then process them."""
-        buffer = self._buffer
-        rows = np.array([np.asarray(item[3], dtype=float) for item in buffer])
-        speeds = (np.abs(np.array([item[4] for item in buffer], dtype=float))
-                  if self._speed_model else None)
-        model = fit_noise_model(rows, np.array([item[2] for item in buffer]), self._ar_max,
-                                speeds)
-        if self._speed_model and not speed_fit_done(len(buffer), self._fit_n, model):
-            self._next_fit = len(buffer) + self._fit_n
-            return []
-        self._buffer = []
-        self._fitting = False
-        self._noise = model
-        self._ar = model.ar
-        self._speed_std = model.speed_std
-        if self._p == 2:
-            fs, ints = self._fs, self._ints
-            ints[kern.I_AR_ORDER] = len(model.ar)
-            fs[ints[kern.I_O_AR]:ints[kern.I_O_AR] + len(model.ar)] = model.ar
-            if model.speed_std is not None:
-                ints[kern.I_SPEED_MODEL] = 1
-                fs[kern.F_SPEED_A:kern.F_SPEED_FLOOR + 1] = model.speed_std
-        self._fast = self._default
-        events: list[AnomalyEvent] = []
-        for row, t, f, h, w in buffer:
-            events.extend(self._ingest_fitted(row, t, f, h, w))
-        return events
-
-    def _ingest_fitted(self, row: int, t: float, f: float, h, speed: float
-                       ) -> list[AnomalyEvent]:
-        if self._speed_std is not None:
-            level = speed_scale(abs(speed), self._speed_std)
-            f = f / level
-            if self._p == 2:
-                h = (float(h[0]) / level, float(h[1]) / level)
-            else:
-                h = np.asarray(h, dtype=float) / level
-        if self._p == 2:
-            flags = kern.ingest(self._fs, self._ints, row, t, f, float(h[0]), float(h[1]))
-            return self._after(flags) if flags else []
-        if self._ar:
-            f, h = self._whiten(f, h)
-        return self._update_general(row, t, f, np.asarray(h, dtype=float))
