@@ -385,7 +385,7 @@ def test_nonfinite_samples_are_dropped_counted_and_harmless():
             assert dirty.update(math.nan, b, c) == []
             assert dirty.update(a + 0.3, None, c) == []
             np.testing.assert_equal(_state(dirty), before)
-    assert dirty.counters['nonfinite'] == 4 * len(range(0, 3000, 97))
+    assert dirty.counters['non_finite'] == 4 * len(range(0, 3000, 97))
     np.testing.assert_equal(_state(dirty), _state(clean))
 
 
@@ -448,7 +448,7 @@ def test_reset_restores_the_constructed_state():
     first = stream(det, t, w, f)
     det.update(math.nan, 0.0, 0.0)
     det.reset()
-    assert det.n_samples == 0 and det.counters['nonfinite'] == 0 and det.p_min == 1.0
+    assert det.n_samples == 0 and det.counters['non_finite'] == 0 and det.p_min == 1.0
     assert stream(det, t, w, f) == first
 
 
@@ -514,7 +514,7 @@ def test_custom_model_with_auxiliary_channel_batch_equals_streaming():
         streamed.extend(det.update(t[i], w[i], f[i], {'gain': gain[i]}))
     batch, counters = detect_batch_with_counters(t, w, f, aux={'gain': gain}, **params)
     assert streamed == batch and counters == det.counters
-    assert counters['nonfinite'] == np.count_nonzero(np.isnan(gain))
+    assert counters['non_finite'] == np.count_nonzero(np.isnan(gain))
     assert counters['non_increasing_time'] == 1
     assert [guess(e) for e in batch if e.revision == 0] == ['dry']
 

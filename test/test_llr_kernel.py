@@ -40,8 +40,8 @@ def test_inputs_other_than_floats_give_the_events_of_floats():
         got.extend(mixed.update(a, b, c))
     assert [e.to_json() for e in got] == [e.to_json() for e in expected]
     assert mixed.counters == plain.counters
-    assert mixed.update(None, 1.0, 0.0) == [] and mixed.counters['nonfinite'] == 1
-    assert mixed.update(t[-1] + 1.0, 'x', 0.0) == [] and mixed.counters['nonfinite'] == 2
+    assert mixed.update(None, 1.0, 0.0) == [] and mixed.counters['non_finite'] == 1
+    assert mixed.update(t[-1] + 1.0, 'x', 0.0) == [] and mixed.counters['non_finite'] == 2
     assert mixed.n_samples == plain.n_samples + 2
 
 

@@ -40,9 +40,9 @@ def accepted_mask(t: np.ndarray, w: np.ndarray, f: np.ndarray, max_speed: float,
     """Return the samples the streaming detector accepts, and the rejection counts.
 
     Checks in the streaming order (core/llr_kernel.py ``accept``): finite time, speed and
-    friction (else ``nonfinite``); speed and friction within the bounds (else
+    friction (else ``non_finite``); speed and friction within the bounds (else
     ``out_of_range``); time after the last accepted time (else ``non_increasing_time``);
-    finite regressor row ``row_ok`` (else ``nonfinite``). The last accepted time before a
+    finite regressor row ``row_ok`` (else ``non_finite``). The last accepted time before a
     sample equals the running maximum of the times of the earlier samples that pass all
     checks but the time check.
     """
@@ -57,7 +57,7 @@ def accepted_mask(t: np.ndarray, w: np.ndarray, f: np.ndarray, max_speed: float,
     timely = t > prev
     accepted = cand & timely
     bad_row = 0 if row_ok is None else int(np.count_nonzero(inrange & timely & ~row_ok))
-    counts = {'nonfinite': int(np.count_nonzero(~finite)) + bad_row,
+    counts = {'non_finite': int(np.count_nonzero(~finite)) + bad_row,
               'out_of_range': int(np.count_nonzero(finite & ~inrange)),
               'non_increasing_time': int(np.count_nonzero(inrange & ~timely))}
     return accepted, counts

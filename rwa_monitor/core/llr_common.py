@@ -21,7 +21,7 @@ from rwa_monitor.core.gchi2 import log_lower_bound, log_sf2, log_sf2_t
 from rwa_monitor.core.llr_noise import AR_ORDER_LIMIT, DEFAULT_AR_ORDER
 from rwa_monitor.core.params import AUTO, check_int, check_real
 
-COUNTER_NAMES = ('nonfinite', 'out_of_range', 'non_increasing_time', 'missing_aux',
+COUNTER_NAMES = ('non_finite', 'out_of_range', 'non_increasing_time', 'missing_aux',
                  'ill_conditioned')
 _LN10 = math.log(10.0)
 

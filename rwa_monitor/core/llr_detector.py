@@ -25,7 +25,7 @@ from rwa_monitor.core.llr_general import GeneralModel
 from rwa_monitor.core.llr_noise import NoiseFitting, NoiseModel
 from rwa_monitor.core.params import AUTO
 
-_KERNEL_COUNTERS = (('nonfinite', kern.I_NONFINITE), ('out_of_range', kern.I_OUT_OF_RANGE),
+_KERNEL_COUNTERS = (('non_finite', kern.I_NON_FINITE), ('out_of_range', kern.I_OUT_OF_RANGE),
                     ('non_increasing_time', kern.I_NON_INCREASING),
                     ('ill_conditioned', kern.I_ILL))
 _step = kern.step
@@ -378,7 +378,7 @@ class LLRDetector(ChangeRules, GeneralModel, NoiseFitting):
             return float(t), float(speed), float(friction)
         except (TypeError, ValueError):
             self._ints[kern.I_ROWS] += 1
-            self._counters['nonfinite'] += 1
+            self._counters['non_finite'] += 1
             return None
 
     def _row(self, t: float, w: float, aux: Mapping[str, float] | None) -> np.ndarray | None:
@@ -391,6 +391,6 @@ class LLRDetector(ChangeRules, GeneralModel, NoiseFitting):
             self._counters['missing_aux'] += 1
             return None
         if not np.all(np.isfinite(h)):
-            self._counters['nonfinite'] += 1
+            self._counters['non_finite'] += 1
             return None
         return h

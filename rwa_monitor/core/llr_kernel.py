@@ -66,7 +66,7 @@ I_O_RTERM = 17
 I_O_RTIME = 18
 I_O_AR = 19
 I_O_LAGS = 20
-I_NONFINITE = 21      # rejected samples by the first check they fail
+I_NON_FINITE = 21      # rejected samples by the first check they fail
 I_OUT_OF_RANGE = 22
 I_NON_INCREASING = 23
 I_SPEED_MODEL = 24    # 1: samples divided by the modelled noise level before the sums
@@ -294,7 +294,7 @@ def accept(fs, ints, t, w, f):
     if -max_w < w < max_w and -max_f < f < max_f and fs[F_LAST_T] < t < math.inf:
         return row
     if (t - t) + (w - w) + (f - f) != 0.0:
-        ints[I_NONFINITE] += 1
+        ints[I_NON_FINITE] += 1
     elif not (-max_w < w < max_w and -max_f < f < max_f):
         ints[I_OUT_OF_RANGE] += 1
     else:
