@@ -105,7 +105,7 @@ def allocate(length: int, width: int, term_width: int, ar_max: int
     return fs, ints
 
 
-@njit(cache=True, error_model='numpy')
+@njit(cache=True, error_model='numpy', inline='always')
 def test(fs, ints, k, at, bt, ct, ut, vt):
     """Algorithm 1 lines 9-18 at candidate ``k`` (p = 2); return EXACT, DECLARE or 0.
 
@@ -208,8 +208,7 @@ def test_row(fs, ints, k, row):
     return test(fs, ints, k, row[0], row[1], row[2], row[3], row[4])
 
 
-@njit('int64(float64[::1], int64[::1], int64, float64, float64, float64, float64)',
-      cache=True, error_model='numpy')
+@njit(cache=True, error_model='numpy', inline='always')
 def ingest(fs, ints, row, t, f, h1, h2):
     """Prewhiten an accepted sample, add it to the sums and ring, test; return flags.
 
@@ -280,7 +279,7 @@ def ingest(fs, ints, row, t, f, h1, h2):
     return flags
 
 
-@njit('int64(float64[::1], int64[::1], float64, float64, float64)', cache=True)
+@njit(cache=True, inline='always')
 def accept(fs, ints, t, w, f):
     """Count the row; return its index if the sample is accepted, else count why and -1.
 
@@ -302,8 +301,8 @@ def accept(fs, ints, t, w, f):
     return -1
 
 
-@njit('int64(float64[::1], int64[::1], float64, float64, float64)', cache=True)
-def step(fs, ints, t, w, f):
+@njit(cache=True, error_model='numpy', inline='always')
+def sample(fs, ints, t, w, f):
     """Process one sample of model (1): accept, form ``h = (-sign w, -w)``, ingest.
 
     With a noise level growing with speed (``ints[I_SPEED_MODEL]``), ``h`` and ``f`` are
@@ -325,6 +324,12 @@ def step(fs, ints, t, w, f):
     return ingest(fs, ints, row, t, f, h1, h2)
 
 
+@njit('int64(float64[::1], int64[::1], float64, float64, float64)', cache=True)
+def step(fs, ints, t, w, f):
+    """:func:`sample` called from Python: the streaming path, one call per sample."""
+    return sample(fs, ints, t, w, f)
+
+
 @njit('int64(float64[::1], int64[::1], float64[::1], float64[::1], float64[::1], int64)',
       cache=True)
 def run(fs, ints, t, w, f, start):
@@ -336,7 +341,7 @@ def run(fs, ints, t, w, f, start):
     streaming detector, compiled, with Python only at those rare samples.
     """
     for i in range(start, t.size):
-        flags = step(fs, ints, t[i], w[i], f[i])
+        flags = sample(fs, ints, t[i], w[i], f[i])
         if flags:
             ints[I_FLAGS] = flags
             return i
@@ -414,4 +419,4 @@ def nominal_residual(table, t, w, f):
 @njit('int64(float64[::1], int64[::1], float64[::1], float64, float64, float64)', cache=True)
 def step_calibrated(fs, ints, table, t, w, f):
     """:func:`step` of ``(t, w, nominal_residual(table, t, w, f))``: one call per sample."""
-    return step(fs, ints, t, w, nominal_residual(table, t, w, f))
+    return sample(fs, ints, t, w, nominal_residual(table, t, w, f))
