@@ -337,6 +337,11 @@ class LLRDetector(ChangeRules, GeneralModel, NoiseFitting):
                 i = kern.run(self._fs, self._ints, t, w, f, i)
                 if i < n:
                     events.extend(self._after(int(self._ints[kern.I_FLAGS])))
+            elif self._default and self._fitting and not self._speed_model:
+                i = self._buffer_arrays(t, w, f, i)
+                if len(self._buffer) >= self._fit_n:
+                    events.extend(self._fit_and_replay())
+                continue
             else:
                 events.extend(self.update(float(t[i]), float(w[i]), float(f[i])))
             i += 1

@@ -348,6 +348,27 @@ def run(fs, ints, t, w, f, start):
     return t.size
 
 
+@njit('int64(float64[::1], int64[::1], float64[::1], float64[::1], float64[::1], int64, '
+      'int64[::1])', cache=True)
+def accept_run(fs, ints, t, w, f, start, rows):
+    """:func:`accept` over the samples ``start, start + 1, ...`` until ``rows`` is full.
+
+    Writes the row index of each accepted sample into ``rows`` (the rest stays as it was)
+    and returns the index of the next sample: the samples that wait for the noise fit,
+    taken as the streaming path takes them one by one.
+    """
+    m = 0
+    i = start
+    while i < t.size and m < rows.size:
+        row = accept(fs, ints, t[i], w[i], f[i])
+        if row >= 0:
+            fs[F_LAST_T] = t[i]
+            rows[m] = row
+            m += 1
+        i += 1
+    return i
+
+
 # Calibrated nominal lookup (core/calibrate.py NominalWheel): one table array per wheel.
 T_REASON = 0      # out: why the last sample was not tested (0: tested or no reason)
 T_BAND = 1

@@ -206,6 +206,22 @@ class NoiseFitting:
             return self._fit_and_replay()
         return self._ingest_fitted(row, t, f, h, speed)
 
+    def _buffer_arrays(self, t: np.ndarray, w: np.ndarray, f: np.ndarray, start: int) -> int:
+        """Buffer the samples from ``start`` on (paper's model) up to the fit; return the next.
+
+        The acceptance loop compiled (core/llr_kernel.py ``accept_run``); the buffer holds
+        what :meth:`update` would have put in it, sample by sample.
+        """
+        rows = np.full(self._fit_n - len(self._buffer), -1, dtype=np.int64)
+        row0 = int(self._ints[kern.I_ROWS])
+        end = kern.accept_run(self._fs, self._ints, t, w, f, start, rows)
+        for row in rows[rows >= 0].tolist():
+            i = start + row - row0
+            speed = float(w[i])
+            h1 = -1.0 if speed > 0.0 else (1.0 if speed < 0.0 else 0.0)
+            self._buffer.append((row, float(t[i]), float(f[i]), (h1, -speed), speed))
+        return end
+
     def _fit_and_replay(self) -> list[AnomalyEvent]:
         """Fit the noise model on the buffered samples, then process them."""
         buffer = self._buffer
