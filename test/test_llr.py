@@ -632,3 +632,28 @@ def test_realistic_profile_unconfirmed_kind_is_reported_as_such_and_streaming_eq
             assert abs(ev.details[keys.Z_DRY]) <= limit
             assert abs(ev.details[keys.Z_VISCOUS]) <= limit
             assert ev.details[keys.DELTA_DRY] + ev.details[keys.DELTA_VISCOUS] > 0.0
+
+
+def test_state_restored_into_a_fresh_detector_continues_the_stream():
+    # The detector's state is its instance attributes, plain data (arrays, scalars, str,
+    # None, containers, NamedTuple, dataclass): copied into a fresh detector of the same
+    # parameters between two halves of a stream, it gives the events of one detector fed
+    # the whole stream (nothing hidden in views shared between attributes).
+    import copy
+    import dataclasses
+    t, w, f = friction_signal(8000, 17, ((2500, 0.6, 0.0), (5200, 0.0, 0.03)),
+                              profile='crossing')
+    params = dict(window=150, noise_ar_max_order=2)
+    whole = stream(LLRDetector('rw1', **params), t, w, f)
+    first = LLRDetector('rw1', **params)
+    events = stream(first, t[:4000], w[:4000], f[:4000])
+    assert events   # the first change is declared and its kind still re-checked at 4000
+    plain = (np.ndarray, int, float, str, bool, type(None), tuple, list, dict)
+    for name, value in vars(first).items():
+        assert name == '_cfg' or isinstance(value, plain) or dataclasses.is_dataclass(value), \
+            name
+    second = LLRDetector('rw1', **params)
+    for name, value in vars(first).items():
+        setattr(second, name, copy.deepcopy(value))
+    events += stream(second, t[4000:], w[4000:], f[4000:])
+    assert len(whole) >= 2 and [e.to_json() for e in events] == [e.to_json() for e in whole]
