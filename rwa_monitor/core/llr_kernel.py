@@ -1,18 +1,22 @@
-"""Compiled per-sample path of the streaming LLR detector, paper's model (1) (p = 2).
+"""Compiled per-sample path of the LLR detector, paper's model (1) (p = 2).
 
-One call per sample (:func:`step`: acceptance, regressors, AR prewhitening, prefix sums,
-ring, the test of Algorithm 1 lines 9-18 with eq. (5)) on the detector's state, held in
-two preallocated arrays (:func:`allocate`): ``fs`` (floats: scalars, then the rings of
-prefix rows, terms and times, the AR coefficients and lags) and ``ints`` (counters,
-positions, then the ring of row indices). The exact tail of eq. (7) (rare: a sample whose
-skip bound does not rule it out) and all categorisation stay in Python: the kernel returns
-flags and leaves ``y``, ``tr``, ``dm`` in ``fs``.
+One sample (:func:`sample`: acceptance, regressors, noise level growing with speed, AR
+prewhitening, prefix sums, ring, the test of Algorithm 1 lines 9-18 with eq. (5)) on the
+detector's state, held in two preallocated arrays (:func:`allocate`): ``fs`` (floats:
+named scalars ``F_*``, then the rings of prefix rows, terms and times, the AR coefficients
+and lags) and ``ints`` (named scalars ``I_*``: counters, positions, then the ring of row
+indices). Entry points: :func:`step` (one sample from Python, the streaming path),
+:func:`run` (the same over whole arrays, loop compiled, the batch path), :func:`accept_run`
+(the samples waiting for the noise fit). They return flags at the rare samples that need
+Python: the exact tail of eq. (7) (a sample whose skip bound does not rule it out; ``y``,
+``tr``, ``dm`` left in ``fs``), a declaration, a revision point; categorisation and
+declarations are core/llr_changes.py.
 
 Compiled by :mod:`rwa_monitor.core.jit` (numba, no fast-math: the same IEEE operations in
-the same order as the batch path and the golden files; docs/architecture.md "Compiled
-kernels"); plain Python functions when numba is absent or disabled. Also here: the
-calibrated nominal lookup (:func:`nominal_residual`) and both in one call
-(:func:`step_calibrated`).
+the same order whatever the caller; docs/architecture.md "Compiled kernels"), the
+per-sample functions inlined into the entry points; plain Python functions when numba is
+absent or disabled. Also here: the calibrated nominal lookup (:func:`nominal_residual`)
+and both in one call (:func:`step_calibrated`).
 """
 
 from __future__ import annotations
