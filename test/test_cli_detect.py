@@ -68,10 +68,10 @@ def test_detect_round_trip_finds_the_step(simulated):
     assert llr['components']['rw1']['events'] == 0
     assert llr['components']['rw2']['changes'] == 1
     assert sum(llr['components']['rw2']['by_kind'].values()) == 1
-    assert llr['components']['rw1']['rejected']['nonfinite'] == 0
+    assert llr['components']['rw1']['rejected']['non_finite'] == 0
 
 
-def test_nonfinite_samples_are_counted_not_fatal(tmp_path):
+def test_non_finite_samples_are_counted_not_fatal(tmp_path):
     tele = simulate_friction(n_wheels=1, n_samples=3000, seed=4)
     tele.wheels['rw1'].friction[[10, 20, 30]] = np.nan
     tele.wheels['rw1'].speed[40] = np.inf
@@ -81,7 +81,7 @@ def test_nonfinite_samples_are_counted_not_fatal(tmp_path):
     assert main(['detect', str(path), '-o', str(out)]) == 0
     rejected = json.loads(out.read_text())['summary']['pipelines']['llr']['components'][
         'rw1']['rejected']
-    assert rejected['nonfinite'] == 4
+    assert rejected['non_finite'] == 4
 
 
 def test_detect_prints_a_table_without_output(simulated, capsys):

@@ -42,11 +42,11 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 from rwa_monitor.core import gyro_calibration as gc
-from rwa_monitor.core.attitude import StarTrackerRate
 from rwa_monitor.core.events import AnomalyEvent
+from rwa_monitor.core.gyro_rows import AXES, GyroRows
 from rwa_monitor.core.params import check_int, check_real
 from rwa_monitor.core.schema import RESIDUAL_PARAMETERS, VSADC, vsadc_kwargs
-from rwa_monitor.core.vsadc import AXES, BIAS, DRIFT, HEALTHY, make_event, Transition, \
+from rwa_monitor.core.vsadc import BIAS, DRIFT, HEALTHY, make_event, Transition, \
     VsadcDetector
 
 #: Block-mean spread without a calibration (rad/s): the largest of the three axes measured
@@ -61,6 +61,7 @@ DEFAULT_BLOCK_S = 10.0
 MIN_LAG1 = -0.45
 #: |gyro| at or above this (rad/s) is a saturated sample: held and counted, never a fault.
 DEFAULT_SATURATION_RAD_S = VSADC['saturation_rad_s'].default
+_D = VSADC.defaults()   # keyword defaults: the schema's (one home, docs/parameters.md)
 #: Axis keywords and defaults: the ``residual_*`` parameters of the VSADC schema.
 AXIS_DEFAULTS: dict[str, Any] = {
     name[len('residual_'):]: VSADC[name].default
@@ -368,42 +369,85 @@ class ResidualAxis:
 class GyroDiagnosis:
     """Drift/bias diagnosis of the three gyro axes from gyro rates and star-tracker q.
 
-    ``update(time, gyro, q, ref=None, index=None)`` per row returns AnomalyEvents
-    (detector ``vsadc``, components ``gyro_x/y/z``). ``calibration`` maps axis -> the dict
-    of :func:`calibrate_gyro` (None: defaults). Bad input never reaches an axis: stamps
-    not after the last one, rows without a star-tracker rate (invalid or missing q, first
-    quaternion after a gap) and, per axis, a non-finite gyro value or one at or above
-    ``saturation_rad_s`` (counted as ``saturated``) leave that axis's label unchanged.
-    ``ref`` is accepted and ignored (the residual needs no guidance reference).
+    A gyro detector (:class:`~rwa_monitor.core.protocol.GyroDetector`): ``update(t, gyro,
+    q, ref=None, index=None)`` per row returns AnomalyEvents (detector ``vsadc``,
+    components ``gyro_x/y/z``). Bad input never reaches an axis: the row filter shared
+    with every gyro detector (:mod:`rwa_monitor.core.gyro_rows`) drops bad stamps and
+    shapes and holds the axes on rows without a star-tracker rate; per axis, a non-finite
+    gyro value (``bad_axis_<a>``) or one at or above ``saturation_rad_s``
+    (``saturated_<a>``) leaves that axis's label unchanged. ``ref`` is accepted and ignored
+    (the residual needs no guidance reference).
+
+    Parameters
+    ----------
+    calibration : mapping or None
+        Axis -> the dict of :func:`~rwa_monitor.core.gyro_calibration.calibrate_gyro`
+        (the ``gyro:`` block of calibration.yaml); None or a missing axis: defaults.
+    saturation_rad_s : float
+        A gyro rate at or above this (rad/s) is saturated: held and counted.
+    max_gap, norm_tolerance : float
+        Star-tracker rate: restart after a gap (s); quaternion norm tolerance.
+    axes : sequence of str
+        The gyro axes monitored, a non-empty subset of ``('x', 'y', 'z')``.
+    block, nominal_blocks, tracking_blocks, guard_blocks, fit_blocks, decide_blocks, \
+confirm_blocks, max_wait_blocks, decide_chi2, freeze_fraction, recovery_fraction, \
+cusum_threshold, cusum_allowance
+        Per-axis parameters of :class:`ResidualAxis`: the ``residual_*`` parameters of
+        core/schema.py ``VSADC`` (docs/parameters.md), without the prefix.
+
+    Examples
+    --------
+    >>> det = GyroDiagnosis(block=4, nominal_blocks=2)
+    >>> det.update(0.0, [0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0])
+    []
+    >>> det.update(0.0, [0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0])
+    []
+    >>> det.counters['held'], det.counters['non_increasing_time']
+    (1, 1)
     """
 
     def __init__(self, *, calibration: Mapping[str, Mapping[str, Any]] | None = None,
-                 saturation_rad_s: float = DEFAULT_SATURATION_RAD_S, max_gap: float = 1.0,
-                 norm_tolerance: float = 0.1, axes: Sequence[str] = AXES,
-                 **axis_parameters: Any) -> None:
-        bad = [a for a in axes if a not in AXES]
-        if bad or not axes:
-            raise ValueError(f'axes must be a non-empty subset of x, y, z; got {axes!r}')
-        self.axes = tuple(axes)
-        self._index = [AXES.index(a) for a in self.axes]
+                 saturation_rad_s: float = _D['saturation_rad_s'],
+                 max_gap: float = _D['max_gap'], norm_tolerance: float = _D['norm_tolerance'],
+                 axes: Sequence[str] = AXES, block: int = _D['residual_block'],
+                 nominal_blocks: int = _D['residual_nominal_blocks'],
+                 tracking_blocks: int = _D['residual_tracking_blocks'],
+                 guard_blocks: int = _D['residual_guard_blocks'],
+                 fit_blocks: int = _D['residual_fit_blocks'],
+                 decide_blocks: int = _D['residual_decide_blocks'],
+                 confirm_blocks: int = _D['residual_confirm_blocks'],
+                 max_wait_blocks: int = _D['residual_max_wait_blocks'],
+                 decide_chi2: float = _D['residual_decide_chi2'],
+                 freeze_fraction: float = _D['residual_freeze_fraction'],
+                 recovery_fraction: float = _D['residual_recovery_fraction'],
+                 cusum_threshold: float = _D['residual_cusum_threshold'],
+                 cusum_allowance: float = _D['residual_cusum_allowance']) -> None:
+        axis_parameters = dict(
+            block=block, nominal_blocks=nominal_blocks, tracking_blocks=tracking_blocks,
+            guard_blocks=guard_blocks, fit_blocks=fit_blocks, decide_blocks=decide_blocks,
+            confirm_blocks=confirm_blocks, max_wait_blocks=max_wait_blocks,
+            decide_chi2=decide_chi2, freeze_fraction=freeze_fraction,
+            recovery_fraction=recovery_fraction, cusum_threshold=cusum_threshold,
+            cusum_allowance=cusum_allowance)
+        self._rows = GyroRows(axes, max_gap=max_gap, norm_tolerance=norm_tolerance)
+        self.axes = self._rows.axes
         self.saturation_rad_s = check_real('saturation_rad_s', saturation_rad_s, 0.0,
                                            low_open=True)
         calibration = calibration or {}
         self.channels = [ResidualAxis(calibration.get(a), **axis_parameters)
                          for a in self.axes]
-        self.star_tracker = StarTrackerRate(max_gap=max_gap, norm_tolerance=norm_tolerance)
+        self._params = {'saturation_rad_s': self.saturation_rad_s, 'max_gap': max_gap,
+                        'norm_tolerance': norm_tolerance, 'axes': self.axes,
+                        **{k: getattr(self.channels[0], k) for k in AXIS_DEFAULTS}}
         self.reset()
 
     def reset(self) -> None:
-        """Reset every axis, the star-tracker differencer and the counters."""
+        """Reset every axis, the row filter (star-tracker differencer) and the counters."""
         for ch in self.channels:
             ch.reset()
-        self.star_tracker.reset()
-        self.rows = self.accepted = self.held = self.bad_gyro = self.out_of_order = 0
+        self._rows.reset()
         self.saturated = {a: 0 for a in self.axes}
-        self.bad_axis = {a: 0 for a in self.axes}
         self.saturated_now = {a: False for a in self.axes}
-        self._last_time = -math.inf
         self._prev_gyro: tuple[float, float, float] | None = None
         self._prev_time = -math.inf
         self._last_event: AnomalyEvent | None = None
@@ -415,9 +459,8 @@ class GyroDiagnosis:
 
     @property
     def params(self) -> dict[str, Any]:
-        """Return the axis parameters (the first axis's; all axes share them)."""
-        ch = self.channels[0]
-        return {k: getattr(ch, k) for k in AXIS_DEFAULTS}
+        """Return the keyword parameters (checked; the axis ones are every axis's)."""
+        return dict(self._params)
 
     @property
     def last_event(self) -> AnomalyEvent | None:
@@ -427,44 +470,37 @@ class GyroDiagnosis:
     @property
     def counters(self) -> dict[str, int]:
         """Return the bad-input counters: rows seen, accepted, held and rejected by cause."""
-        st = self.star_tracker
-        out = {'rows': self.rows, 'accepted': self.accepted, 'held': self.held,
-               'bad_gyro': self.bad_gyro, 'out_of_order': self.out_of_order,
-               'invalid_quaternions': st.invalid, 'star_tracker_gaps': st.gaps}
+        out = self._rows.counters
         out.update({f'saturated_{a}': n for a, n in self.saturated.items()})
-        out.update({f'bad_axis_{a}': n for a, n in self.bad_axis.items()})
         return out
 
-    def update(self, time: float, gyro: Sequence[float], q: Sequence[float] | None,
+    def update(self, t: float, gyro: Sequence[float], q: Sequence[float] | None,
                ref: Sequence[float] | None = None,
                index: int | None = None) -> list[AnomalyEvent]:
-        """Take one row; return the events of every axis whose label changed."""
-        index = self.rows if index is None else index
-        self.rows += 1
-        if not math.isfinite(time) or time <= self._last_time:
-            self.out_of_order += 1
+        """Take one row; return the events of every axis whose label changed.
+
+        As :meth:`rwa_monitor.core.protocol.GyroDetector.update`; ``ref`` is ignored (the
+        gyro-minus-star-tracker residual needs no reference).
+        """
+        rows = self._rows
+        index = rows.rows if index is None else index
+        if not rows.accept(t, gyro):
             return []
-        if len(gyro) != 3:
-            self.bad_gyro += 1
-            return []
-        self._last_time = time
         g = tuple(float(v) for v in gyro)
-        st_prev = self.star_tracker.last_time
-        rate = None if q is None else self.star_tracker.update(time, q)
+        st_prev = rows.star_tracker.last_time
+        rate = rows.star_rate(t, q)
         prev, prev_time = self._prev_gyro, self._prev_time
-        self._prev_gyro, self._prev_time = g, time
+        self._prev_gyro, self._prev_time = g, t
         if rate is None:
-            self.held += 1
             return []
-        self.accepted += 1
         trapezoid = prev is not None and prev_time == st_prev
-        stamp = (time, index)
+        stamp = (t, index)
         events = []
-        for axis, i, ch in zip(self.axes, self._index, self.channels):
+        for axis, i, ch in zip(self.axes, rows.index, self.channels):
             now = g[i]
             before = prev[i] if trapezoid else now
             if not math.isfinite(now):
-                self.bad_axis[axis] += 1  # rejected on this axis only (issue 17)
+                rows.bad_axis[axis] += 1  # rejected on this axis only (issue 17)
                 continue
             if not math.isfinite(before):
                 continue
@@ -473,7 +509,7 @@ class GyroDiagnosis:
             if sat:
                 self.saturated[axis] += 1
                 continue
-            tr = ch.update(0.5 * (now + before) - rate[i], time, stamp)
+            tr = ch.update(0.5 * (now + before) - rate[i], t, stamp)
             if tr is not None:
                 events.append(make_event(axis, tr))
         if events:

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 from typing import Any, NamedTuple
 
+from rwa_monitor.core import keys
 from rwa_monitor.core.fss.classify import WindowClassifier
 from rwa_monitor.core.fss.pipeline import diagnose, FssConfig, SlidingWindow
 
@@ -56,10 +57,15 @@ class FssDiagnoser:
 
     @property
     def counters(self) -> dict[str, int]:
-        """Samples dropped (out of order), kept but non-finite, time gaps, diagnoses run."""
+        """Return the samples dropped or kept by reason, time gaps and diagnoses run.
+
+        ``non_increasing_time``: stamps not after the last (dropped); ``non_finite``: a
+        non-finite stamp (dropped) or value (kept: the stages skip it); ``gaps``: steps
+        longer than three times the first one.
+        """
         w = self.window
-        return {'out_of_order': w.out_of_order, 'non_finite': w.non_finite, 'gaps': w.gaps,
-                'diagnoses': self._diagnoses}
+        return {keys.NON_INCREASING_TIME: w.non_increasing_time, keys.NON_FINITE: w.non_finite,
+                'gaps': w.gaps, 'diagnoses': self._diagnoses}
 
     @property
     def last_event(self) -> WindowDiagnosis | None:

@@ -197,10 +197,12 @@ class SlidingWindow:
     """The last ``length`` samples of one wheel; a diagnosis is due every ``period``.
 
     ``update(t, speed, friction)`` per sample; a stamp not after the previous one is
-    dropped and counted (``out_of_order``); non-finite values are kept (the stages skip
-    them) and counted (``non_finite``); a step between stamps more than ``gap_factor``
-    times the first step seen is counted (``gaps``) and otherwise ignored: the stages
-    count in samples, so a gap only shortens the FSS residence times it spans.
+    dropped and counted (``non_increasing_time``), so is a non-finite stamp
+    (``non_finite``); non-finite values are kept (the stages skip them) and counted
+    (``non_finite``); ``dropped`` is the number of samples dropped; a step between stamps
+    more than ``gap_factor`` times the first step seen is counted (``gaps``) and otherwise
+    ignored: the stages count in samples, so a gap only shortens the FSS residence times
+    it spans.
     Memory: three arrays of ``length``.
     """
 
@@ -220,8 +222,9 @@ class SlidingWindow:
         self._since = 0
         self._last_t = -np.inf
         self._step = None
-        self.out_of_order = 0
+        self.non_increasing_time = 0
         self.non_finite = 0
+        self.dropped = 0
         self.gaps = 0
 
     @property
@@ -232,7 +235,11 @@ class SlidingWindow:
     def update(self, t: float, speed: float, friction: float) -> bool:
         """Add one sample; return True when a diagnosis is due."""
         if not np.isfinite(t) or t <= self._last_t:
-            self.out_of_order += 1
+            if np.isfinite(t):
+                self.non_increasing_time += 1
+            else:
+                self.non_finite += 1
+            self.dropped += 1
             return False
         if not (np.isfinite(speed) and np.isfinite(friction)):
             self.non_finite += 1
