@@ -517,6 +517,14 @@ cusum_threshold, cusum_allowance
         return events
 
 
+def gyro_diagnosis_kwargs(values: Mapping[str, Any]) -> dict[str, Any]:
+    """Return GyroDiagnosis keywords from checked VSADC values (``residual_`` dropped)."""
+    shared = vsadc_kwargs(values)
+    return {'saturation_rad_s': values['saturation_rad_s'], 'max_gap': shared['max_gap'],
+            'norm_tolerance': shared['norm_tolerance'], 'axes': shared['axes'],
+            **{k: values[f'residual_{k}'] for k in AXIS_DEFAULTS}}
+
+
 def make_gyro_detector(values: Mapping[str, Any],
                        calibration: Mapping[str, Mapping[str, Any]] | None = None
                        ) -> GyroDiagnosis | VsadcDetector:
@@ -528,7 +536,4 @@ def make_gyro_detector(values: Mapping[str, Any],
     paper = VsadcDetector(**vsadc_kwargs(values))
     if values['feature'] == 'paper':
         return paper
-    return GyroDiagnosis(
-        calibration=calibration, saturation_rad_s=values['saturation_rad_s'],
-        max_gap=values['max_gap'], norm_tolerance=values['norm_tolerance'], axes=paper.axes,
-        **{k: values[f'residual_{k}'] for k in AXIS_DEFAULTS})
+    return GyroDiagnosis(calibration=calibration, **gyro_diagnosis_kwargs(values))
