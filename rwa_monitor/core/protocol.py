@@ -33,7 +33,17 @@ __all__ = ['GyroDetector', 'StreamingDetector', 'WheelDetector', 'WindowDiagnose
 
 @runtime_checkable
 class StreamingDetector(Protocol):
-    """What every streaming detector has: reset, counters, params, last_event."""
+    """What every streaming detector has: reset, counters, params, last_event.
+
+    Examples
+    --------
+    >>> from rwa_monitor import VsadcDetector
+    >>> detector = VsadcDetector()
+    >>> isinstance(detector, StreamingDetector)
+    True
+    >>> detector.last_event is None, detector.counters['rows'], detector.params['window']
+    (True, 0, 200)
+    """
 
     def reset(self) -> None:
         """Forget every sample, counter and finding."""
@@ -53,7 +63,17 @@ class StreamingDetector(Protocol):
 
 @runtime_checkable
 class WheelDetector(StreamingDetector, Protocol):
-    """A detector of one reaction wheel's friction, one telemetry sample per call."""
+    """A detector of one reaction wheel's friction, one telemetry sample per call.
+
+    Examples
+    --------
+    >>> from rwa_monitor import LLRDetector
+    >>> detector = LLRDetector('rw1', window=50)
+    >>> isinstance(detector, WheelDetector)
+    True
+    >>> detector.update(0.0, 100.0, -2.5e-4)
+    []
+    """
 
     def update(self, t: float, speed: float, friction: float,
                aux: Mapping[str, float] | None = None) -> list[AnomalyEvent]:
@@ -84,7 +104,17 @@ class WheelDetector(StreamingDetector, Protocol):
 
 @runtime_checkable
 class GyroDetector(StreamingDetector, Protocol):
-    """A detector of gyro drift and bias per axis, one gyro / star-tracker row per call."""
+    """A detector of gyro drift and bias per axis, one gyro / star-tracker row per call.
+
+    Examples
+    --------
+    >>> from rwa_monitor import GyroDiagnosis, VsadcDetector
+    >>> detectors = (GyroDiagnosis(), VsadcDetector())
+    >>> all(isinstance(d, GyroDetector) for d in detectors)
+    True
+    >>> [d.update(0.0, [0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0]) for d in detectors]
+    [[], []]
+    """
 
     def update(self, t: float, gyro: Sequence[float], q: Sequence[float] | None,
                ref: Sequence[float] | None = None,
@@ -121,7 +151,15 @@ class GyroDetector(StreamingDetector, Protocol):
 
 @runtime_checkable
 class WindowDiagnoser(StreamingDetector, Protocol):
-    """A diagnoser of one wheel's sliding window, one telemetry sample per call."""
+    """A diagnoser of one wheel's sliding window, one telemetry sample per call.
+
+    Examples
+    --------
+    >>> from rwa_monitor import FssDiagnoser, load_fss_model
+    >>> diagnoser = FssDiagnoser(load_fss_model(), window_length=300)
+    >>> isinstance(diagnoser, WindowDiagnoser), diagnoser.update(0.0, 100.0, -2.5e-4)
+    (True, None)
+    """
 
     def update(self, t: float, speed: float, friction: float) -> WindowDiagnosis | None:
         """Add one sample; return the window's diagnosis when one is due, else None.

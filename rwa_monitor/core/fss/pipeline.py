@@ -158,9 +158,34 @@ def diagnose(speed_rad_s: np.ndarray, friction_nm: np.ndarray, time_s: np.ndarra
              classifier: WindowClassifier, config: FssConfig = FssConfig()) -> dict:
     """Return one wheel's window diagnosis (DESIGN.md "Window diagnosis"), SI units.
 
-    ``anomalies``: one boolean per anomaly; ``estimates``: base dry (N m), viscous
-    (N m s/rad) and its standard error, noise std (N m), levels per FSS (N m);
-    ``changepoints``: time, index, FSS and dry jump (N m) of each accepted changepoint.
+    Parameters
+    ----------
+    speed_rad_s, friction_nm, time_s : ndarray, shape (n,)
+        The window's speed (rad/s), friction (N m) and stamps (s); non-finite samples
+        are skipped by the stages.
+    classifier : WindowClassifier
+        The trained classifier (``rwa_monitor.load_fss_model()``: the shipped one).
+    config : FssConfig
+        The stages' parameters (core/schema.py ``FSS``).
+
+    Returns
+    -------
+    dict
+        ``anomalies``: one boolean per anomaly; ``estimates``: base dry (N m), viscous
+        (N m s/rad) and its standard error, noise std (N m), levels per FSS (N m);
+        ``changepoints``: time, index, FSS and dry jump (N m) of each accepted
+        changepoint; ``timings_s``: seconds per stage.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from rwa_monitor import load_fss_model
+    >>> t = np.arange(600) * 0.1
+    >>> speed = 200.0 + 150.0 * np.sin(t / 20.0)
+    >>> friction = -2e-4 - 5e-7 * speed + np.random.default_rng(0).normal(0, 5e-5, 600)
+    >>> result = diagnose(speed, friction, t, load_fss_model())
+    >>> result['anomalies']
+    {'dry': False, 'viscous': False, 'fss1': False, 'fss2': False}
     """
     speed, friction = normalise(speed_rad_s, friction_nm, config)
     time_s = np.asarray(time_s, dtype=float)
