@@ -12,7 +12,8 @@ import inspect
 import pytest
 
 import rwa_monitor
-from rwa_monitor.core.gyro_diagnosis import gyro_diagnosis_kwargs, ResidualAxis
+from rwa_monitor.core.gyro_diagnosis import gyro_diagnosis_kwargs
+from rwa_monitor.core.gyro_residual import ResidualAxis
 from rwa_monitor.core.schema import FSS, LLR, llr_kwargs, VSADC, vsadc_kwargs
 from rwa_monitor.core.vsadc import VsadcAxis, VsadcDetector
 

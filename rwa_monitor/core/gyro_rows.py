@@ -7,16 +7,18 @@ the row; a gyro (or reference) that is not three values, or a row no monitored a
 use, is ``bad_gyro``; a row without a star-tracker rate (invalid or missing quaternion,
 first quaternion after a gap) is ``held``: the axes keep their labels, so a star tracker
 that stops cannot turn into a fault. The rest is ``accepted``; an axis that cannot use an
-accepted row counts it in ``bad_axis_<a>``.
+accepted row counts it in ``bad_axis_<a>``. :class:`GyroAxes` is what the gyro detectors
+share around it: one channel per axis and the protocol's properties.
 """
 
 from __future__ import annotations
 
 import math
-from typing import Sequence
+from typing import Any, Sequence
 
 from rwa_monitor.core import keys
 from rwa_monitor.core.attitude import StarTrackerRate
+from rwa_monitor.core.events import AnomalyEvent
 
 AXES = ('x', 'y', 'z')
 
@@ -80,3 +82,44 @@ class GyroRows:
                 keys.NON_INCREASING_TIME: self.non_increasing_time,
                 'invalid_quaternions': st.invalid, 'star_tracker_gaps': st.gaps,
                 **{f'bad_axis_{a}': n for a, n in self.bad_axis.items()}}
+
+
+class GyroAxes:
+    """A gyro detector's common part: the row filter, one channel per axis, the properties.
+
+    A subclass builds its channels (objects with ``reset()`` and ``state``) and writes
+    ``update`` (core/protocol.py ``GyroDetector``), setting ``_last_event``.
+    """
+
+    def __init__(self, rows: GyroRows, channels: list, params: dict[str, Any]) -> None:
+        self._rows = rows
+        self.axes = rows.axes
+        self.channels = channels
+        self._params = params
+
+    def reset(self) -> None:
+        """Reset every axis, the row filter (star-tracker differencer) and the counters."""
+        for ch in self.channels:
+            ch.reset()
+        self._rows.reset()
+        self._last_event: AnomalyEvent | None = None
+
+    @property
+    def states(self) -> dict[str, int]:
+        """Return axis -> current label."""
+        return {a: ch.state for a, ch in zip(self.axes, self.channels)}
+
+    @property
+    def params(self) -> dict[str, Any]:
+        """Return the keyword parameters (checked; the axis ones are every axis's)."""
+        return dict(self._params)
+
+    @property
+    def counters(self) -> dict[str, int]:
+        """Return rows seen, accepted, held and rejected by cause."""
+        return self._rows.counters
+
+    @property
+    def last_event(self) -> AnomalyEvent | None:
+        """Return the last event returned by ``update`` (None before any)."""
+        return self._last_event

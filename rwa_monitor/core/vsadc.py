@@ -40,7 +40,7 @@ from typing import Any, Sequence
 
 from rwa_monitor.core import keys
 from rwa_monitor.core.events import AnomalyEvent
-from rwa_monitor.core.gyro_rows import AXES, GyroRows
+from rwa_monitor.core.gyro_rows import AXES, GyroAxes, GyroRows
 from rwa_monitor.core.params import AUTO, check_choice, check_int, check_real
 
 HEALTHY, DRIFT, BIAS = 0, 1, 2
@@ -342,7 +342,7 @@ class VsadcAxis:
         return Transition(previous, new, onset, stamp, d, sigma)
 
 
-class VsadcDetector:
+class VsadcDetector(GyroAxes):
     """VSADC on the three gyro axes from raw telemetry: gyro, star-tracker q, reference rate.
 
     A gyro detector (:class:`~rwa_monitor.core.protocol.GyroDetector`): ``update(t, gyro,
@@ -392,39 +392,11 @@ exit_margin, hold, nominal_tracking, freeze_fraction, adaptive, recovery_fractio
             exit_margin=exit_margin, hold=hold, nominal_tracking=nominal_tracking,
             freeze_fraction=freeze_fraction, adaptive=adaptive,
             recovery_fraction=recovery_fraction)
-        self._rows = GyroRows(axes, max_gap=max_gap, norm_tolerance=norm_tolerance)
-        self.axes = self._rows.axes
-        self._params = {'max_gap': max_gap, 'norm_tolerance': norm_tolerance,
-                        'axes': self.axes, **axis_parameters}
-        self.channels = [VsadcAxis(**axis_parameters) for _ in self.axes]
+        rows = GyroRows(axes, max_gap=max_gap, norm_tolerance=norm_tolerance)
+        super().__init__(rows, [VsadcAxis(**axis_parameters) for _ in rows.axes],
+                         {'max_gap': max_gap, 'norm_tolerance': norm_tolerance,
+                          'axes': rows.axes, **axis_parameters})
         self.reset()
-
-    def reset(self) -> None:
-        """Reset every axis, the row filter (star-tracker differencer) and the counters."""
-        for ch in self.channels:
-            ch.reset()
-        self._rows.reset()
-        self._last_event: AnomalyEvent | None = None
-
-    @property
-    def states(self) -> dict[str, int]:
-        """Return axis -> current label."""
-        return {a: ch.state for a, ch in zip(self.axes, self.channels)}
-
-    @property
-    def params(self) -> dict[str, Any]:
-        """Return the keyword parameters given (axis ones included)."""
-        return dict(self._params)
-
-    @property
-    def counters(self) -> dict[str, int]:
-        """Return rows seen, accepted, held and rejected by cause (core/gyro_rows.py)."""
-        return self._rows.counters
-
-    @property
-    def last_event(self) -> AnomalyEvent | None:
-        """Return the last event returned by :meth:`update` (None before any)."""
-        return self._last_event
 
     def update(self, t: float, gyro: Sequence[float], q: Sequence[float] | None,
                ref: Sequence[float] | None = None,
