@@ -26,6 +26,7 @@ from typing import Any
 
 import numpy as np
 
+from bench.bus_config import llr_config
 from bench.report import table, update_section, write_json
 from rwa_monitor.sim.basilisk_config import available, BusConfig, INSTALL_HINT
 
@@ -108,13 +109,6 @@ def node_speed(sim_s: float, rate: float, with_llr: bool, burst: int = 1) -> dic
             'llr_share': None if llr_samples is None else llr_samples / published}
 
 
-def _llr_config() -> dict[str, Any]:
-    from rwa_monitor.pipelines import llr
-    from rwa_monitor.telemetry.parameters_file import load_block
-    params = load_block(None, llr.SCHEMA)
-    return {k: v for k, v in params.items() if k in llr.DEFAULTS}
-
-
 def false_alarms(name: str, overrides: dict[str, Any], hours: float,
                  out_dir: pathlib.Path) -> dict[str, Any]:
     """Simulate ``hours`` with no fault; return the LLR declarations per wheel-hour."""
@@ -124,7 +118,7 @@ def false_alarms(name: str, overrides: dict[str, Any], hours: float,
     start = time.perf_counter()
     tele = BasiliskBus(config, seed=SEED).run(hours * 3600.0)
     sim_wall = time.perf_counter() - start
-    params = _llr_config()
+    params = llr_config()
     events = llr.run(tele, params)
     first = [e for e in events if e.revision == 0]
     window = int(params.get('window', llr.DEFAULTS['window']))
@@ -246,8 +240,8 @@ def run_acceptance_only(out_dir: pathlib.Path) -> dict[str, Any]:
     results.pop('machine', None)
     partial = out_dir / f'{NAME}_acceptance_partial.json'
     results['acceptance'] = bus_acceptance.run(
-        out_dir, _llr_config(), progress=lambda acc: write_json(out_dir, partial.stem, acc))
-    results.setdefault('llr_r', _llr_config().get('false_alarm_rate', 1.0e-5))
+        out_dir, llr_config(), progress=lambda acc: write_json(out_dir, partial.stem, acc))
+    results.setdefault('llr_r', llr_config().get('false_alarm_rate', 1.0e-5))
     write_json(out_dir, NAME, results)
     if 'bare' in results:
         update_section(NAME, _markdown(results))
@@ -288,14 +282,14 @@ def run(out_dir: pathlib.Path, quick: bool) -> dict[str, Any]:
     for rate in ((100.0,) if quick else (10.0, 25.0, 50.0, 100.0)):
         results['node'].append(node_speed(120.0 if quick else 600.0, rate, True))
         print(f'  node + llr at {rate:g}: {results["node"][-1]}', flush=True)
-    results['llr_r'] = _llr_config().get('false_alarm_rate', 1.0e-5)
+    results['llr_r'] = llr_config().get('false_alarm_rate', 1.0e-5)
     results['false_alarms'] = []
     for name, overrides in SCENARIOS.items():
         results['false_alarms'].append(false_alarms(name, overrides, hours, out_dir))
         print(f'  {name}: {results["false_alarms"][-1]["false_alarms_per_wheel_hour"]:.3f} '
               'false alarms per wheel-hour', flush=True)
     from bench import bus_acceptance
-    results['acceptance'] = bus_acceptance.run(out_dir, _llr_config(), quick)
+    results['acceptance'] = bus_acceptance.run(out_dir, llr_config(), quick)
     write_json(out_dir, NAME, results)
     if not quick:
         update_section(NAME, _markdown(results))

@@ -587,7 +587,7 @@ def development(args: list[str]) -> int:
     import argparse
     import json
 
-    from bench.bench_bus import _llr_config
+    from bench.bus_config import llr_config
     from rwa_monitor.telemetry.atomic import write_text_atomic
     parser = argparse.ArgumentParser(prog='python -m bench.bus_acceptance dev')
     parser.add_argument('--seeds', required=True, help='first-last, e.g. 10-29')
@@ -601,7 +601,7 @@ def development(args: list[str]) -> int:
             CALIBRATION_SEED,):
         parser.error('these seeds are the acceptance seeds: choose development seeds')
     opts.out.mkdir(parents=True, exist_ok=True)
-    acc = run(opts.out, _llr_config(), seeds=seeds, calibration_seed=opts.calibration_seed,
+    acc = run(opts.out, llr_config(), seeds=seeds, calibration_seed=opts.calibration_seed,
               speed=opts.speed)
     write_text_atomic(opts.out / 'bus_acceptance_dev.json', json.dumps(acc, indent=1))
     print('\n'.join(markdown_scores(acc)))

@@ -4,8 +4,9 @@ The Python API, without ROS (names load on first use, so ``import rwa_monitor`` 
 
     from rwa_monitor import LLRDetector, detect_batch, VsadcDetector, FssDiagnoser
 
-Streaming detectors follow :class:`StreamingDetector` (``update``, ``reset``,
-``counters``, ``params``, ``last_event``); their parameters are defined in
+Streaming detectors follow :class:`StreamingDetector` (``reset``, ``counters``,
+``params``, ``last_event``) and their family's typed ``update``: :class:`WheelDetector`,
+:class:`GyroDetector` or :class:`WindowDiagnoser`; their parameters are defined in
 :data:`SCHEMAS` (docs/parameters.md). docs/architecture.md shows the layers.
 """
 
@@ -21,9 +22,13 @@ _EXPORTS = {
     'AUTO': 'rwa_monitor.core.params',
     'SCHEMAS': 'rwa_monitor.core.schema',
     'StreamingDetector': 'rwa_monitor.core.protocol',
+    'WheelDetector': 'rwa_monitor.core.protocol',
+    'GyroDetector': 'rwa_monitor.core.protocol',
+    'WindowDiagnoser': 'rwa_monitor.core.protocol',
     'LLRDetector': 'rwa_monitor.core.llr',
     'detect_batch': 'rwa_monitor.core.llr',
     'VsadcDetector': 'rwa_monitor.core.vsadc',
+    'GyroDiagnosis': 'rwa_monitor.core.gyro_diagnosis',
     'FssDiagnoser': 'rwa_monitor.core.fss.diagnoser',
     'WindowDiagnosis': 'rwa_monitor.core.fss.diagnoser',
     'diagnose_window': 'rwa_monitor.core.fss.pipeline:diagnose',

@@ -88,7 +88,7 @@ def test_streaming_rejects_bad_quaternions_and_counts_them():
     assert est.update(0.0, _about(0, 0.001)) is None            # stamp not after the last
     rate = est.update(0.25, 1.05 * _about(0, 0.001))            # norm 1.05: normalised
     np.testing.assert_allclose(rate, [0.004, 0, 0], atol=1e-12)
-    assert (est.invalid, est.out_of_order, est.gaps) == (2, 1, 0)
+    assert (est.invalid, est.non_increasing_time, est.gaps) == (2, 1, 0)
 
 
 def test_streaming_restarts_after_a_gap():

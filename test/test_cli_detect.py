@@ -71,7 +71,7 @@ def test_detect_round_trip_finds_the_step(simulated):
     assert llr['components']['rw1']['rejected']['non_finite'] == 0
 
 
-def test_nonfinite_samples_are_counted_not_fatal(tmp_path):
+def test_non_finite_samples_are_counted_not_fatal(tmp_path):
     tele = simulate_friction(n_wheels=1, n_samples=3000, seed=4)
     tele.wheels['rw1'].friction[[10, 20, 30]] = np.nan
     tele.wheels['rw1'].speed[40] = np.inf

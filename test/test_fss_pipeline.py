@@ -92,7 +92,7 @@ def test_sliding_window_is_bounded_and_ordered():
     assert [i for i, d in enumerate(due) if d] == [99, 129, 159, 189, 219, 249]
     t, w, f = win.snapshot()
     assert t.tolist() == list(range(150, 250))
-    assert not win.update(10.0, 1.0, 1.0) and win.out_of_order == 1
+    assert not win.update(10.0, 1.0, 1.0) and win.non_increasing_time == 1
     win.update(300.0, float('nan'), 1.0)
     assert win.non_finite == 1 and win.snapshot()[0][-1] == 300.0
     assert win.gaps == 1  # 300 after 249 with a step of 1

@@ -111,7 +111,7 @@ def test_bad_input_is_counted(tele):
         counters = node.input_counters
         assert counters['length_mismatch'] == 1
         assert counters['unknown_wheel'] == 1 and counters['empty_name'] == 1
-        assert counters['out_of_order'] == 1
+        assert counters['non_increasing_time'] == 1
         rw1 = node.wheels['rw1']
         assert rw1.samples == 2 and rw1.window.non_finite == 1
 

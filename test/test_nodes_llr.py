@@ -234,8 +234,8 @@ def test_bad_messages_are_counted_and_never_poison(tmp_path):
                                                            [9.0, 9.0]))
             inject('out_of_order', messages.joint_state(t - 0.05, ['rw1', 'rw2'],
                                                         [9.0, 9.0], [9.0, 9.0]))
-            inject('nonfinite', messages.joint_state(t + 0.01, ['rw1', 'rw2'], [nan, 1.0],
-                                                     [1.0, inf]))
+            inject('non_finite', messages.joint_state(t + 0.01, ['rw1', 'rw2'], [nan, 1.0],
+                                                      [1.0, inf]))
             inject('unknown_wheel', messages.joint_state(t + 0.02, ['rwX'], [1.0], [1.0]))
             inject('duplicate_name', messages.joint_state(t + 0.03, ['rw1', 'rw1'],
                                                           [nan, 9.0], [nan, 9.0]))
@@ -258,10 +258,10 @@ def test_bad_messages_are_counted_and_never_poison(tmp_path):
     for w in ('rw1', 'rw2'):
         assert wheels[w].counters['duplicate_stamp'] == k
         assert wheels[w].counters['out_of_order'] == k
-    # nonfinite: one per wheel per injection, plus the NaN rw1 of the duplicate-name message
-    assert wheels['rw1'].rejected()['nonfinite'] == 2 * k
-    assert wheels['rw2'].rejected()['nonfinite'] == k
-    assert health['rw1']['rejected_nonfinite'] == 2 * k
+    # non_finite: one per wheel per injection, plus the NaN rw1 of the duplicate-name message
+    assert wheels['rw1'].rejected()['non_finite'] == 2 * k
+    assert wheels['rw2'].rejected()['non_finite'] == k
+    assert health['rw1']['rejected_non_finite'] == 2 * k
     assert health['rw2']['out_of_order'] == k
     assert health['telemetry/wheels']['length_mismatch'] == k
     # Never poisoned: the same changes, kinds and declarations as on the clean file.

@@ -28,6 +28,7 @@ def test_import_is_cheap():
 def test_constructors_show_their_parameters():
     for cls, name in ((rwa_monitor.LLRDetector, 'k_verif'),
                       (rwa_monitor.VsadcDetector, 'sigma_window'),
+                      (rwa_monitor.GyroDiagnosis, 'decide_chi2'),
                       (rwa_monitor.FssDiagnoser, 'wglr_window')):
         params = inspect.signature(cls).parameters
         assert name in params

@@ -164,7 +164,8 @@ def test_vsadc_never_raises_and_counts_every_row(rows):
         det.update(t, g, q, r)
     c = det.counters
     assert c['rows'] == len(rows)
-    assert c['accepted'] + c['held'] + c['bad_gyro'] + c['out_of_order'] == len(rows)
+    assert (c['accepted'] + c['held'] + c['bad_gyro'] + c['non_finite']
+            + c['non_increasing_time']) == len(rows)
 
 
 @st.composite

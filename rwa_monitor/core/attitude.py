@@ -143,7 +143,7 @@ class StarTrackerRate:
         self._prev: tuple[float, float, float, float] | None = None
         self._prev_time = -math.inf
         self.invalid = 0
-        self.out_of_order = 0
+        self.non_increasing_time = 0
         self.gaps = 0
 
     @property
@@ -159,7 +159,7 @@ class StarTrackerRate:
             self.invalid += 1
             return None
         if t <= self._prev_time:
-            self.out_of_order += 1
+            self.non_increasing_time += 1
             return None
         x, y, z, w = x / norm, y / norm, z / norm, w / norm
         prev, dt = self._prev, t - self._prev_time

@@ -17,6 +17,13 @@ Friction changes inside the calibration data are looked for with the calibrated 
 detector itself; each is reported in ``warnings`` with wheel and time (see
 :func:`calibrate_wheel`).
 
+The modules by responsibility: this one is the commissioning procedure (noise profile,
+the nominal model's fit and self-check); core/nominal.py the nominal model in force
+(``nominal_prediction``, ``NominalWheel``); core/calibrated_fss.py the window diagnoser
+against the nominal (``fss_reference``, ``fss_inputs``, ``diagnose_fss``);
+core/calibration_check.py the file's shape (``check_calibration``). Their public names
+are importable from here too.
+
 The gyro block is filled by :func:`rwa_monitor.core.gyro_calibration.calibrate_gyro` (the
 gyro diagnosis' own commissioning: time, gyro (n, 3), star-tracker quaternion (n, 4,
 scalar last); a plain dict per axis); it is empty for a record without gyro and star
@@ -25,15 +32,22 @@ tracker.
 
 from __future__ import annotations
 
-from typing import Any, Mapping, Sequence
+from typing import Any, Sequence
 
 import numpy as np
 from scipy import stats
 
-from rwa_monitor.core import llr_kernel
-from rwa_monitor.exceptions import ConfigError
+from rwa_monitor.core.calibrated_fss import diagnose_fss, fss_extra, fss_inputs, fss_reference
+from rwa_monitor.core.calibration_check import check_calibration, check_wheels, VERSION
+from rwa_monitor.core.nominal import nominal_prediction, NominalWheel, TABLE_STEP_RAD_S
 
-VERSION = 1
+# Importers use these names from here as well as from their modules.
+__all__ = ['BAND_EDGES', 'BAND_LEVEL', 'calibrate_gyro', 'calibrate_wheel',
+           'check_calibration', 'check_wheels', 'diagnose_fss', 'fss_extra', 'fss_inputs',
+           'fss_reference', 'MAX_BAND_RAD_S', 'MIN_EXCESS', 'noise_profile',
+           'nominal_prediction', 'NominalWheel', 'REFERENCE_FRACTION', 'refit_outside_band',
+           'REFIT_RCOND', 'SPEED_KINDS', 'TABLE_STEP_RAD_S', 'VERSION']
+
 # |speed| bin edges (rad/s) of the noise profile; the last bin is open.
 BAND_EDGES = (0.0, 0.25, 0.5, 1.0, 1.5, 2.0, 3.0, 4.0, 5.0, 6.0, 8.0, 10.0, 15.0)
 # Level of the test "this bin's residual is larger than the reference noise".
@@ -44,35 +58,10 @@ MAX_BAND_RAD_S = 8.0
 MIN_EXCESS = 1.1
 # Effects of the speed alone: the ones a nominal model keeps (see _keep_speed_effects).
 SPEED_KINDS = ('stribeck', 'asymmetric_coulomb', 'drag', 'smooth_speed')
-# Speed step (rad/s) of the nominal model's table (NominalWheel); knots are added to it.
-TABLE_STEP_RAD_S = 0.01
-# Reasons of a sample not tested, by the code of llr_kernel.nominal_residual.
-_REASONS = (None, 'low_speed_band', 'outside_calibrated_range')
-_nominal_residual = llr_kernel.nominal_residual
 # Relative singular-value cut-off of the refit outside the low-speed band.
 REFIT_RCOND = 1.0e-9
 # Speeds above this fraction of the largest |speed| seen form the reference region.
 REFERENCE_FRACTION = 0.3
-
-
-def nominal_prediction(friction_model: Mapping[str, Any], speed: np.ndarray,
-                       time: np.ndarray | None = None,
-                       aux: Mapping[str, np.ndarray] | None = None) -> np.ndarray:
-    """Return the nominal friction (N m, project sign) of a ``friction_model`` block.
-
-    The regressor columns are identify's (model.regressors_from_config, eq. (1) sign:
-    ``h = -[sign(w), w, ...]``) times the block's weights. Raise ConfigError naming a
-    missing weight.
-    """
-    from rwa_monitor.core.identify.model import regressors_from_config
-    block = friction_model.get('friction_model', friction_model)
-    regs = regressors_from_config(block)
-    weights = block.get('weights') or {}
-    missing = [n for n in regs.names if n not in weights]
-    if missing:
-        raise ConfigError(f'friction_model.weights lacks {", ".join(missing)}')
-    x = np.array([float(weights[n]) for n in regs.names])
-    return regs.matrix(np.asarray(speed, dtype=float), time, aux) @ x
 
 
 def noise_profile(speed: np.ndarray, residual: np.ndarray,
@@ -225,146 +214,6 @@ def refit_outside_band(model: dict[str, Any], speed: np.ndarray, friction: np.nd
     model['weights'] = {n: float(c) for n, c in zip(regs.names, coef)}
 
 
-def fss_reference(speed: np.ndarray, friction: np.ndarray, friction_model: Mapping[str, Any],
-                  noise: Mapping[str, Any], window_samples: int | None = None
-                  ) -> dict[str, Any]:
-    """Return the window diagnoser's nominal reference of one wheel.
-
-    The diagnoser knows model (1) and the FSSs (the FSS paper's eq. (4)); what the wheel's
-    nominal holds beyond model (1) is removed from its friction first. That part is not
-    the nominal model's own extra columns as identification fitted them: identification
-    knows no FSS, and on a wheel with FSS jumps it takes them for effects of speed (on
-    the paper's Examples 1-2: drag and smooth_speed, a reference base dry 1.6 x the true
-    one). So the extra columns are refitted together with the FSS jumps, in the
-    diagnoser's own stage 2 (eq. 14: one dry coefficient per interval between the
-    changepoints of stages 1-3, one viscous coefficient) plus the columns
-    (core/fss/segments.py ``fit_extra_columns``), twice: the changepoints are found
-    again once the first fit's extra part is removed. ``extra_weights``: that part as
-    weights of the nominal model's columns (``nominal_prediction`` with them is what
-    :func:`fss_inputs` removes). ``base_dry_nm``, ``viscous_nms``, ``noise_std_nm``:
-    what the diagnoser's extraction (core/fss/pipeline.py, stages 1-3) reports on the
-    calibration data given as :func:`fss_inputs` gives a window, so that a nominal window
-    is judged against the same estimator's nominal values. ``model1_*``: the plain
-    least-squares fit of model (1) outside the low-speed band (for reading only).
-
-    A record of two or more diagnosed windows (``window_samples``, default the node's
-    ``window_length``) gets the median of the base dry of each window-long piece
-    (``base_dry_windows`` pieces, their std ``base_dry_window_std_nm``) and the mean of
-    their viscous coefficients (standard error from theirs): the reference is that of a
-    window, as the diagnosed ones are. Algorithm 1's base is a one-window estimate, and
-    on a longer record its running sums of jumps drift down with every jump given to the
-    wrong FSS (docs/fss.md, "Calibrated": a three-window record read 0.54 x the true
-    base dry). When the refitted
-    columns leave no positive base dry (they took the dry friction itself), they are
-    dropped and ``extra_refit_dropped`` is set: the reference is model (1) alone.
-    """
-    from rwa_monitor.core.fss.pipeline import extract, FssConfig, normalise
-    from rwa_monitor.core.fss.segments import fit_extra_columns
-    from rwa_monitor.core.identify.model import regressors_from_config
-    from rwa_monitor.core.schema import FSS
-    speed = np.asarray(speed, dtype=float)
-    friction = np.asarray(friction, dtype=float)
-    band = float(noise['low_speed_band']['speed_abs_below_rad_s'])
-    with np.errstate(invalid='ignore'):
-        out = np.isfinite(speed) & np.isfinite(friction) & (np.abs(speed) >= band)
-    h = -np.column_stack([np.sign(speed[out]), speed[out]])
-    dry, viscous = np.linalg.lstsq(h, friction[out], rcond=None)[0]
-    ref = {'model1_dry_nm': float(dry), 'model1_viscous_nms': float(viscous),
-           'speed_abs_below_rad_s': band}
-    block = friction_model.get('friction_model', friction_model)
-    regs = regressors_from_config(block)
-    names = list(regs.names)
-    extra = [i for i, n in enumerate(names) if n not in ('dry', 'viscous')]
-    config = FssConfig()
-    weights = dict.fromkeys(names, 0.0)
-    safe = np.where(out, speed, 0.0)
-    columns = regs.matrix(safe)[:, extra] if extra else np.zeros((speed.size, 0))
-    given = np.where(out, friction, np.nan)
-    for _ in range(2 if extra else 0):
-        ext = extract(*normalise(speed, given, config), config)
-        c, d = fit_extra_columns(friction, np.where(out, speed, np.nan), ext.accepted,
-                                 columns, dk_error=config.dk_error)
-        # columns @ c + d[0] sign(w) + d[1] w; model (1)'s columns are -sign(w), -w.
-        weights = dict.fromkeys(names, 0.0)
-        weights.update({names[i]: float(v) for i, v in zip(extra, c)})
-        weights['dry'], weights['viscous'] = float(-d[0]), float(-d[1])
-        given = np.where(out, friction - nominal_prediction(
-            {'effects': block.get('effects') or [], 'weights': weights}, safe), np.nan)
-    ext = extract(*normalise(speed, given, config), config)
-    if extra and not ext.base_dry > 0.0:
-        # The refitted columns took the dry friction itself (nearly collinear with the
-        # interval levels when few intervals hold both signs of the speed): a reference
-        # with no positive base dry is never right, so the nominal is model (1) alone.
-        weights = dict.fromkeys(names, 0.0)
-        given = np.where(out, friction, np.nan)
-        ext = extract(*normalise(speed, given, config), config)
-        ref['extra_refit_dropped'] = True
-    tq = config.torque_scale_nm
-    base, viscous, viscous_se = ext.base_dry, ext.viscous, ext.viscous_se
-    length = int(window_samples or FSS['window_length'].default)
-    pieces = speed.size // length
-    if pieces >= 2:
-        parts = [extract(*normalise(speed[k * length:(k + 1) * length],
-                                    given[k * length:(k + 1) * length], config), config)
-                 for k in range(pieces)]
-        bases = [p.base_dry for p in parts]
-        base = float(np.median(bases))
-        viscous = float(np.mean([p.viscous for p in parts]))
-        viscous_se = float(np.sqrt(np.sum([p.viscous_se ** 2 for p in parts]))) / pieces
-        ref.update(base_dry_windows=pieces,
-                   base_dry_window_std_nm=float(np.std(bases, ddof=1) * tq))
-    ref.update(base_dry_nm=float(base * tq),
-               viscous_nms=float(viscous * tq / config.speed_scale_rad_s),
-               viscous_se_nms=float(viscous_se * tq / config.speed_scale_rad_s)
-               if np.isfinite(viscous_se) else float('nan'),
-               noise_std_nm=float(ext.sigma * tq), extra_weights=weights,
-               samples=int(np.count_nonzero(out)))
-    return ref
-
-
-def fss_extra(block: Mapping[str, Any], speed: np.ndarray) -> np.ndarray:
-    """Return what the wheel's nominal holds beyond model (1), as the FSS reference fitted.
-
-    ``fss.extra_weights`` on the nominal model's columns (:func:`fss_reference`); a
-    calibration written before they existed gives the nominal model minus the
-    reference's model-(1) fit.
-    """
-    ref = block['fss']
-    model = block['friction_model']
-    if 'extra_weights' in ref:
-        return nominal_prediction({'effects': model.get('effects') or [],
-                                   'weights': ref['extra_weights']}, speed)
-    model1 = -ref['model1_dry_nm'] * np.sign(speed) - ref['model1_viscous_nms'] * speed
-    return nominal_prediction(model, speed) - model1
-
-
-def fss_inputs(block: Mapping[str, Any], speed: np.ndarray, friction: np.ndarray
-               ) -> tuple[np.ndarray, dict[str, float]]:
-    """Return (friction for the diagnoser, its scales) relative to the wheel's nominal.
-
-    The friction loses what the nominal holds beyond model (1) (:func:`fss_extra`),
-    samples inside the low-speed band or outside the calibrated speed range become NaN
-    (the stages skip them), and the normalising scales are the reference's base dry
-    friction and base dry / viscous, so that the nominal wheel is (1, 1) in the
-    diagnoser's units, where its classifier was trained (docs/fss.md, "Calibrated").
-    """
-    speed = np.asarray(speed, dtype=float)
-    friction = np.asarray(friction, dtype=float)
-    ref = block['fss']
-    safe = np.where(np.isfinite(speed), speed, 0.0)
-    out = friction - fss_extra(block, safe)
-    lo, hi = block['speed_range_rad_s']
-    with np.errstate(invalid='ignore'):
-        skip = (np.abs(speed) < ref['speed_abs_below_rad_s']) | (speed < lo) | (speed > hi)
-    out[skip | ~np.isfinite(speed)] = np.nan
-    scales = {}
-    if ref['base_dry_nm'] > 0:
-        scales['torque_scale_nm'] = float(ref['base_dry_nm'])
-        if ref['viscous_nms'] > 0:
-            scales['speed_scale_rad_s'] = float(ref['base_dry_nm'] / ref['viscous_nms'])
-    return out, scales
-
-
 def _keep_speed_effects(model: dict[str, Any], data: Any) -> list[str]:
     """Keep the effects that depend on speed only; refit the weights; return the dropped.
 
@@ -404,237 +253,3 @@ def calibrate_gyro(time: np.ndarray, gyro: np.ndarray | None, quaternion: np.nda
     from rwa_monitor.core.gyro_calibration import calibrate_gyro as fill
     return dict(fill(np.asarray(time, dtype=float), np.asarray(gyro, dtype=float),
                      np.asarray(quaternion, dtype=float)))
-
-
-def check_calibration(cal: Any, source: str = 'calibration') -> dict[str, Any]:
-    """Return the inner ``calibration`` mapping after checking its shape.
-
-    Raise ConfigError naming the file (``source``) and the key at fault.
-    """
-    if not isinstance(cal, Mapping) or not isinstance(cal.get('calibration'), Mapping):
-        raise ConfigError(f'{source}: key calibration: expected a mapping')
-    inner = cal['calibration']
-    if inner.get('version') != VERSION:
-        raise ConfigError(f'{source}: key calibration.version: expected {VERSION}, got '
-                          f'{inner.get("version")!r}')
-    wheels = inner.get('wheels')
-    if not isinstance(wheels, Mapping):
-        raise ConfigError(f'{source}: key calibration.wheels: expected a mapping')
-    for name, block in wheels.items():
-        key = f'calibration.wheels.{name}'
-        if not isinstance(block, Mapping):
-            raise ConfigError(f'{source}: key {key}: expected a mapping')
-        for part in ('friction_model', 'noise', 'speed_range_rad_s', 'fss'):
-            if part not in block:
-                raise ConfigError(f'{source}: key {key}.{part}: missing')
-        rng = block['speed_range_rad_s']
-        if (not isinstance(rng, Sequence) or len(rng) != 2
-                or not all(isinstance(v, (int, float)) for v in rng) or rng[0] > rng[1]):
-            raise ConfigError(f'{source}: key {key}.speed_range_rad_s: expected [lo, hi]')
-        band = (block['noise'] or {}).get('low_speed_band', {})
-        if not isinstance(band.get('speed_abs_below_rad_s', 0.0), (int, float)):
-            raise ConfigError(f'{source}: key {key}.noise.low_speed_band.'
-                              f'speed_abs_below_rad_s: expected a number')
-        try:
-            nominal_prediction(block['friction_model'], np.array([1.0, -1.0]))
-        except ConfigError as err:
-            raise ConfigError(f'{source}: key {key}.friction_model: {err}') from None
-    return dict(inner)
-
-
-def check_wheels(cal: Mapping[str, Any], wheels: Sequence[str], source: str) -> None:
-    """Raise ConfigError naming the record's wheels the calibration does not cover."""
-    missing = [w for w in wheels if w not in cal['wheels']]
-    if missing:
-        raise ConfigError(f'{source}: no calibration for wheel(s) {", ".join(missing)}; it '
-                          f'calibrates {", ".join(cal["wheels"]) or "none"}')
-
-
-class NominalWheel:
-    """One wheel's calibration in force: nominal prediction, low-speed band, speed range.
-
-    The calibrated LLR path (docs/llr.md, section "Calibrated") feeds the unchanged
-    model-(1) detector with ``friction - nominal(speed)``; samples inside the low-speed
-    band or outside the calibrated speed range are given as NaN (the detector drops and
-    counts them as non-finite, and the row index of every event stays the file's row) and
-    counted here by reason.
-
-    The nominal model is evaluated from a table built once per calibration: on each side
-    of zero, the tested speeds (band edge to the end of the calibrated range) at every
-    TABLE_STEP_RAD_S plus the knots of a piecewise-linear effect, interpolated linearly.
-    The batch path (:meth:`residual`) and the streaming path (:meth:`residual_one`, a
-    node's per-sample call) do the same floating-point operations, so a node and
-    ``detect --calibration`` give the same events; a per-sample evaluation of the
-    regressors costs milliseconds, the table about a microsecond. ``table_error_nm`` is
-    the largest difference from the exact model at the midpoints of the table.
-    """
-
-    def __init__(self, block: Mapping[str, Any]) -> None:
-        self.block = block
-        self.friction_model = block['friction_model']
-        band = (block.get('noise') or {}).get('low_speed_band') or {}
-        self.band_rad_s = float(band.get('speed_abs_below_rad_s', 0.0))
-        lo, hi = block['speed_range_rad_s']
-        self.speed_range = (float(lo), float(hi))
-        knots = [float(k) for e in self.friction_model.get('effects') or []
-                 for k in (e.get('params') or {}).get('knots_rad_s', [])]
-        self._tables = {side: self._table(side, knots) for side in (1.0, -1.0)}
-        self.at_zero = float(nominal_prediction(self.friction_model, np.zeros(1))[0])
-        # Both sides packed for the compiled lookup (also LLRDetector.update_nominal's).
-        self.table = llr_kernel.pack_table(
-            self.band_rad_s, self.speed_range, self.at_zero, 1.0 / TABLE_STEP_RAD_S,
-            _lookup(*self._tables[1.0]), _lookup(*self._tables[-1.0]))
-
-    def _table(self, side: float, knots: list[float]
-               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Return (|w| grid, nominal, slope to the next point) of one side of zero."""
-        end = self.speed_range[1] if side > 0 else -self.speed_range[0]
-        start = max(self.band_rad_s, TABLE_STEP_RAD_S * 1e-3)
-        if end <= start:
-            grid = np.array([start, start])
-        else:
-            grid = np.unique(np.concatenate([
-                np.arange(start, end, TABLE_STEP_RAD_S), [end],
-                [abs(k) for k in knots if start < abs(k) < end and k * side > 0]]))
-        values = nominal_prediction(self.friction_model, side * grid)
-        step = np.diff(grid)
-        slope = np.append(np.divide(np.diff(values), step, out=np.zeros_like(step),
-                                    where=step > 0), 0.0)
-        return grid, values, slope
-
-    @property
-    def table_error_nm(self) -> float:
-        """Return the largest |table - exact model| at the table's midpoints (N m)."""
-        worst = 0.0
-        for side, (grid, _, _) in self._tables.items():
-            if len(grid) > 1:
-                mid = 0.5 * (grid[1:] + grid[:-1]) * side
-                exact = nominal_prediction(self.friction_model, mid)
-                worst = max(worst, float(np.max(np.abs(self.nominal(mid) - exact))))
-        return worst
-
-    def nominal(self, speed: np.ndarray) -> np.ndarray:
-        """Return the tabled nominal friction (NaN outside the tables' speeds, except 0)."""
-        speed = np.asarray(speed, dtype=float)
-        out = np.full(speed.shape, np.nan)
-        out[speed == 0.0] = self.at_zero
-        for side, (grid, values, slope) in self._tables.items():
-            with np.errstate(invalid='ignore'):
-                mag = speed * side
-                on = (mag >= grid[0]) & (mag <= grid[-1])
-            j = np.searchsorted(grid, mag[on], side='right') - 1
-            j = np.minimum(j, len(grid) - 1)
-            out[on] = values[j] + (mag[on] - grid[j]) * slope[j]
-        return out
-
-    def residual(self, time: np.ndarray, speed: np.ndarray, friction: np.ndarray
-                 ) -> tuple[np.ndarray, dict[str, int]]:
-        """Return (friction - nominal, NaN where not tested) and the counts by reason.
-
-        Each side's table is evaluated by ``numpy.interp`` (NaN off the table), which forms
-        ``slope_j (|w| - grid_j) + nominal_j`` with the slope computed as in the table: the
-        floats of :meth:`residual_one` (test_calibrate checks it point by point); few
-        temporaries, as fresh large arrays cost page faults.
-        """
-        speed = np.asarray(speed, dtype=float)
-        friction = np.asarray(friction, dtype=float)
-        time = np.asarray(time, dtype=float)
-        finite = np.isfinite(speed)
-        valid = finite & np.isfinite(friction) & np.isfinite(time)
-        mag = np.abs(speed)
-        with np.errstate(invalid='ignore'):
-            low = valid & (mag < self.band_rad_s)
-            outside = valid & ((speed < self.speed_range[0]) | (speed > self.speed_range[1]))
-        (grid, values, _), (grid_below, values_below, _) = (self._tables[1.0],
-                                                            self._tables[-1.0])
-        out = np.interp(mag, grid, values, np.nan, np.nan)
-        np.copyto(out, np.interp(mag, grid_below, values_below, np.nan, np.nan),
-                  where=~(speed > 0.0))
-        out[speed == 0.0] = self.at_zero
-        np.subtract(friction, out, out=out)
-        out[low | outside | ~finite] = np.nan
-        return out, {'low_speed_band': int(np.count_nonzero(low)),
-                     'outside_calibrated_range': int(np.count_nonzero(outside & ~low))}
-
-    def residual_one(self, time: float, speed: float, friction: float
-                     ) -> tuple[float, str | None]:
-        """Return (friction - nominal, reason not tested or None) of one sample.
-
-        The same arithmetic as :meth:`residual` on one sample (a node's per-sample call):
-        core/llr_kernel.py ``nominal_residual`` on :attr:`table`, which also counts the
-        samples not tested by reason (:attr:`not_tested`).
-        """
-        table = self.table
-        try:
-            out = _nominal_residual(table, time, speed, friction)
-        except TypeError:
-            out = _nominal_residual(table, float(time), float(speed), float(friction))
-        code = table[0]
-        return out, (None if code == 0.0 else _REASONS[int(code)])
-
-    @property
-    def not_tested(self) -> dict[str, int]:
-        """Samples not tested since construction, by reason, through :attr:`table`."""
-        return {name: int(self.table[llr_kernel.T_COUNTS + code - 1])
-                for code, name in enumerate(_REASONS) if code}
-
-
-def _lookup(grid: np.ndarray, values: np.ndarray, slope: np.ndarray) -> tuple:
-    """Return one side's table with a bucket index for the binary search.
-
-    ``first[b]`` counts the grid points at or below ``grid[0] + (b - 1) h`` (``h`` =
-    TABLE_STEP_RAD_S); a speed ``m`` on the table falls in bucket ``b = int((m - grid[0]) /
-    h)`` (within one bucket after rounding), so its interval lies between ``first[b]`` and
-    ``first[b + 3]``: the search sees a few points, with the answer of a full one.
-    """
-    count = int((grid[-1] - grid[0]) / TABLE_STEP_RAD_S) + 6   # b + 3 < count on the table
-    edges = grid[0] + (np.arange(count) - 1.0) * TABLE_STEP_RAD_S
-    first = np.searchsorted(grid, edges, side='right')
-    return grid, values, slope, first
-
-
-def diagnose_fss(block: Mapping[str, Any], time: np.ndarray, speed: np.ndarray,
-                 friction: np.ndarray, classifier: Any, config: Any) -> dict[str, Any]:
-    """Return the window diagnosis of one wheel relative to its calibrated nominal.
-
-    :func:`fss_inputs` (nominal's non-model-(1) part removed, band and out-of-range
-    samples skipped, scales from the reference), the four stages (core/fss/pipeline.py
-    ``diagnose``), then core/fss/classify.py ``relative_verdict`` (``status``: nominal,
-    anomalous or unknown, with ``unknown_reason``) with the classifier's noise-ratio
-    bound (``noise_ratio_bound`` of its spec's ``noise_ratio``). A viscous flag stands only
-    when the window's viscous coefficient is also significantly above the reference's
-    (``viscous_z`` > the one-sided quantile at VISCOUS_LEVEL, both standard errors of
-    least squares): the classifier's threshold is a size (x1.14 on the shipped model),
-    learned where the estimate is ten times more precise than on a 3-hour bus record;
-    ``calibration.viscous_z`` keeps the value. A window mostly not tested (band, range)
-    is ``unknown`` from ``diagnose`` already (its coverage) and keeps that answer.
-    """
-    from dataclasses import replace
-
-    from rwa_monitor.core.fss.classify import (noise_ratio_bound, relative_verdict,
-                                               viscous_significant, viscous_z)
-    from rwa_monitor.core.fss.pipeline import diagnose
-    given, scales = fss_inputs(block, speed, friction)
-    result = diagnose(speed, given, time, classifier, replace(config, **scales))
-    skipped = int(np.sum(~np.isfinite(given) & np.isfinite(np.asarray(friction, float))))
-    if result.get('status') == 'unknown':   # mostly not tested: no relative verdict
-        result['calibration'] = {**scales, 'samples_not_tested': skipped}
-        return result
-    spec = getattr(classifier, 'spec', None) or {}
-    bound = noise_ratio_bound(spec.get('noise_ratio'))
-    est, ref = result['estimates'], block['fss']
-    se = est.get('viscous_se_nms')
-    z = viscous_z(est['viscous_nms'], float('inf') if se is None else se,
-                  ref['viscous_nms'], ref.get('viscous_se_nms', float('nan')))
-    if result['anomalies'].get('viscous') and not viscous_significant(z):
-        result['anomalies']['viscous'] = False
-        result['viscous_not_significant'] = True
-    status, flags, reason = relative_verdict(result['anomalies'], est['noise_std_nm'],
-                                             ref['noise_std_nm'], bound)
-    result['anomalies'] = flags
-    result['status'] = status
-    if reason:
-        result['unknown_reason'] = reason
-    result['calibration'] = {**scales, 'samples_not_tested': skipped,
-                             'viscous_z': z if np.isfinite(z) else None}
-    return result

@@ -18,6 +18,38 @@ class AnomalyEvent:
     is 0 for a first declaration and n > 0 for the n-th explicit revision of the same
     change (e.g. its kind confirmed or corrected as more data arrived). ``details`` holds
     further fields, named from :mod:`rwa_monitor.core.keys`, units in the key.
+
+    Parameters
+    ----------
+    detector : str
+        The detector that declared it: ``llr``, ``vsadc`` or ``fss``.
+    component : str
+        What it concerns: a wheel id (``rw1``) or a gyro axis (``gyro_y``).
+    kind : str
+        The anomaly's kind (core/keys.py: ``dry``, ``viscous``, ``drift``, ``bias``, ...).
+    time : float
+        Estimated change time (s).
+    index : int
+        Row index of the estimated change.
+    declared_time : float
+        Time (s) at which the detector had enough evidence.
+    declared_index : int
+        Row index of the declaration.
+    p_value : float
+        Nominal p-value of the declaration; NaN when the detector gives none.
+    revision : int
+        0 for a first declaration, n > 0 for the n-th revision of the same change.
+    details : mapping of str to value
+        Further fields named from :mod:`rwa_monitor.core.keys`.
+
+    Examples
+    --------
+    >>> event = AnomalyEvent('llr', 'rw1', 'dry', time=120.0, index=1200,
+    ...                      declared_time=131.5, declared_index=1315)
+    >>> event.declared_time - event.time, event.revision
+    (11.5, 0)
+    >>> event.to_json()['declared_index']
+    1315
     """
 
     detector: str

@@ -1,470 +1,146 @@
-"""Gyro drift/bias diagnosis on the gyro-minus-star-tracker residual (docs/vsadc.md).
+"""Gyro drift/bias diagnosis of three axes on the gyro-minus-star-tracker residual.
 
-Algorithm 1 of the vsadc-gyro-drift paper on a feature that cancels the true body rate:
-per axis the residual ``e = (g_{k-1} + g_k)/2 - w_st,k``
-(:mod:`rwa_monitor.core.gyro_calibration`) is averaged over blocks of ``block`` steps.
-
-- Nominal class (Alg. 1 lines 9-13): the mean of the first ``nominal_blocks`` blocks; then,
-  beyond the paper, a running mean over ``tracking_blocks`` fed by the block ``guard_blocks``
-  back, only while the axis is healthy and the last ``guard_blocks + 1`` blocks lie within
-  ``freeze_fraction`` of the threshold (a slow thermal wander is nominal, a fault freezes
-  the nominal before it is declared).
-- Evolving class and distance (lines 15-20, eq. (8)): the signed distance of the newest
-  block mean to the nominal centre, ``d``; a fault when ``|d|`` exceeds the level threshold
-  on ``confirm_blocks`` successive blocks (line 26) or, beyond the paper, when a two-sided
-  CUSUM of ``d / block_std`` (reference value ``cusum_allowance``) passes
-  ``cusum_threshold``.
-- Drift or bias (lines 27-34): instead of the spread of ``d`` against self-adapted sigma
-  limits, a likelihood comparison on the half-block means of the last ``decide_blocks``
-  blocks of a step (bias) and a ramp (drift), each with its onset fitted, whitened with
-  the calibrated noise model (:meth:`ResidualAxis._whitener`): the kind is declared when
-  one model explains the data better by ``decide_chi2`` (in block variances), or after
-  ``max_wait_blocks`` by the better one. The fitted onset is the event's change time.
-- While faulty: drift becomes bias when the least-squares slope over the last
-  ``fit_blocks`` blocks falls below half the slope threshold; bias becomes drift only
-  when the level has also moved from the held bias level by the level threshold and the
-  slope is above the slope threshold (a kind change needs its own evidence at the level
-  of the declaration); both confirmed on ``confirm_blocks`` blocks, and not before the
-  fault has lasted ``fit_blocks`` blocks (the step itself is a slope). Recovery when
-  ``|d|`` stays below ``recovery_fraction`` of the threshold for ``confirm_blocks``
-  blocks.
-
-Thresholds come from :func:`rwa_monitor.core.gyro_calibration.calibrate_gyro` (the
-``gyro:`` block of calibration.yaml) or, without one, from ``DEFAULT_BLOCK_STD``.
+:class:`GyroDiagnosis` is the default gyro detector (``feature: residual``, docs/vsadc.md):
+rows accepted by the shared row filter (core/gyro_rows.py), the residual of each axis
+(trapezoidal gyro mean minus star-tracker rate) fed to one
+:class:`~rwa_monitor.core.gyro_residual.ResidualAxis` each (the algorithm: Algorithm 1 of
+the vsadc-gyro-drift paper on block means, see that module). :func:`make_gyro_detector`
+builds the detector of a VSADC parameter block, this one or the paper's VsadcDetector.
 """
 
 from __future__ import annotations
 
-from collections import deque
 import math
 from typing import Any, Mapping, Sequence
 
-import numpy as np
-
-from rwa_monitor.core import gyro_calibration as gc
-from rwa_monitor.core.attitude import StarTrackerRate
 from rwa_monitor.core.events import AnomalyEvent
-from rwa_monitor.core.params import check_int, check_real
-from rwa_monitor.core.schema import RESIDUAL_PARAMETERS, VSADC, vsadc_kwargs
-from rwa_monitor.core.vsadc import AXES, BIAS, DRIFT, HEALTHY, make_event, Transition, \
-    VsadcDetector
+from rwa_monitor.core.gyro_residual import AXIS_DEFAULTS, ResidualAxis
+from rwa_monitor.core.gyro_rows import AXES, GyroAxes, GyroRows
+from rwa_monitor.core.params import check_real
+from rwa_monitor.core.schema import VSADC, vsadc_kwargs
+from rwa_monitor.core.vsadc import make_event, VsadcDetector
 
-#: Block-mean spread without a calibration (rad/s): the largest of the three axes measured
-#: by calibrate_gyro on the bus development seeds 1-3 (docs/vsadc.md), rounded up.
-DEFAULT_BLOCK_STD = 4.0e-6
-#: Block length (s) of ``DEFAULT_BLOCK_STD`` (40 steps at 4 Hz). The star-tracker part of a
-#: block mean, which dominates it, falls as 1 / block length: without a calibration the
-#: spread is scaled to the block length of the record (measured on its first block).
-DEFAULT_BLOCK_S = 10.0
-#: Lowest lag-1 correlation of block means the decision's noise model accepts (MA(1) of
-#: differenced star-tracker noise plus white gyro noise: -0.5 is the limit, no gyro noise).
-MIN_LAG1 = -0.45
 #: |gyro| at or above this (rad/s) is a saturated sample: held and counted, never a fault.
 DEFAULT_SATURATION_RAD_S = VSADC['saturation_rad_s'].default
-#: Axis keywords and defaults: the ``residual_*`` parameters of the VSADC schema.
-AXIS_DEFAULTS: dict[str, Any] = {
-    name[len('residual_'):]: VSADC[name].default
-    for name in RESIDUAL_PARAMETERS if name.startswith('residual_')}
+_D = VSADC.defaults()   # keyword defaults: the schema's (one home, docs/parameters.md)
 
 
-def axis_thresholds(calibration: Mapping[str, Any] | None, block: int,
-                    fit_blocks: int, sample_s: float = 0.25) -> dict[str, float]:
-    """Return the level, quiet and slope thresholds and block std of one axis.
-
-    From its calibration dict (keys of :func:`calibrate_gyro`) or, when None, from
-    ``DEFAULT_BLOCK_STD`` with the calibration's own factors.
-    """
-    if calibration:
-        try:
-            return {'block_std': check_real('block_std_rad_s',
-                                            calibration['block_std_rad_s'], 0.0, low_open=True),
-                    'level': check_real('level_threshold_rad_s',
-                                        calibration['level_threshold_rad_s'], 0.0,
-                                        low_open=True),
-                    'quiet': check_real('quiet_level_rad_s', calibration['quiet_level_rad_s'],
-                                        0.0, low_open=True),
-                    'slope': check_real('slope_threshold_rad_s2',
-                                        calibration['slope_threshold_rad_s2'], 0.0,
-                                        low_open=True)}
-        except KeyError as exc:
-            raise ValueError(f'gyro calibration lacks {exc.args[0]}') from None
-    std = DEFAULT_BLOCK_STD * DEFAULT_BLOCK_S / (block * sample_s)
-    return {'block_std': std, 'level': gc.DEFAULT_LEVEL_K * std + gc.DEFAULT_WANDER_RAD_S,
-            'quiet': 3.0 * std,
-            'slope': gc.DEFAULT_SLOPE_K * gc.slope_std(std, fit_blocks, block * sample_s)}
-
-
-class ResidualAxis:
-    """One axis: ``update(e, time, stamp)`` per residual; a Transition when the label changes.
-
-    ``stamp`` is any object returned in transitions (e.g. ``(time, row)``).
-    """
-
-    def __init__(self, calibration: Mapping[str, Any] | None = None, **params: Any) -> None:
-        bad = sorted(set(params) - set(AXIS_DEFAULTS))
-        if bad:
-            raise ValueError(f'unknown gyro diagnosis parameter(s): {", ".join(bad)}')
-        p = {**AXIS_DEFAULTS, **params}
-        self.block = check_int('block', p['block'], 2, 100_000)
-        self.nominal_blocks = check_int('nominal_blocks', p['nominal_blocks'], 1, 100_000)
-        self.tracking_blocks = check_int('tracking_blocks', p['tracking_blocks'], 0, 1_000_000)
-        self.guard_blocks = check_int('guard_blocks', p['guard_blocks'], 0, 1000)
-        self.fit_blocks = check_int('fit_blocks', p['fit_blocks'], 3, 10_000)
-        self.decide_blocks = check_int('decide_blocks', p['decide_blocks'], 3, 10_000)
-        self.confirm_blocks = check_int('confirm_blocks', p['confirm_blocks'], 1, 1000)
-        self.max_wait_blocks = check_int('max_wait_blocks', p['max_wait_blocks'], 0, 1000)
-        self.decide_chi2 = check_real('decide_chi2', p['decide_chi2'], 0.0)
-        self.freeze_fraction = check_real('freeze_fraction', p['freeze_fraction'], 0.0, 1.0)
-        self.recovery_fraction = check_real('recovery_fraction', p['recovery_fraction'],
-                                            0.0, 1.0, low_open=True)
-        self.cusum_threshold = check_real('cusum_threshold', p['cusum_threshold'], 0.0)
-        self.cusum_allowance = check_real('cusum_allowance', p['cusum_allowance'], 0.0)
-        self._calibrated = bool(calibration)
-        self._set_thresholds(axis_thresholds(calibration, self.block, self.fit_blocks))
-        rho = float((calibration or {}).get('block_lag1_correlation', 0.0))
-        self.lag1_correlation = min(max(rho, MIN_LAG1) if math.isfinite(rho) else 0.0, 0.0)
-        self._whiteners: dict[int, np.ndarray] = {}
-        self.reset()
-
-    def _set_thresholds(self, th: Mapping[str, float]) -> None:
-        self.block_std, self.level_threshold = th['block_std'], th['level']
-        self.quiet_level, self.slope_threshold = th['quiet'], th['slope']
-
-    def reset(self) -> None:
-        """Forget everything: the next residual starts a new nominal batch."""
-        self._sum = self._first_half = 0.0
-        self._times: list[float] = []
-        self._stamps: list[Any] = []
-        keep = max(self.decide_blocks, self.fit_blocks, self.guard_blocks + 1)
-        self._blocks: deque = deque(maxlen=keep)       # (mean, times, stamps)
-        self._nb = 0
-        self._nominal_sum = 0.0
-        self.nominal = math.nan
-        self._state = HEALTHY
-        self._over = self._waited = self._pending_run = self._fault_blocks = 0
-        self._pending = HEALTHY
-        self._level_sum, self._level_n = 0.0, 0
-        self._n = 0
-        self.distance = self.slope = math.nan
-        self.cusum = [0.0, 0.0]     # upward, downward (block standard deviations)
-
-    # Names the node's health report reads (shared with VsadcAxis).
-    @property
-    def sigma(self) -> float:
-        """Return the last fitted slope (rad/s per s), shown as the spread statistic."""
-        return self.slope
-
-    @property
-    def sigma_lim1(self) -> float:
-        """Return the level threshold (rad/s)."""
-        return self.level_threshold
-
-    @property
-    def sigma_lim2(self) -> float:
-        """Return the slope threshold (rad/s per s)."""
-        return self.slope_threshold
-
-    @property
-    def state(self) -> int:
-        """Return the current label (0 healthy, 1 drift, 2 bias)."""
-        return self._state
-
-    @property
-    def samples(self) -> int:
-        """Return the residuals taken since the last reset."""
-        return self._n
-
-    @property
-    def ready(self) -> bool:
-        """Return True once the nominal level is learnt."""
-        return self._nb >= self.nominal_blocks
-
-    def update(self, e: float, time: float, stamp: Any = None) -> Transition | None:
-        """Take one residual (rad/s) at ``time`` (s); return a Transition on a label change."""
-        self._n += 1
-        self._sum += e
-        self._times.append(time)
-        self._stamps.append(stamp)
-        if len(self._times) == self.block // 2:
-            self._first_half = self._sum
-        if len(self._times) < self.block:
-            return None
-        mean = self._sum / self.block
-        half = self.block // 2
-        halves = (self._first_half / half, (self._sum - self._first_half) / (self.block - half))
-        block = (mean, np.array(self._times), self._stamps, halves)
-        self._sum, self._times, self._stamps = 0.0, [], []
-        if self._nb == 0 and not self._calibrated:     # defaults at this record's rate
-            step = (block[1][-1] - block[1][0]) / (self.block - 1)
-            if step > 0:
-                self._set_thresholds(axis_thresholds(None, self.block, self.fit_blocks, step))
-        return self._on_block(block)
-
-    def _on_block(self, block: tuple) -> Transition | None:
-        self._blocks.append(block)
-        self._nb += 1
-        mean = block[0]
-        if self._nb <= self.nominal_blocks:                 # Alg. 1 lines 9-13
-            self._nominal_sum += mean
-            if self._nb == self.nominal_blocks:
-                self.nominal = self._nominal_sum / self.nominal_blocks
-            return None
-        d = mean - self.nominal                             # eq. (8), one dimension
-        self.distance = d
-        stamp = block[2][-1]
-        if self._state == HEALTHY:
-            self._track_nominal()
-            self._over = self._over + 1 if abs(d) > self.level_threshold else 0
-            if self._over < self.confirm_blocks and not self._cusum_alarm(d):
-                self._waited = 0
-                return None
-            kind, onset = self._decide(force=self._waited >= self.max_wait_blocks)
-            self._waited += 1
-            if kind is None:
-                return None
-            return self._change(kind, onset, stamp, d)
-        self._fault_blocks += 1
-        if abs(d) < self.recovery_fraction * self.level_threshold:
-            return self._confirm(HEALTHY, stamp, d)
-        moved = False
-        if self._state == BIAS:             # the held level: mean of the bias's blocks
-            moved = bool(self._level_n) and (abs(d - self._level_sum / self._level_n)
-                                             > self.level_threshold)
-            self._level_sum, self._level_n = self._level_sum + d, self._level_n + 1
-        if self._fault_blocks < self.fit_blocks:
-            self._pending_run = 0
-            return None
-        self.slope = self._slope()
-        if self._state == DRIFT and abs(self.slope) < 0.5 * self.slope_threshold:
-            return self._confirm(BIAS, stamp, d)
-        if moved and abs(self.slope) > self.slope_threshold:
-            return self._confirm(DRIFT, stamp, d)
-        if moved and self._pending_run == 0:    # a further step: a bias at a new level
-            self._level_sum, self._level_n = d, 1
-        self._pending_run = 0
-        return None
-
-    def _cusum_alarm(self, d: float) -> bool:
-        """Update the two-sided CUSUM of the block distances; True above its threshold.
-
-        Page's CUSUM on ``z = d / block_std`` with reference value ``cusum_allowance``
-        (block standard deviations: the nominal tracking's lag under a slow wander); a
-        threshold of 0 turns it off (level test only).
-        """
-        if not self.cusum_threshold:
-            return False
-        z = d / self.block_std
-        up, down = self.cusum
-        self.cusum = [max(0.0, up + z - self.cusum_allowance),
-                      max(0.0, down - z - self.cusum_allowance)]
-        return max(self.cusum) > self.cusum_threshold
-
-    def _confirm(self, new: int, stamp: Any, d: float) -> Transition | None:
-        if new != self._pending:
-            self._pending, self._pending_run = new, 0
-        self._pending_run += 1
-        if self._pending_run < self.confirm_blocks:
-            return None
-        return self._change(new, stamp, stamp, d)
-
-    def _change(self, new: int, onset: Any, stamp: Any, d: float) -> Transition:
-        previous, self._state = self._state, new
-        self._pending, self._pending_run = new, 0
-        self._over = self._waited = self._fault_blocks = 0
-        self._level_sum, self._level_n = 0.0, 0
-        self.cusum = [0.0, 0.0]
-        return Transition(previous, new, onset, stamp, abs(d), self.slope)
-
-    def _track_nominal(self) -> None:
-        """Move the nominal towards the block ``guard_blocks`` back (beyond the paper)."""
-        g = self.guard_blocks
-        if not self.tracking_blocks or len(self._blocks) < g + 1:
-            return
-        recent = list(self._blocks)[-(g + 1):]
-        limit = self.freeze_fraction * self.level_threshold
-        if all(abs(b[0] - self.nominal) < limit for b in recent):
-            self.nominal += (recent[0][0] - self.nominal) / self.tracking_blocks
-
-    def _slope(self) -> float:
-        """Return the least-squares slope (rad/s per s) of the last ``fit_blocks`` means."""
-        blocks = list(self._blocks)[-self.fit_blocks:]
-        t = np.array([b[1].mean() for b in blocks])
-        y = np.array([b[0] for b in blocks])
-        t = t - t.mean()
-        return float(np.dot(t, y - y.mean()) / np.dot(t, t))
-
-    def _whitener(self, k: int) -> np.ndarray:
-        """Return ``W`` (k, k) with ``W C W^T = I``, C the covariance of k half-block means.
-
-        Noise model (docs/vsadc.md): a mean over a span is white gyro noise plus the
-        difference of the star-tracker angle noise at its two ends divided by the span. In
-        block variances, with ``rho`` the calibrated lag-1 correlation of block means
-        (clipped to [MIN_LAG1, 0]), ``s_a = -rho`` and ``s_g = 1 + 2 rho``; halving the
-        span doubles the gyro part and quadruples the star-tracker part:
-        ``C = 2 s_g I + 4 s_a (2 I - offdiag)``. A step or a ramp lives at low
-        frequencies, where the telescoping star-tracker noise is small: whitened, they
-        stand out earlier than under a white-noise model.
-        """
-        w = self._whiteners.get(k)
-        if w is None:
-            s_a = -self.lag1_correlation
-            s_g = 1.0 - 2.0 * s_a
-            off = np.eye(k, k=1) + np.eye(k, k=-1)
-            cov = 2.0 * s_g * np.eye(k) + 4.0 * s_a * (2.0 * np.eye(k) - off)
-            w = np.linalg.inv(np.linalg.cholesky(cov))
-            self._whiteners[k] = w
-        return w
-
-    def _decide(self, force: bool) -> tuple[int | None, Any]:
-        """Step or ramp: the better fit of the recent distances, and its onset stamp.
-
-        On the half-block means of the last ``decide_blocks`` blocks (half blocks: twice
-        the time resolution of the level test), per onset candidate (every quarter
-        block) the regressor of a step is the share of each half block's samples after
-        the onset, that of a ramp the half-block mean of ``max(0, t - onset)``. Data and
-        regressors are whitened (:meth:`_whitener`); the explained sum of squares
-        ``(x.d)^2 / x.x`` of the best onset of each model is compared in block variances.
-        """
-        blocks = list(self._blocks)[-self.decide_blocks:]
-        d = np.array([h for b in blocks for h in b[3]]) - self.nominal
-        times = np.stack([b[1] for b in blocks])            # (K, block)
-        half = self.block // 2
-        step = max(self.block // 4, 1)
-        candidates = times.ravel()[::step]
-
-        def regressors(t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-            rel = t[None, :, :] - candidates[:, None, None]
-            return (rel >= 0).mean(axis=2), np.maximum(rel, 0.0).mean(axis=2)
-
-        s1, r1 = regressors(times[:, :half])
-        s2, r2 = regressors(times[:, half:])
-        x_step = np.stack([s1, s2], axis=2).reshape(len(candidates), -1)
-        x_ramp = np.stack([r1, r2], axis=2).reshape(len(candidates), -1)
-        whiten = self._whitener(len(d))
-        d = whiten @ d
-
-        def best(x: np.ndarray) -> tuple[float, int]:
-            x = x @ whiten.T
-            xx = np.einsum('ck,ck->c', x, x)
-            xd = x @ d
-            with np.errstate(invalid='ignore', divide='ignore'):
-                explained = np.where(xx > 0, xd * xd / np.where(xx > 0, xx, 1.0), 0.0)
-            i = int(np.argmax(explained))
-            return float(explained[i]), i
-
-        step_fit, i_step = best(x_step)
-        ramp_fit, i_ramp = best(x_ramp)
-        margin = (ramp_fit - step_fit) / self.block_std ** 2
-        if margin > self.decide_chi2 or (force and margin > 0):
-            kind, i = DRIFT, i_ramp
-        elif margin < -self.decide_chi2 or force:
-            kind, i = BIAS, i_step
-        else:
-            return None, None
-        stamps = [s for b in blocks for s in b[2]]
-        return kind, stamps[i * step]
-
-
-class GyroDiagnosis:
+class GyroDiagnosis(GyroAxes):
     """Drift/bias diagnosis of the three gyro axes from gyro rates and star-tracker q.
 
-    ``update(time, gyro, q, ref=None, index=None)`` per row returns AnomalyEvents
-    (detector ``vsadc``, components ``gyro_x/y/z``). ``calibration`` maps axis -> the dict
-    of :func:`calibrate_gyro` (None: defaults). Bad input never reaches an axis: stamps
-    not after the last one, rows without a star-tracker rate (invalid or missing q, first
-    quaternion after a gap) and, per axis, a non-finite gyro value or one at or above
-    ``saturation_rad_s`` (counted as ``saturated``) leave that axis's label unchanged.
-    ``ref`` is accepted and ignored (the residual needs no guidance reference).
+    A gyro detector (:class:`~rwa_monitor.core.protocol.GyroDetector`): ``update(t, gyro,
+    q, ref=None, index=None)`` per row returns AnomalyEvents (detector ``vsadc``,
+    components ``gyro_x/y/z``). Bad input never reaches an axis: the row filter shared
+    with every gyro detector (:mod:`rwa_monitor.core.gyro_rows`) drops bad stamps and
+    shapes and holds the axes on rows without a star-tracker rate; per axis, a non-finite
+    gyro value (``bad_axis_<a>``) or one at or above ``saturation_rad_s``
+    (``saturated_<a>``) leaves that axis's label unchanged. ``ref`` is accepted and ignored
+    (the residual needs no guidance reference).
+
+    Parameters
+    ----------
+    calibration : mapping or None
+        Axis -> the dict of :func:`~rwa_monitor.core.gyro_calibration.calibrate_gyro`
+        (the ``gyro:`` block of calibration.yaml); None or a missing axis: defaults.
+    saturation_rad_s : float
+        A gyro rate at or above this (rad/s) is saturated: held and counted.
+    max_gap, norm_tolerance : float
+        Star-tracker rate: restart after a gap (s); quaternion norm tolerance.
+    axes : sequence of str
+        The gyro axes monitored, a non-empty subset of ``('x', 'y', 'z')``.
+    block, nominal_blocks, tracking_blocks, guard_blocks, fit_blocks, decide_blocks, \
+confirm_blocks, max_wait_blocks, decide_chi2, freeze_fraction, recovery_fraction, \
+cusum_threshold, cusum_allowance
+        Per-axis parameters of :class:`ResidualAxis`: the ``residual_*`` parameters of
+        core/schema.py ``VSADC`` (docs/parameters.md), without the prefix.
+
+    Examples
+    --------
+    >>> det = GyroDiagnosis(block=4, nominal_blocks=2)
+    >>> det.update(0.0, [0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0])
+    []
+    >>> det.update(0.0, [0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0])
+    []
+    >>> det.counters['held'], det.counters['non_increasing_time']
+    (1, 1)
     """
 
     def __init__(self, *, calibration: Mapping[str, Mapping[str, Any]] | None = None,
-                 saturation_rad_s: float = DEFAULT_SATURATION_RAD_S, max_gap: float = 1.0,
-                 norm_tolerance: float = 0.1, axes: Sequence[str] = AXES,
-                 **axis_parameters: Any) -> None:
-        bad = [a for a in axes if a not in AXES]
-        if bad or not axes:
-            raise ValueError(f'axes must be a non-empty subset of x, y, z; got {axes!r}')
-        self.axes = tuple(axes)
-        self._index = [AXES.index(a) for a in self.axes]
+                 saturation_rad_s: float = _D['saturation_rad_s'],
+                 max_gap: float = _D['max_gap'], norm_tolerance: float = _D['norm_tolerance'],
+                 axes: Sequence[str] = AXES, block: int = _D['residual_block'],
+                 nominal_blocks: int = _D['residual_nominal_blocks'],
+                 tracking_blocks: int = _D['residual_tracking_blocks'],
+                 guard_blocks: int = _D['residual_guard_blocks'],
+                 fit_blocks: int = _D['residual_fit_blocks'],
+                 decide_blocks: int = _D['residual_decide_blocks'],
+                 confirm_blocks: int = _D['residual_confirm_blocks'],
+                 max_wait_blocks: int = _D['residual_max_wait_blocks'],
+                 decide_chi2: float = _D['residual_decide_chi2'],
+                 freeze_fraction: float = _D['residual_freeze_fraction'],
+                 recovery_fraction: float = _D['residual_recovery_fraction'],
+                 cusum_threshold: float = _D['residual_cusum_threshold'],
+                 cusum_allowance: float = _D['residual_cusum_allowance']) -> None:
+        axis_parameters = dict(
+            block=block, nominal_blocks=nominal_blocks, tracking_blocks=tracking_blocks,
+            guard_blocks=guard_blocks, fit_blocks=fit_blocks, decide_blocks=decide_blocks,
+            confirm_blocks=confirm_blocks, max_wait_blocks=max_wait_blocks,
+            decide_chi2=decide_chi2, freeze_fraction=freeze_fraction,
+            recovery_fraction=recovery_fraction, cusum_threshold=cusum_threshold,
+            cusum_allowance=cusum_allowance)
+        rows = GyroRows(axes, max_gap=max_gap, norm_tolerance=norm_tolerance)
         self.saturation_rad_s = check_real('saturation_rad_s', saturation_rad_s, 0.0,
                                            low_open=True)
         calibration = calibration or {}
-        self.channels = [ResidualAxis(calibration.get(a), **axis_parameters)
-                         for a in self.axes]
-        self.star_tracker = StarTrackerRate(max_gap=max_gap, norm_tolerance=norm_tolerance)
+        channels = [ResidualAxis(calibration.get(a), **axis_parameters) for a in rows.axes]
+        super().__init__(rows, channels, {
+            'saturation_rad_s': self.saturation_rad_s, 'max_gap': max_gap,
+            'norm_tolerance': norm_tolerance, 'axes': rows.axes,
+            **{k: getattr(channels[0], k) for k in AXIS_DEFAULTS}})
         self.reset()
 
     def reset(self) -> None:
-        """Reset every axis, the star-tracker differencer and the counters."""
-        for ch in self.channels:
-            ch.reset()
-        self.star_tracker.reset()
-        self.rows = self.accepted = self.held = self.bad_gyro = self.out_of_order = 0
+        """Reset every axis, the row filter, the counters and the previous gyro sample."""
+        super().reset()
         self.saturated = {a: 0 for a in self.axes}
-        self.bad_axis = {a: 0 for a in self.axes}
         self.saturated_now = {a: False for a in self.axes}
-        self._last_time = -math.inf
         self._prev_gyro: tuple[float, float, float] | None = None
         self._prev_time = -math.inf
-        self._last_event: AnomalyEvent | None = None
-
-    @property
-    def states(self) -> dict[str, int]:
-        """Return axis -> current label."""
-        return {a: ch.state for a, ch in zip(self.axes, self.channels)}
-
-    @property
-    def params(self) -> dict[str, Any]:
-        """Return the axis parameters (the first axis's; all axes share them)."""
-        ch = self.channels[0]
-        return {k: getattr(ch, k) for k in AXIS_DEFAULTS}
-
-    @property
-    def last_event(self) -> AnomalyEvent | None:
-        """Return the last event returned by :meth:`update` (None before any)."""
-        return self._last_event
 
     @property
     def counters(self) -> dict[str, int]:
-        """Return the bad-input counters: rows seen, accepted, held and rejected by cause."""
-        st = self.star_tracker
-        out = {'rows': self.rows, 'accepted': self.accepted, 'held': self.held,
-               'bad_gyro': self.bad_gyro, 'out_of_order': self.out_of_order,
-               'invalid_quaternions': st.invalid, 'star_tracker_gaps': st.gaps}
+        """Return rows seen, accepted, held and rejected by cause, and saturated per axis."""
+        out = super().counters
         out.update({f'saturated_{a}': n for a, n in self.saturated.items()})
-        out.update({f'bad_axis_{a}': n for a, n in self.bad_axis.items()})
         return out
 
-    def update(self, time: float, gyro: Sequence[float], q: Sequence[float] | None,
+    def update(self, t: float, gyro: Sequence[float], q: Sequence[float] | None,
                ref: Sequence[float] | None = None,
                index: int | None = None) -> list[AnomalyEvent]:
-        """Take one row; return the events of every axis whose label changed."""
-        index = self.rows if index is None else index
-        self.rows += 1
-        if not math.isfinite(time) or time <= self._last_time:
-            self.out_of_order += 1
+        """Take one row; return the events of every axis whose label changed.
+
+        As :meth:`rwa_monitor.core.protocol.GyroDetector.update`; ``ref`` is ignored (the
+        gyro-minus-star-tracker residual needs no reference).
+        """
+        rows = self._rows
+        index = rows.rows if index is None else index
+        if not rows.accept(t, gyro):
             return []
-        if len(gyro) != 3:
-            self.bad_gyro += 1
-            return []
-        self._last_time = time
         g = tuple(float(v) for v in gyro)
-        st_prev = self.star_tracker.last_time
-        rate = None if q is None else self.star_tracker.update(time, q)
+        st_prev = rows.star_tracker.last_time
+        rate = rows.star_rate(t, q)
         prev, prev_time = self._prev_gyro, self._prev_time
-        self._prev_gyro, self._prev_time = g, time
+        self._prev_gyro, self._prev_time = g, t
         if rate is None:
-            self.held += 1
             return []
-        self.accepted += 1
         trapezoid = prev is not None and prev_time == st_prev
-        stamp = (time, index)
+        stamp = (t, index)
         events = []
-        for axis, i, ch in zip(self.axes, self._index, self.channels):
+        for axis, i, ch in zip(self.axes, rows.index, self.channels):
             now = g[i]
             before = prev[i] if trapezoid else now
             if not math.isfinite(now):
-                self.bad_axis[axis] += 1  # rejected on this axis only (issue 17)
+                rows.bad_axis[axis] += 1  # rejected on this axis only (issue 17)
                 continue
             if not math.isfinite(before):
                 continue
@@ -473,12 +149,20 @@ class GyroDiagnosis:
             if sat:
                 self.saturated[axis] += 1
                 continue
-            tr = ch.update(0.5 * (now + before) - rate[i], time, stamp)
+            tr = ch.update(0.5 * (now + before) - rate[i], t, stamp)
             if tr is not None:
                 events.append(make_event(axis, tr))
         if events:
             self._last_event = events[-1]
         return events
+
+
+def gyro_diagnosis_kwargs(values: Mapping[str, Any]) -> dict[str, Any]:
+    """Return GyroDiagnosis keywords from checked VSADC values (``residual_`` dropped)."""
+    shared = vsadc_kwargs(values)
+    return {'saturation_rad_s': values['saturation_rad_s'], 'max_gap': shared['max_gap'],
+            'norm_tolerance': shared['norm_tolerance'], 'axes': shared['axes'],
+            **{k: values[f'residual_{k}'] for k in AXIS_DEFAULTS}}
 
 
 def make_gyro_detector(values: Mapping[str, Any],
@@ -492,7 +176,4 @@ def make_gyro_detector(values: Mapping[str, Any],
     paper = VsadcDetector(**vsadc_kwargs(values))
     if values['feature'] == 'paper':
         return paper
-    return GyroDiagnosis(
-        calibration=calibration, saturation_rad_s=values['saturation_rad_s'],
-        max_gap=values['max_gap'], norm_tolerance=values['norm_tolerance'], axes=paper.axes,
-        **{k: values[f'residual_{k}'] for k in AXIS_DEFAULTS})
+    return GyroDiagnosis(calibration=calibration, **gyro_diagnosis_kwargs(values))

@@ -66,3 +66,9 @@ DISTANCE = 'distance_rad_s'
 DISTANCE_SIGMA = 'distance_sigma_rad_s'
 SIGMA_LIM1 = 'sigma_lim1_rad_s'
 SIGMA_LIM2 = 'sigma_lim2_rad_s'
+
+# Counters of bad input (every detector's ``counters``, node health): one name per reason.
+NON_FINITE = 'non_finite'                     # NaN, Inf or not a number: time or value
+NON_INCREASING_TIME = 'non_increasing_time'   # a stamp not after the last accepted one
+OUT_OF_RANGE = 'out_of_range'                 # a value beyond the detector's bound
+ILL_CONDITIONED = 'ill_conditioned'           # a test skipped: the data cannot decide it

@@ -83,6 +83,18 @@ def detect_batch(time, speed, friction, *, component: str = 'rw1',
     -------
     list of AnomalyEvent
         The events :meth:`LLRDetector.update` gives on the same rows.
+
+    Examples
+    --------
+    A dry-friction step of 4e-4 N m at 450 s on a wheel swinging between 50 and 350 rad/s:
+
+    >>> import numpy as np
+    >>> t = np.arange(0.0, 900.0, 0.1)
+    >>> speed = 200.0 + 150.0 * np.sin(t / 40.0)
+    >>> noise = np.random.default_rng(1).normal(0.0, 5e-5, t.size)
+    >>> friction = -(2e-4 + 4e-4 * (t >= 450.0)) - 5e-7 * speed + noise
+    >>> [(e.kind, round(e.time, 1)) for e in detect_batch(t, speed, friction, window=300)]
+    [('dry', 450.0)]
     """
     events, _ = detect_batch_with_counters(time, speed, friction, component=component,
                                            aux=aux, **params)

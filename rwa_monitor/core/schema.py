@@ -407,8 +407,8 @@ VSADC = Schema('vsadc_detector', (
           'deviations): the lag of the tracked nominal under a slow wander.', low=0.0),
     Param('window', 200, 'SW: samples of the nominal batch and of the evolving window '
           '(vsadc paper, Algorithm 1).', low=2, high=100_000, unit='samples'),
-    Param('sigma_window', 200, 'Distances in the sigma of line 22; auto = window (the '
-          'paper).', low=2, high=100_000, auto=True, unit='samples'),
+    Param('sigma_window', AUTO, 'Distances in the sigma of line 22; auto = window (the '
+          'paper).', low=2, high=100_000, auto=True, kind=int, unit='samples'),
     Param('distance_threshold', 1.5e-5, 'thr_dis: a distance between class centres above '
           'it is a fault.', low=0.0, low_open=True, unit='rad/s'),
     Param('reference_window', 1200, 'Healthy sigmas behind the sigma limits; auto = '

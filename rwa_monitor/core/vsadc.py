@@ -39,13 +39,13 @@ import math
 from typing import Any, Sequence
 
 from rwa_monitor.core import keys
-from rwa_monitor.core.attitude import StarTrackerRate
 from rwa_monitor.core.events import AnomalyEvent
+from rwa_monitor.core.gyro_rows import AXES, GyroAxes, GyroRows
 from rwa_monitor.core.params import AUTO, check_choice, check_int, check_real
 
 HEALTHY, DRIFT, BIAS = 0, 1, 2
 STATE_NAMES = keys.GYRO_STATES
-AXES = ('x', 'y', 'z')
+_NO_REFERENCE = (0.0, 0.0, 0.0)
 DETECTOR = 'vsadc'
 _RESUM_EVERY = 4096
 
@@ -342,16 +342,41 @@ class VsadcAxis:
         return Transition(previous, new, onset, stamp, d, sigma)
 
 
-class VsadcDetector:
+class VsadcDetector(GyroAxes):
     """VSADC on the three gyro axes from raw telemetry: gyro, star-tracker q, reference rate.
 
-    ``update(time, gyro, q, ref)`` per row returns the AnomalyEvents of label changes.
-    Bad input never reaches the axes: a stamp that is not after the last accepted one and
-    rows without a star-tracker rate (NaN, non-unit or missing quaternion, first sample
-    after a gap) are counted and the axes *hold* their labels, so a star tracker that
-    stops cannot turn into a drift. A non-finite gyro or reference value is rejected per
-    axis (``bad_axis_<a>``): the other axes still take the row; a row no axis can use
-    counts as ``bad_gyro``.
+    A gyro detector (:class:`~rwa_monitor.core.protocol.GyroDetector`): ``update(t, gyro,
+    q, ref)`` per row returns the AnomalyEvents of label changes. Bad input never reaches
+    the axes: the row filter shared with every gyro detector
+    (:mod:`rwa_monitor.core.gyro_rows`) drops and counts bad stamps and shapes and holds
+    the axes on rows without a star-tracker rate, so a star tracker that stops cannot turn
+    into a drift. A non-finite gyro or reference value is rejected per axis
+    (``bad_axis_<a>``): the other axes still take the row; a row no axis can use counts as
+    ``bad_gyro``.
+
+    Parameters
+    ----------
+    window, sigma_window, distance_threshold, reference_window, margin, exit_limit, \
+exit_margin, hold, nominal_tracking, freeze_fraction, adaptive, recovery_fraction
+        Per-axis parameters of :class:`VsadcAxis` (meanings and bounds: core/schema.py
+        ``VSADC``, docs/parameters.md); ``sigma_window`` and ``reference_window`` take
+        :data:`~rwa_monitor.core.params.AUTO` (= ``window``).
+    max_gap : float
+        Seconds between star-tracker samples above which the star-tracker rate restarts.
+    norm_tolerance : float
+        Quaternions whose norm is off 1 by more than this are rejected.
+    axes : sequence of str
+        The gyro axes monitored, a non-empty subset of ``('x', 'y', 'z')``.
+
+    Examples
+    --------
+    >>> det = VsadcDetector(window=20, reference_window=20)
+    >>> det.update(0.0, [0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0], [0.0, 0.0, 0.0])
+    []
+    >>> det.update(float('nan'), [0.0, 0.0, 0.0], None, None)
+    []
+    >>> det.counters['accepted'], det.counters['held'], det.counters['non_finite']
+    (0, 1, 1)
     """
 
     def __init__(self, *, window: int = 200, distance_threshold: float = 1.5e-5,
@@ -361,95 +386,50 @@ class VsadcDetector:
                  adaptive: bool = True, recovery_fraction: float = 0.75,
                  max_gap: float = 1.0, norm_tolerance: float = 0.1,
                  axes: Sequence[str] = AXES) -> None:
-        """Build one :class:`VsadcAxis` per axis (core/schema.py VSADC has the meanings)."""
         axis_parameters = dict(
             window=window, distance_threshold=distance_threshold, sigma_window=sigma_window,
             reference_window=reference_window, margin=margin, exit_limit=exit_limit,
             exit_margin=exit_margin, hold=hold, nominal_tracking=nominal_tracking,
             freeze_fraction=freeze_fraction, adaptive=adaptive,
             recovery_fraction=recovery_fraction)
-        bad = [a for a in axes if a not in AXES]
-        if bad or not axes:
-            raise ValueError(f'axes must be a non-empty subset of x, y, z; got {axes!r}')
-        self.axes = tuple(axes)
-        self._index = [AXES.index(a) for a in self.axes]
-        self._axis_kwargs = axis_parameters
-        self._params = {'max_gap': max_gap, 'norm_tolerance': norm_tolerance,
-                        'axes': self.axes, **axis_parameters}
-        self.channels = [VsadcAxis(**self._axis_kwargs) for _ in self.axes]
-        self.star_tracker = StarTrackerRate(max_gap=max_gap, norm_tolerance=norm_tolerance)
+        rows = GyroRows(axes, max_gap=max_gap, norm_tolerance=norm_tolerance)
+        super().__init__(rows, [VsadcAxis(**axis_parameters) for _ in rows.axes],
+                         {'max_gap': max_gap, 'norm_tolerance': norm_tolerance,
+                          'axes': rows.axes, **axis_parameters})
         self.reset()
 
-    def reset(self) -> None:
-        """Reset every axis, the star-tracker differencer and the counters."""
-        for ch in self.channels:
-            ch.reset()
-        self.star_tracker.reset()
-        self.rows = 0
-        self.accepted = 0
-        self.held = 0
-        self.bad_gyro = 0
-        self.out_of_order = 0
-        self.bad_axis = {a: 0 for a in self.axes}
-        self._last_time = -math.inf
-        self.last_event: AnomalyEvent | None = None
-
-    @property
-    def states(self) -> dict[str, int]:
-        """Return axis -> current label."""
-        return {a: ch.state for a, ch in zip(self.axes, self.channels)}
-
-    @property
-    def params(self) -> dict[str, Any]:
-        """The keyword parameters given (axis ones included; defaults are VsadcAxis's)."""
-        return dict(self._params)
-
-    @property
-    def counters(self) -> dict[str, int]:
-        """Rows seen, accepted, held and rejected by cause."""
-        st = self.star_tracker
-        return {'rows': self.rows, 'accepted': self.accepted, 'held': self.held,
-                'bad_gyro': self.bad_gyro, 'out_of_order': self.out_of_order,
-                'invalid_quaternions': st.invalid, 'star_tracker_gaps': st.gaps,
-                **{f'bad_axis_{a}': n for a, n in self.bad_axis.items()}}
-
-    def update(self, time: float, gyro: Sequence[float], q: Sequence[float] | None,
-               ref: Sequence[float], index: int | None = None) -> list[AnomalyEvent]:
+    def update(self, t: float, gyro: Sequence[float], q: Sequence[float] | None,
+               ref: Sequence[float] | None = None,
+               index: int | None = None) -> list[AnomalyEvent]:
         """Take one row; return the events of every axis whose label changed.
 
-        ``index`` is the row number reported in events (default: rows seen so far).
+        As :meth:`rwa_monitor.core.protocol.GyroDetector.update`; ``ref`` None is a zero
+        reference rate (the ``reference_rate`` default).
         """
-        index = self.rows if index is None else index
-        self.rows += 1
-        if not math.isfinite(time) or time <= self._last_time:
-            self.out_of_order += 1
+        rows = self._rows
+        index = rows.rows if index is None else index
+        if not rows.accept(t, gyro, ref):
             return []
-        if len(gyro) != 3 or len(ref) != 3:
-            self.bad_gyro += 1
-            return []
-        g, r = gyro, ref
+        g, r = gyro, _NO_REFERENCE if ref is None else ref
         isfinite = math.isfinite
-        usable = [isfinite(g[i]) and isfinite(r[i]) for i in self._index]
+        usable = [isfinite(g[i]) and isfinite(r[i]) for i in rows.index]
         if not any(usable):
-            self.bad_gyro += 1
+            rows.bad_gyro += 1
             return []
-        self._last_time = time
-        rate = None if q is None else self.star_tracker.update(time, q)
+        rate = rows.star_rate(t, q)
         if rate is None:
-            self.held += 1
             return []
-        self.accepted += 1
-        stamp = (time, index)
+        stamp = (t, index)
         events = []
-        for axis, i, ch, ok in zip(self.axes, self._index, self.channels, usable):
+        for axis, i, ch, ok in zip(self.axes, rows.index, self.channels, usable):
             if not ok:
-                self.bad_axis[axis] += 1
+                rows.bad_axis[axis] += 1
                 continue
             tr = ch.update(r[i] - rate[i], r[i] - g[i], stamp)
             if tr is not None:
                 events.append(make_event(axis, tr))
         if events:
-            self.last_event = events[-1]
+            self._last_event = events[-1]
         return events
 
 

@@ -101,7 +101,7 @@ class FssDiagnoserNode(Node):
         self.events: collections.deque[AnomalyEvent] = collections.deque(maxlen=MAX_KEPT)
         self.input_counters = {'messages': 0, 'length_mismatch': 0, 'empty_name': 0,
                                'duplicate_name': 0, 'unknown_wheel': 0, 'too_many_wheels': 0,
-                               'out_of_order': 0, 'diagnosis_failed': 0,
+                               'non_increasing_time': 0, 'diagnosis_failed': 0,
                                'wheel_failures': 0, 'wheels_freed': 0}
         self._logged: set[tuple[str, str]] = set()
         self._allowed = common.wheel_names(self.params['wheels'])
@@ -184,10 +184,10 @@ class FssDiagnoserNode(Node):
     def _append(self, wheel_id: str, wheel: _Wheel, seconds: float, speed: float,
                 friction: float) -> None:
         """Add one sample to a wheel's window; submit a diagnosis when one is due."""
-        before = wheel.window.out_of_order
+        before = wheel.window.dropped
         due = wheel.window.update(seconds, speed, friction)
-        if wheel.window.out_of_order != before:
-            self._count('out_of_order', wheel_id, f'{wheel_id}: dropped a sample whose '
+        if wheel.window.dropped != before:
+            self._count('non_increasing_time', wheel_id, f'{wheel_id}: dropped a sample whose '
                         f'stamp is not after the last one (t={seconds!r})')
             return
         wheel.samples += 1

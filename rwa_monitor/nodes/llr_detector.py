@@ -333,7 +333,7 @@ class LLRDetectorNode(Node):
         values['detector_failures'] = wheel.failures
         rejected = wheel.rejected()
         fault = wheel.sensor.update(wheel.samples, rejected.get('out_of_range', 0)
-                                    + rejected.get('nonfinite', 0))
+                                    + rejected.get('non_finite', 0))
         if fault is not None:
             level, message = ERROR, f'{fault}; {message}'
             values['sensor_fault'] = True

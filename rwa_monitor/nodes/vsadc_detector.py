@@ -335,7 +335,7 @@ class VsadcDetectorNode(Node):
         gyro, star = self._pairer.waiting
         values.update(waiting_gyro=gyro, waiting_star_tracker=star)
         values.update(self.calibration.values())
-        message = f'{self.samples} gyro samples, {self.detector.held} held'
+        message = f'{self.samples} gyro samples, {self.detector.counters["held"]} held'
         if self._failure is not None and self.diagnostics.now() - self._failure[0] < \
                 ERROR_HOLD_S:
             return ERROR, f'detector failed ({self._failure[1]}), restarted; {message}', values

@@ -43,7 +43,32 @@ def detect(tele: Telemetry, config: dict[str, Any], where: Any = 'parameters'
            ) -> Detection:
     """Run every applicable pipeline; return (events sorted by time, summary).
 
-    ``config`` holds the node blocks of a parameters file; ``where`` names it in errors.
+    Parameters
+    ----------
+    tele : Telemetry
+        The record; each pipeline whose input columns it has runs on it.
+    config : dict
+        The node blocks of a parameters file (``{}``: every default).
+    where : str or path
+        The parameters file's name, used in error messages.
+
+    Returns
+    -------
+    Detection
+        ``events`` (AnomalyEvents sorted by change time) and ``summary`` (JSON-ready
+        facts per pipeline: events, components, counters, runtime).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from rwa_monitor.telemetry import Telemetry, Wheel
+    >>> t = np.arange(3000) * 0.1
+    >>> speed = 200.0 + 150.0 * np.sin(t / 20.0)
+    >>> noise = np.random.default_rng(0).normal(0.0, 5e-5, t.size)
+    >>> friction = -(2e-4 + 4e-4 * (t >= 150.0)) - 5e-7 * speed + noise
+    >>> events, summary = detect(Telemetry(t, {'rw1': Wheel(speed, friction)}), {})
+    >>> [(e.component, e.kind, round(e.time, 1)) for e in events], list(summary['pipelines'])
+    ([('rw1', 'dry', 150.0)], ['llr'])
     """
     events: list[AnomalyEvent] = []
     summary: dict[str, Any] = {'samples': len(tele), 'source': tele.source, 'pipelines': {}}

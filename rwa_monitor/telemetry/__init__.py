@@ -21,7 +21,31 @@ __all__ = ['STREAMS', 'Telemetry', 'Wheel', 'read_telemetry', 'write_telemetry']
 
 def read_telemetry(path: str | os.PathLike,
                    topics: str | Mapping[str, str] | None = None) -> Telemetry:
-    """Read a telemetry file or recording; ``topics``: stream -> topic of a recording."""
+    """Read a telemetry file or recording (the format from the path, module doc).
+
+    Parameters
+    ----------
+    path : str or path
+        A CSV file, a rosbag2 folder, or a bare ``.mcap`` or ``.db3`` file.
+    topics : str or mapping, optional
+        Stream -> topic of a recording (``wheels=/a,gyro=/b``); None: the default topics.
+
+    Returns
+    -------
+    Telemetry
+        The record; a TelemetrySchemaError names the file and what is wrong with it.
+
+    Examples
+    --------
+    >>> import pathlib, tempfile
+    >>> import numpy as np
+    >>> path = pathlib.Path(tempfile.mkdtemp()) / 'record.csv'
+    >>> write_telemetry(path, Telemetry(np.arange(3) * 0.25,
+    ...                                 {'rw1': Wheel(np.array([1.0, 2.0, 3.0]))}))
+    >>> tele = read_telemetry(path)
+    >>> len(tele), tele.wheels['rw1'].speed.tolist()
+    (3, [1.0, 2.0, 3.0])
+    """
     from rwa_monitor.telemetry import rosbag_io
     if rosbag_io.is_recording(path):
         return rosbag_io.read(path, topics)
@@ -34,7 +58,29 @@ def read_telemetry(path: str | os.PathLike,
 
 
 def write_telemetry(path: str | os.PathLike, telemetry: Telemetry) -> None:
-    """Write a telemetry file or recording, the format chosen by the path (module doc)."""
+    """Write a telemetry file or recording, the format chosen by the path (module doc).
+
+    Parameters
+    ----------
+    path : str or path
+        ``.mcap`` or ``.db3``: a bare recording file; no suffix (or an existing recording
+        folder): a rosbag2 folder; anything else: CSV.
+    telemetry : Telemetry
+        The record to write (atomically: a reader never sees half a file).
+
+    Returns
+    -------
+    None
+
+    Examples
+    --------
+    >>> import pathlib, tempfile
+    >>> import numpy as np
+    >>> path = pathlib.Path(tempfile.mkdtemp()) / 'record.csv'
+    >>> write_telemetry(path, Telemetry(np.arange(2) * 0.5, {'rw1': Wheel(np.ones(2))}))
+    >>> path.read_text().splitlines()[0]
+    'time,rw1_speed'
+    """
     from rwa_monitor.telemetry import rosbag_io
     target = pathlib.Path(path)
     if rosbag_io.is_recording(target) or not target.suffix:

@@ -20,6 +20,27 @@ def load_model(path: str | os.PathLike | None = None) -> WindowClassifier:
     """Return the classifier at ``path`` or the shipped default model.
 
     FileNotFoundError names a missing file; ValueError a file that is not a model.
+
+    Parameters
+    ----------
+    path : str or path, optional
+        A model written by ``rwa-monitor fss train``; None: the shipped model.
+
+    Returns
+    -------
+    WindowClassifier
+        The classifier of the window diagnoser (core/fss/classify.py).
+
+    Examples
+    --------
+    >>> model = load_model()
+    >>> type(model).__name__
+    'WindowClassifier'
+    >>> load_model('no_such_model.json')
+    Traceback (most recent call last):
+    ...
+    FileNotFoundError: FSS model not found: no_such_model.json (train one with \
+`rwa-monitor fss train DATASET -o MODEL`)
     """
     path = DEFAULT_MODEL if path is None else pathlib.Path(path)
     if not path.is_file():

@@ -39,7 +39,37 @@ class Wheel:
 
 @dataclass
 class Telemetry:
-    """A telemetry record held as numpy arrays of equal length ``n``."""
+    """A telemetry record held as numpy arrays of equal length ``n``.
+
+    Parameters
+    ----------
+    time : ndarray, shape (n,)
+        Stamps (s), strictly increasing.
+    wheels : dict of str to Wheel
+        Wheel id -> its speed (rad/s) and friction (N m) channels.
+    gyro : ndarray, shape (n, 3), optional
+        Gyro rates (rad/s, body frame).
+    attitude : ndarray, shape (n, 4), optional
+        Star-tracker attitude quaternions (x, y, z, w).
+    reference_rate : ndarray, shape (n, 3), optional
+        Guidance reference body rate (rad/s).
+    aux : dict of str to ndarray
+        Auxiliary channels (any other numeric column).
+    truth : dict of str to ndarray
+        Ground truth of a simulation (``truth_*`` columns), ignored by the detectors.
+    source : str, optional
+        Where the record was read from.
+    present : dict of str to ndarray of bool
+        Per stream of a multi-rate recording, the rows where it has a sample.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> tele = Telemetry(time=np.arange(4) * 0.25,
+    ...                  wheels={'rw1': Wheel(np.full(4, 100.0), np.full(4, -2e-4))})
+    >>> len(tele), list(tele.columns())
+    (4, ['time', 'rw1_speed', 'rw1_friction'])
+    """
 
     time: np.ndarray
     wheels: dict[str, Wheel] = field(default_factory=dict)

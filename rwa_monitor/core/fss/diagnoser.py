@@ -12,12 +12,28 @@ from __future__ import annotations
 
 from typing import Any, NamedTuple
 
+from rwa_monitor.core import keys
 from rwa_monitor.core.fss.classify import WindowClassifier
 from rwa_monitor.core.fss.pipeline import diagnose, FssConfig, SlidingWindow
 
 
 class WindowDiagnosis(NamedTuple):
-    """One diagnosis: the window's first and last time (s) and the per-wheel JSON object."""
+    """One diagnosis: the window's first and last time (s) and the per-wheel JSON object.
+
+    Parameters
+    ----------
+    start_s, end_s : float
+        Time (s) of the window's first and last sample.
+    result : dict
+        The window diagnosis of :func:`~rwa_monitor.core.fss.pipeline.diagnose`
+        (``anomalies``, ``estimates``, ``changepoints``, ``timings_s``).
+
+    Examples
+    --------
+    >>> found = WindowDiagnosis(0.0, 29.5, {'anomalies': {'dry': False}})
+    >>> found.end_s - found.start_s, found.result['anomalies']['dry']
+    (29.5, False)
+    """
 
     start_s: float
     end_s: float
@@ -27,9 +43,36 @@ class WindowDiagnosis(NamedTuple):
 class FssDiagnoser:
     """Diagnose one wheel's sliding window: ``update(t, speed, friction)`` per sample.
 
-    ``update`` returns the :class:`WindowDiagnosis` when one was due at this sample, else
-    None. Parameters as core/schema.py FSS (``window_length``, ``window_period``,
-    ``wglr_window`` ...; SI telemetry in, rad/s and N m).
+    A window diagnoser (:class:`~rwa_monitor.core.protocol.WindowDiagnoser`): ``update``
+    returns the :class:`WindowDiagnosis` when one was due at this sample, else None. SI
+    telemetry in, rad/s and N m.
+
+    Parameters
+    ----------
+    classifier : WindowClassifier
+        The trained classifier (``rwa_monitor.load_fss_model()``: the shipped one).
+    window_length : int
+        Samples per diagnosed window.
+    window_period : int
+        Samples between two diagnoses, once the window is full.
+    wglr_window, w_bias, viscous_prior, p_false, dk_error, beam, torque_scale_nm, \
+speed_scale_rad_s
+        The stages' parameters (core/schema.py ``FSS``, docs/parameters.md).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from rwa_monitor import load_fss_model
+    >>> diagnoser = FssDiagnoser(load_fss_model(), window_length=300, window_period=100)
+    >>> rng = np.random.default_rng(0)
+    >>> speed = 200.0 + np.arange(400.0)
+    >>> friction = -2e-4 - 5e-7 * speed + rng.normal(0.0, 5e-5, 400)
+    >>> found = [d for k in range(400)
+    ...          if (d := diagnoser.update(0.1 * k, speed[k], friction[k]))]
+    >>> len(found), diagnoser.counters['diagnoses'], diagnoser.last_event == found[-1]
+    (2, 2, True)
+    >>> sorted(found[-1].result['anomalies'])
+    ['dry', 'fss1', 'fss2', 'viscous']
     """
 
     def __init__(self, classifier: WindowClassifier, *, window_length: int = 80_000,
@@ -56,10 +99,15 @@ class FssDiagnoser:
 
     @property
     def counters(self) -> dict[str, int]:
-        """Samples dropped (out of order), kept but non-finite, time gaps, diagnoses run."""
+        """Return the samples dropped or kept by reason, time gaps and diagnoses run.
+
+        ``non_increasing_time``: stamps not after the last (dropped); ``non_finite``: a
+        non-finite stamp (dropped) or value (kept: the stages skip it); ``gaps``: steps
+        longer than three times the first one.
+        """
         w = self.window
-        return {'out_of_order': w.out_of_order, 'non_finite': w.non_finite, 'gaps': w.gaps,
-                'diagnoses': self._diagnoses}
+        return {keys.NON_INCREASING_TIME: w.non_increasing_time, keys.NON_FINITE: w.non_finite,
+                'gaps': w.gaps, 'diagnoses': self._diagnoses}
 
     @property
     def last_event(self) -> WindowDiagnosis | None:

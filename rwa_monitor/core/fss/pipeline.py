@@ -159,13 +159,38 @@ def diagnose(speed_rad_s: np.ndarray, friction_nm: np.ndarray, time_s: np.ndarra
              classifier: WindowClassifier, config: FssConfig = FssConfig()) -> dict:
     """Return one wheel's window diagnosis (DESIGN.md "Window diagnosis"), SI units.
 
-    ``anomalies``: one boolean per anomaly; ``estimates``: base dry (N m), viscous
-    (N m s/rad) and its standard error, noise std (N m), levels per FSS (N m);
-    ``changepoints``: time, index, FSS and dry jump (N m) of each accepted changepoint.
-    A window most of whose samples are not tested (non-finite, or left out by a
-    calibration) is ``status: unknown`` with every flag False, ``unknown_reason`` and
-    ``coverage`` (core/coverage.py): never a nominal answer; with fewer tested samples
-    than :func:`samples_needed` the stages do not run (estimates None).
+    Parameters
+    ----------
+    speed_rad_s, friction_nm, time_s : ndarray, shape (n,)
+        The window's speed (rad/s), friction (N m) and stamps (s); non-finite samples
+        are skipped by the stages.
+    classifier : WindowClassifier
+        The trained classifier (``rwa_monitor.load_fss_model()``: the shipped one).
+    config : FssConfig
+        The stages' parameters (core/schema.py ``FSS``).
+
+    Returns
+    -------
+    dict
+        ``anomalies``: one boolean per anomaly; ``estimates``: base dry (N m), viscous
+        (N m s/rad) and its standard error, noise std (N m), levels per FSS (N m);
+        ``changepoints``: time, index, FSS and dry jump (N m) of each accepted
+        changepoint; ``timings_s``: seconds per stage. A window most of whose samples
+        are not tested (non-finite, or left out by a calibration) is ``status: unknown``
+        with every flag False, ``unknown_reason`` and ``coverage`` (core/coverage.py):
+        never a nominal answer; with fewer tested samples than :func:`samples_needed` the
+        stages do not run (estimates None).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from rwa_monitor import load_fss_model
+    >>> t = np.arange(600) * 0.1
+    >>> speed = 200.0 + 150.0 * np.sin(t / 20.0)
+    >>> friction = -2e-4 - 5e-7 * speed + np.random.default_rng(0).normal(0, 5e-5, 600)
+    >>> result = diagnose(speed, friction, t, load_fss_model())
+    >>> result['anomalies']
+    {'dry': False, 'viscous': False, 'fss1': False, 'fss2': False}
     """
     speed, friction = normalise(speed_rad_s, friction_nm, config)
     time_s = np.asarray(time_s, dtype=float)
@@ -239,10 +264,12 @@ class SlidingWindow:
     """The last ``length`` samples of one wheel; a diagnosis is due every ``period``.
 
     ``update(t, speed, friction)`` per sample; a stamp not after the previous one is
-    dropped and counted (``out_of_order``); non-finite values are kept (the stages skip
-    them) and counted (``non_finite``); a step between stamps more than ``gap_factor``
-    times the first step seen is counted (``gaps``) and otherwise ignored: the stages
-    count in samples, so a gap only shortens the FSS residence times it spans.
+    dropped and counted (``non_increasing_time``), so is a non-finite stamp
+    (``non_finite``); non-finite values are kept (the stages skip them) and counted
+    (``non_finite``); ``dropped`` is the number of samples dropped; a step between stamps
+    more than ``gap_factor`` times the first step seen is counted (``gaps``) and otherwise
+    ignored: the stages count in samples, so a gap only shortens the FSS residence times
+    it spans.
     Memory: three arrays of ``length``.
     """
 
@@ -262,8 +289,9 @@ class SlidingWindow:
         self._since = 0
         self._last_t = -np.inf
         self._step = None
-        self.out_of_order = 0
+        self.non_increasing_time = 0
         self.non_finite = 0
+        self.dropped = 0
         self.gaps = 0
 
     @property
@@ -274,7 +302,11 @@ class SlidingWindow:
     def update(self, t: float, speed: float, friction: float) -> bool:
         """Add one sample; return True when a diagnosis is due."""
         if not np.isfinite(t) or t <= self._last_t:
-            self.out_of_order += 1
+            if np.isfinite(t):
+                self.non_increasing_time += 1
+            else:
+                self.non_finite += 1
+            self.dropped += 1
             return False
         if not (np.isfinite(speed) and np.isfinite(friction)):
             self.non_finite += 1

@@ -163,6 +163,40 @@ def identify(data: IdentData, alpha: float = 1e-3, alpha_held: float = 1e-2,
     selected, jumps are searched again with those effects in the background, and if the
     segments change the selection is run again on the new baseline (so that neither a
     jump passes for an effect nor an effect for a string of jumps).
+
+    Parameters
+    ----------
+    data : IdentData
+        One wheel's valid samples and their noise standard deviation (N m).
+    alpha : float
+        Family-wise level of the effect and jump tests, in (0, 0.5].
+    alpha_held : float
+        Level of the held-out confirmation of an added effect, in (0, 0.5].
+    max_effects : int
+        Most effects added to model (1).
+    jumps : bool
+        Segment friction jumps before fitting.
+    jump_window : int or None
+        Samples of the jump search's window; None: chosen from the data.
+
+    Returns
+    -------
+    Selection
+        The added ``effects`` (each with its test), the baseline and final fits, the
+        segments and the reason the selection stopped.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from rwa_monitor.core.identify.data import IdentData
+    >>> speed = 300.0 * np.sin(np.arange(2000) * 0.005)
+    >>> noise = np.random.default_rng(0).normal(0.0, 1e-5, 2000)
+    >>> friction = -2e-4 * np.sign(speed) - 5e-7 * speed + noise
+    >>> data = IdentData(wheel='rw1', time=np.arange(2000) * 0.1, speed=speed,
+    ...                  friction=friction, noise_std=np.full(2000, 1e-5))
+    >>> selection = identify(data, jumps=False)
+    >>> selection.effects, selection.stop_reason
+    ([], 'the residual passes the structure and whiteness tests')
     """
     alpha = check_real('alpha', alpha, 0.0, 0.5, low_open=True)
     alpha_held = check_real('alpha_held', alpha_held, 0.0, 0.5, low_open=True)
