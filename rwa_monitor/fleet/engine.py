@@ -1,0 +1,269 @@
+"""The fleet engine on Dask distributed: every spacecraft's passes through its detectors.
+
+Graph (docs/usage.md "Fleet"): one ``scan`` task per candidate pass (first stamp and
+columns), then per spacecraft its passes in time order by first stamp, one ``read`` task
+per pass and, per component (each wheel with a friction column, the gyro), a chain of
+``step`` tasks (:mod:`rwa_monitor.fleet.components`) that carries the detector state as
+data from pass to pass. Chains of different components and spacecraft run in parallel;
+a chain runs in pass order. Every task is pure: a worker that dies mid-run has its tasks
+run again elsewhere by the scheduler, with the same result. The client keeps only the
+last task of each chain, so the scheduler frees each pass once its components have
+taken it.
+
+The cluster is a ``LocalCluster`` of ``workers`` processes started here, or the one at
+``scheduler`` (``dask scheduler`` / ``dask worker``).
+"""
+
+from __future__ import annotations
+
+import contextlib
+from dataclasses import dataclass, field
+import logging
+import math
+import pathlib
+import sys
+import time as _time
+from typing import Any, Iterator, Mapping
+
+from rwa_monitor.core.schema import LLR, VSADC
+from rwa_monitor.exceptions import ConfigError
+from rwa_monitor.fleet import archive as arc, components as comp, state
+from rwa_monitor.telemetry.parameters_file import block_values, read_parameters_file
+
+CALIBRATION_KEY = 'calibration_file'
+
+
+@dataclass
+class FleetResult:
+    """A fleet run: events (dicts with ``spacecraft``), summary, trend rows, timings."""
+
+    events: list[dict[str, Any]]
+    summary: dict[str, Any]
+    trend: list[dict[str, Any]]
+    timings: dict[str, Any]
+    anomaly: bool = False
+    incomplete: bool = False
+    states: dict[str, Any] = field(default_factory=dict)
+
+
+@contextlib.contextmanager
+def dask_client(workers: int = 2, scheduler: str | None = None) -> Iterator[Any]:
+    """Yield a distributed Client: to ``scheduler``, or to a local cluster of processes."""
+    from distributed import Client, LocalCluster
+    if scheduler:
+        try:
+            client = Client(scheduler, timeout=30)
+        except (OSError, TimeoutError) as err:
+            raise ConfigError(f'cannot reach the Dask scheduler {scheduler}: {err}') from None
+        with client:
+            yield client
+        return
+    if workers < 1:
+        raise ConfigError(f'--workers must be at least 1, got {workers}')
+    with LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                      dashboard_address=None, silence_logs=logging.ERROR) as cluster, \
+            Client(cluster) as client:
+        yield client
+
+
+def node_blocks(config_path: pathlib.Path | None) -> dict[str, dict[str, Any]]:
+    """Return the checked llr and vsadc parameter blocks of a parameters file."""
+    config = read_parameters_file(config_path)
+    where = config_path or 'installed parameters'
+    blocks = {'llr': dict(block_values(config, LLR, where)),
+              'vsadc': dict(block_values(config, VSADC, where))}
+    LLR.validate(blocks['llr'])
+    VSADC.validate(blocks['vsadc'])
+    if blocks['llr'].get('friction_model_file'):
+        raise ConfigError('friction_model_file: a refined friction model is not supported '
+                          'by rwa-monitor fleet yet (use detect per file)')
+    return blocks
+
+
+def run_archive(archive: str | pathlib.Path, *, client: Any = None, workers: int = 2,
+                scheduler: str | None = None, config: pathlib.Path | None = None,
+                state_dir: pathlib.Path | None = None, progress: bool = False
+                ) -> FleetResult:
+    """Run the fleet over ``archive`` and return the result (saves the state if given).
+
+    ``client``: an existing distributed Client (else one is made from ``workers`` or
+    ``scheduler``). Raise ConfigError for bad parameters or a refused state.
+    """
+    blocks = node_blocks(config)
+    fleet = arc.list_archive(archive)
+    start_wall, start_cpu = _time.perf_counter(), _time.process_time()
+    with contextlib.ExitStack() as stack:
+        if client is None:
+            client = stack.enter_context(dask_client(workers, scheduler))
+        plan = _plan(client, fleet, blocks, state_dir)
+        finals = _submit(client, plan)
+        if progress and sys.stderr.isatty():
+            from distributed import progress as bar
+            bar([f for f in finals.values() if not isinstance(f, dict)])
+        chains = dict(zip(finals, client.gather(list(finals.values()))))
+        engine = {'name': 'dask.distributed', 'scheduler': client.scheduler.address,
+                  'workers': len(client.scheduler_info()['workers'])}
+    wall = _time.perf_counter() - start_wall
+    result = _assemble(plan, chains, engine)
+    result.timings = _timings(chains, wall, _time.process_time() - start_cpu)
+    result.summary['engine'].update(result.timings)
+    if state_dir is not None:
+        _save_states(pathlib.Path(state_dir), plan, chains)
+    return result
+
+
+def _plan(client: Any, fleet: list[arc.Spacecraft], blocks: Mapping[str, Any],
+          state_dir: pathlib.Path | None) -> list[dict[str, Any]]:
+    """Return per spacecraft: specs, passes to run in time order, prior chains, issues."""
+    paths = [p for craft in fleet for p in craft.candidates]
+    scans = dict(zip(paths, client.gather(client.map(arc.scan_pass, paths, pure=False))))
+    plan = []
+    for craft in fleet:
+        entry: dict[str, Any] = {'craft': craft, 'unreadable': {}, 'passes': [],
+                                 'specs': [], 'prior': {}, 'done': [], 'error': None}
+        plan.append(entry)
+        readable = []
+        for path in craft.candidates:
+            found = scans[path]
+            if isinstance(found, str):
+                entry['unreadable'][pathlib.Path(path).name] = found
+            else:
+                readable.append(found)
+        readable.sort(key=lambda p: (p.first, p.name))
+        cal = _calibration(craft)
+        entry['print'] = state.fingerprint({'llr': blocks['llr'], 'vsadc': blocks['vsadc'],
+                                            'calibration': cal[1]})
+        if state_dir is not None:
+            saved = state.load(pathlib.Path(state_dir), craft.id, entry['print'])
+            if saved is not None:
+                entry['done'], entry['prior'] = saved
+        done = {(p['name'], p['size']) for p in entry['done']}
+        entry['skipped'] = [p.name for p in readable if (p.name, p.size) in done]
+        readable = [p for p in readable if (p.name, p.size) not in done]
+        names = _components(entry, readable)
+        try:
+            entry['specs'] = _specs(craft, names, blocks, cal[0])
+        except ConfigError as err:
+            entry['error'] = str(err)
+            continue
+        entry['passes'] = readable
+    return plan
+
+
+def _calibration(craft: arc.Spacecraft) -> tuple[str, str | None]:
+    """Return the spacecraft's calibration path ('' if none) and its text for the print."""
+    if craft.calibration is None:
+        return '', None
+    try:
+        return craft.calibration, pathlib.Path(craft.calibration).read_text()
+    except OSError as err:
+        raise ConfigError(f'{craft.calibration}: cannot read: {err}') from None
+
+
+def _components(entry: dict[str, Any], readable: list[arc.PassFile]) -> list[str]:
+    """Return the components of a spacecraft; passes with others are set aside."""
+    names = list(entry['prior']) or (arc.components(readable[0].columns) if readable
+                                     else [])
+    for p in list(readable):
+        found = arc.components(p.columns)
+        if found != names:
+            readable.remove(p)
+            entry['unreadable'][p.name] = (f'components {", ".join(found) or "none"} differ '
+                                           f'from the spacecraft\'s {", ".join(names)}')
+    return names
+
+
+def _specs(craft: arc.Spacecraft, names: list[str], blocks: Mapping[str, Any],
+           calibration: str) -> list[comp.ComponentSpec]:
+    """Return the component specs (ConfigError if a wheel lacks a calibration)."""
+    specs = []
+    for name in names:
+        params = dict(blocks['vsadc' if name == arc.GYRO_COMPONENT else 'llr'])
+        params[CALIBRATION_KEY] = calibration
+        specs.append(comp.ComponentSpec(craft.id, name, params))
+    if calibration:
+        from rwa_monitor.core.calibrate import check_wheels
+        from rwa_monitor.telemetry.calibration_file import load
+        check_wheels(load(calibration), [n for n in names if n != arc.GYRO_COMPONENT],
+                     calibration)
+    return specs
+
+
+def _submit(client: Any, plan: list[dict[str, Any]]) -> dict[tuple[str, str], Any]:
+    """Submit every chain; return (spacecraft, component) -> future of its last step."""
+    finals = {}
+    for entry in plan:
+        reads = [client.submit(comp.read, p.path, key=f'read-{entry["craft"].id}-{p.name}'
+                               f'-{p.size}') for p in entry['passes']]
+        for n, spec in enumerate(entry['specs']):
+            chain = comp.new_chain(entry['prior'].get(spec.component))
+            for p, read in zip(entry['passes'], reads):
+                chain = client.submit(comp.step, spec, chain, read, p.name, n == 0)
+            finals[(spec.spacecraft, spec.component)] = chain  # a dict if no pass to run
+        del reads
+    return finals
+
+
+def _assemble(plan: list[dict[str, Any]], chains: Mapping[tuple[str, str], Any],
+              engine: dict[str, Any]) -> FleetResult:
+    """Return events, summary and trend rows from the finished chains."""
+    from rwa_monitor.fleet.summary import spacecraft_summary
+    events: list[dict[str, Any]] = []
+    trend: list[dict[str, Any]] = []
+    crafts = {}
+    anomaly = incomplete = False
+    for entry in plan:
+        craft = entry['craft']
+        mine = {spec.component: chains[(craft.id, spec.component)] for spec in entry['specs']}
+        found = [e for c in mine.values() for e in c['events']]
+        found.sort(key=lambda e: (e.time, e.component, e.revision))
+        anomaly |= any(e.kind != 'healthy' for e in found)
+        events.extend({'spacecraft': craft.id, **e.to_json()} for e in found)
+        trend.extend(row for c in mine.values() for row in c['trend'])
+        crafts[craft.id] = spacecraft_summary(entry, mine, found)
+        incomplete |= bool(crafts[craft.id]['not_examined'])
+    summary = {'spacecraft': crafts, 'events': len(events), 'engine': engine}
+    return FleetResult(events, summary, trend, {}, anomaly, incomplete)
+
+
+def _timings(chains: Mapping[Any, Any], wall: float, client_cpu: float) -> dict[str, Any]:
+    """Return wall, client CPU, per-worker CPU and peak RSS, samples and rate."""
+    workers: dict[str, dict[str, float]] = {}
+    samples = 0
+    for chain in chains.values():
+        samples += sum(p.get('samples', 0) for p in chain['passes'])
+        for worker, facts in chain['work'].items():
+            entry = workers.setdefault(worker, {'cpu_s': 0.0, 'peak_rss_mb': 0.0, 'tasks': 0})
+            entry['cpu_s'] += facts['cpu_s']
+            entry['tasks'] += facts['tasks']
+            entry['peak_rss_mb'] = max(entry['peak_rss_mb'], facts['peak_rss_mb'])
+    cpu = sum(w['cpu_s'] for w in workers.values())
+    return {'wall_s': wall, 'client_cpu_s': client_cpu, 'cpu_s': cpu, 'per_worker': workers,
+            'component_samples': samples,
+            'samples_per_cpu_s': samples / cpu if cpu > 0 else math.nan}
+
+
+def _save_states(folder: pathlib.Path, plan: list[dict[str, Any]],
+                 chains: Mapping[tuple[str, str], Any]) -> None:
+    """Write each spacecraft's state: prior passes plus the ones this run read."""
+    for entry in plan:
+        if entry['error'] or not entry['specs']:
+            continue
+        craft = entry['craft']
+        mine = {s.component: chains[(craft.id, s.component)] for s in entry['specs']}
+        failed = {p['pass'] for c in mine.values() for p in c['passes'] if 'error' in p}
+        done = list(entry['done']) + [{'name': p.name, 'size': p.size, 'first': p.first}
+                                      for p in entry['passes'] if p.name not in failed]
+        state.save(folder, craft.id, entry['print'], done,
+                   {k: comp.persistent(c) for k, c in mine.items()})
+
+
+def measure(archive: str | pathlib.Path, *, workers: int = 1,
+            config: pathlib.Path | None = None) -> dict[str, Any]:
+    """Run the engine on a local cluster of ``workers``; return its timings (bench fleet).
+
+    Keys: ``wall_s``, ``cpu_s`` (sum over workers), ``per_worker`` (``cpu_s``,
+    ``peak_rss_mb``, ``tasks``), ``component_samples``, ``samples_per_cpu_s``, ``events``.
+    """
+    result = run_archive(archive, workers=workers, config=config)
+    return {**result.timings, 'events': len(result.events)}
