@@ -91,3 +91,35 @@ def make_archive(root: pathlib.Path, work: pathlib.Path) -> dict[str, pathlib.Pa
     write_passes(root / 'sat-b', b, CUTS_B)
     return {'sat-a': joined(a, CUTS_A, work / 'sat-a.csv'),
             'sat-b': joined(b, CUTS_B, work / 'sat-b.csv')}
+
+
+def detect_events(path: pathlib.Path, calibration: pathlib.Path | None = None,
+                  config: pathlib.Path | None = None) -> list[dict]:
+    """Return the events of ``rwa-monitor detect`` on one file."""
+    import json
+
+    from rwa_monitor.cli.main import main
+    out = path.with_suffix('.events.json')
+    args = ['detect', str(path), '-o', str(out)]
+    if calibration is not None:
+        args += ['--calibration', str(calibration)]
+    if config is not None:
+        args += ['--config', str(config)]
+    assert main(args) in (0, 1, 3)
+    return json.loads(out.read_text())['events']
+
+
+def events_of(events: list[dict], spacecraft: str) -> list[dict]:
+    """Return a spacecraft's fleet events without the ``spacecraft`` field."""
+    return [{k: v for k, v in e.items() if k != 'spacecraft'} for e in events
+            if e['spacecraft'] == spacecraft]
+
+
+def references(archive: pathlib.Path, joined_files: dict[str, pathlib.Path]
+               ) -> dict[str, list[dict]]:
+    """Return spacecraft -> events of detect on its joined file (with its calibration)."""
+    out = {}
+    for craft, path in joined_files.items():
+        cal = archive / craft / 'calibration.yaml'
+        out[craft] = detect_events(path, cal if cal.exists() else None)
+    return out

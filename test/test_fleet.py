@@ -1,0 +1,130 @@
+"""rwa-monitor fleet: events equal detect on the joined passes; bad passes; --state.
+
+The archive (test/fleet_archive.py) holds two spacecraft whose passes are cut from one
+simulated record each, written under names out of time order, with gaps and an overlap,
+one spacecraft calibrated. The reference is ``rwa-monitor detect`` on the same rows as
+one file. The engine runs on a local Dask cluster of 2 worker processes.
+"""
+
+import json
+import shutil
+
+from distributed import Client, LocalCluster
+from fleet_archive import CUTS_A, CUTS_B, events_of, make_archive, references, rows
+import pytest
+
+from rwa_monitor.cli.main import main
+from rwa_monitor.exceptions import ConfigError
+from rwa_monitor.fleet import state
+from rwa_monitor.fleet.engine import run_archive
+from rwa_monitor.sim.friction import simulate_friction
+from rwa_monitor.telemetry import write_telemetry
+
+
+@pytest.fixture(scope='module')
+def archive(tmp_path_factory):
+    """Return (archive folder, spacecraft -> detect events, work folder)."""
+    root = tmp_path_factory.mktemp('fleet')
+    joined = make_archive(root / 'archive', root / 'work')
+    return root / 'archive', references(root / 'archive', joined), root
+
+
+@pytest.fixture(scope='module')
+def client():
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                      dashboard_address=None) as cluster, Client(cluster) as c:
+        yield c
+
+
+def test_events_equal_detect_on_joined_passes(archive, client):
+    folder, reference, _ = archive
+    result = run_archive(folder, client=client)
+    assert len(client.scheduler_info()['workers']) == 2
+    for craft, events in reference.items():
+        assert events, 'the reference must find something for the test to mean anything'
+        assert events_of(result.events, craft) == events
+    summary = result.summary['spacecraft']
+    # Time order by first stamp, never by name; the overlap of 100 rows dropped.
+    assert summary['sat-a']['passes'] == [name for _, _, name in CUTS_A]
+    assert summary['sat-b']['passes'] == [name for _, _, name in CUTS_B]
+    assert summary['sat-a']['rows_dropped'] == 100
+    assert summary['sat-a']['components']['rw1']['samples'] == 42000
+    assert set(summary['sat-a']['components']) == {'rw1', 'rw2', 'gyro'}
+    assert summary['sat-b']['components']['rw1']['not_tested']['outside_calibrated_range'] > 0
+    assert result.anomaly and not result.incomplete
+    workers = result.timings['per_worker']
+    assert workers and all(w['peak_rss_mb'] > 0 for w in workers.values())
+    trend = [r for r in result.trend if r['spacecraft'] == 'sat-b' and r['wheel'] == 'rw2']
+    assert [r['pass'] for r in trend] == [name for _, _, name in CUTS_B]
+    assert {r['relative_to'] for r in trend} == {'nominal'}
+
+
+def test_cli_outputs_and_unreadable_pass(tmp_path):
+    """A healthy spacecraft with a broken pass: the rest runs, exit code 3."""
+    craft = tmp_path / 'archive' / 'sat-c'
+    craft.mkdir(parents=True)
+    tele = simulate_friction(duration_s=600, rate_hz=10, wheels=('rw1',), seed=5)
+    write_telemetry(craft / 'p2.csv', rows(tele, 3000, 6000))
+    write_telemetry(craft / 'p1.csv', rows(tele, 0, 3000))
+    broken = (craft / 'p1.csv').read_text().splitlines()
+    broken[50] = broken[50].replace(',', ',x', 1)
+    (craft / 'p0.csv').write_text('\n'.join(broken) + '\n')   # readable first row only
+    (craft / 'notes.txt').write_text('not telemetry')
+    (craft / 'p9.csv').write_bytes(b'\xff\xfe junk')
+    out = tmp_path / 'out'
+    code = main(['fleet', str(tmp_path / 'archive'), '-o', str(out), '--workers', '1'])
+    assert code == 3
+    summary = json.loads((out / 'summary.json').read_text())['spacecraft']['sat-c']
+    assert 'not a number' in summary['not_examined']['pass p0.csv']
+    assert 'pass p9.csv' in summary['not_examined']
+    assert summary['ignored'] == {'notes.txt': summary['ignored']['notes.txt']}
+    assert summary['components']['rw1']['passes'] == 2
+    assert summary['components']['rw1']['samples'] == 6000
+    for name in ('events.json', 'events.parquet', 'summary.json', 'trend.parquet',
+                 'report.html'):
+        assert (out / name).stat().st_size > 0
+
+
+def _partial(folder, target, keep):
+    """Copy the archive with only the passes named in ``keep``."""
+    for craft in folder.iterdir():
+        (target / craft.name).mkdir(parents=True, exist_ok=True)
+        for entry in craft.iterdir():
+            if entry.name in keep or entry.name == 'calibration.yaml':
+                shutil.copy(entry, target / craft.name / entry.name)
+
+
+def test_resumed_state_equals_full_run(archive, client, tmp_path):
+    folder, reference, _ = archive
+    first = {'pass_k.csv', 'pass_b.parquet', 'zz.csv'}
+    growing = tmp_path / 'archive'
+    _partial(folder, growing, first)
+    kept = tmp_path / 'state'
+    one = run_archive(growing, client=client, state_dir=kept)
+    _partial(folder, growing, {name for _, _, name in CUTS_A + CUTS_B})
+    two = run_archive(growing, client=client, state_dir=kept)
+    for craft, events in reference.items():
+        assert events_of(one.events, craft) + events_of(two.events, craft) == events
+        assert events_of(two.events, craft), 'the second part must hold events'
+    done = two.summary['spacecraft']['sat-a']['already_processed']
+    assert done == ['pass_k.csv', 'pass_b.parquet']
+    three = run_archive(growing, client=client, state_dir=kept)
+    assert three.events == [] and not three.incomplete
+
+
+def test_foreign_state_is_refused(archive, client, tmp_path):
+    folder, _, _ = archive
+    kept = tmp_path / 'state'
+    run_archive(folder, client=client, state_dir=kept)
+    other = tmp_path / 'other.yaml'
+    other.write_text('llr_detector:\n  ros__parameters:\n    window: 400\n')
+    with pytest.raises(state.StateMismatch, match='other parameters'):
+        run_archive(folder, client=client, state_dir=kept, config=other)
+    document = json.loads((kept / 'sat-a.json').read_text())
+    document['version'] = state.VERSION + 1
+    (kept / 'sat-a.json').write_text(json.dumps(document))
+    with pytest.raises(ConfigError, match='refusing to mix'):
+        run_archive(folder, client=client, state_dir=kept)
+    code = main(['fleet', str(folder), '-o', str(tmp_path / 'out'), '--state', str(kept),
+                 '--workers', '1'])
+    assert code == 2
