@@ -98,7 +98,7 @@ def plan_fleet(*, spacecraft: int = 4, days: float = 7.0, rate_hz: float = 10.0,
     start); ``faults`` (default: one per five spacecraft, at least one) step faults of
     kind dry or viscous at uniform times after each spacecraft's first
     ``commissioning_passes`` passes (default: the first day's; they stay fault-free, for
-    a commissioning calibration).
+    a commissioning calibration; fewer when the archive is shorter than a day).
     """
     n_sc = check_int('spacecraft', spacecraft, 1, 10_000)
     days = check_real('days', days, 0.0, 3660.0, low_open=True)
@@ -111,8 +111,9 @@ def plan_fleet(*, spacecraft: int = 4, days: float = 7.0, rate_hz: float = 10.0,
     if pass_s * rate_hz < 20:
         raise ValueError(f'a pass of {pass_s:g} s at {rate_hz:g} Hz has fewer than 20 samples')
     n_slots = max(int(math.floor(days * per_day + 1e-9)), 1)
-    commissioning = check_int('commissioning_passes', per_day if commissioning_passes is None
-                              else commissioning_passes, 1, n_slots)
+    commissioning = check_int('commissioning_passes', min(per_day, n_slots)
+                              if commissioning_passes is None else commissioning_passes,
+                              1, n_slots)
     rng = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(0,)))
     ids = tuple(f'rw{i + 1}' for i in range(n_wheels))
     width = len(str(n_sc))
