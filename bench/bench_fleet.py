@@ -183,12 +183,12 @@ def markdown(results: dict[str, Any]) -> str:
            'memory': (max(m['peak_rss_mb'] for m in mem) < GOALS['peak_rss_mb']
                       and mem[-1]['peak_rss_mb'] <= 1.1 * mem[0]['peak_rss_mb'])}
     word = {True: 'met', False: 'not met'}
-    lines = [f'## Fleet engine on Dask (`python -m bench fleet`'
-             f'{" --quick" if results["quick"] else ""})', '',
+    lines = [f'## Fleet engine on Dask (`python -m bench fleet'
+             f'{" --quick" if results["quick"] else ""}`)', '',
              f'Archive from `simulate fleet`: {sim["spacecraft"]} spacecraft x '
              f'{sim["days"]:g} days, {sim["passes"]} passes of 10 min at 10 Hz, 4 wheels: '
              f'{sim["wheel_samples"]:.3g} wheel samples, {sim["bytes"] / 1e6:.0f} MB of CSV, '
-             f'written in {sim["wall_s"]:.0f} s wall ({sim["cpu_s"]:.0f} s CPU, one process). '
+             f'written in {sim["wall_s"]:.1f} s wall ({sim["cpu_s"]:.1f} s CPU, one process). '
              f'Engine on a warm local cluster (start-up and a warm-up run excluded), best of '
              f'{len(results["fleet"]["1"])} interleaved runs per size. Load average of the '
              f'2-core machine (`uptime`, 1 min): {load}.', '']
