@@ -28,7 +28,9 @@ def fleet_inputs():
     rows = (rows_of('sc1', 'rw1', 0.0, 1) + rows_of('sc1', 'rw2', 2e-6, 2)
             + rows_of('sc<2>', 'rw1', 0.0, 3) + rows_of('sc<2>', 'rw2', 0.0, 4))
     events = [{'spacecraft': 'sc<2>', 'component': 'rw1', 'kind': 'dry',
-               'time': 4.5 * SECONDS_PER_DAY, 'detector': 'llr'}]
+               'time': 4.5 * SECONDS_PER_DAY, 'detector': 'llr'},
+              {'spacecraft': 'sc1', 'component': 'gyro_y', 'kind': 'drift',
+               'time': 2.25 * SECONDS_PER_DAY, 'detector': 'vsadc'}]
     summary = {'spacecraft': {'sc1': {'components': {}, 'not_examined': {}},
                               'sc<2>': {'components': {'rw2': {'not_examined': 'no rows'}},
                                         'not_examined': {'pass x.csv': 'unreadable'}}},
@@ -62,6 +64,7 @@ def test_report_is_self_contained_and_shows_every_wheel(tmp_path):
         assert f'<td>{wheel}</td>' in text and craft in text
     assert 'sc<2>' not in text                       # names are escaped
     assert 'trend (dry)' in text and 'events (dry)' in text
+    assert 'sc1 gyro_y: vsadc drift at day 2.250' in text
     assert 'not examined: no rows' in text and 'pass x.csv: unreadable' in text
     assert list(tmp_path.joinpath('out').iterdir()) == [path]   # atomic: no leftovers
 

@@ -88,7 +88,9 @@ def write_report(path: str | os.PathLike, events: list[dict], summary: dict,
     parts = ['<!DOCTYPE html>', '<html lang="en"><head><meta charset="utf-8">',
              '<title>Fleet friction report</title>', f'<style>{STYLE}</style></head><body>',
              '<h1>Fleet friction report</h1>', _overview(events, summary, trends),
-             _table(trends, wheel_events, summary), '<h2>Wheels</h2>']
+             _table(trends, wheel_events, summary),
+             _other_events(wheel_events, {(t['spacecraft'], t['wheel']) for t in trends}),
+             '<h2>Wheels</h2>']
     for entry in trends:
         key = (entry['spacecraft'], entry['wheel'])
         png = _plot(key, by_wheel[key], entry, wheel_events.get(key, []))
@@ -179,6 +181,16 @@ def _table(trends: list[dict[str, Any]], wheel_events: Mapping[tuple[str, str], 
             for i, c in enumerate(cells)) + '</tr>')
     rows.append('</table>')
     return '\n'.join(rows)
+
+
+def _other_events(wheel_events: Mapping[tuple[str, str], list],
+                  shown: set[tuple[str, str]]) -> str:
+    """List the events of components without pass levels (gyro axes, wheels not fitted)."""
+    items = [f'<li>{_e(key[0])} {_e(key[1])}: {_e(e.get("detector", ""))} '
+             f'{_e(e.get("kind"))} at day {_num(e.get("time")) / SECONDS_PER_DAY:.3f}</li>'
+             for key, found in sorted(wheel_events.items()) if key not in shown
+             for e in found]
+    return '\n'.join(['<h2>Other events</h2>', '<ul>', *items, '</ul>']) if items else ''
 
 
 def _fmt(value: Any) -> str:
