@@ -15,7 +15,7 @@ EPILOG = '''\
 layout: DIR/<spacecraft>/<pass id>.csv (telemetry schema, random pass ids: names do not sort
 in time), DIR/truth.json (per spacecraft and wheel: base levels, wear rate, faults), and with
 --calibrate DIR/<spacecraft>/calibration.yaml from the spacecraft's commissioning passes (the
-first day's, fault-free).
+first two days', fault-free).
 example: rwa-monitor simulate fleet -o archive --spacecraft 20 --days 7 --rate 10 --seed 0
 '''
 
@@ -51,7 +51,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                              'write calibration.yaml into its folder')
     parser.add_argument('--commissioning-passes', type=int, metavar='C',
                         help='first passes kept fault-free and used by --calibrate '
-                             '(default: one day of passes)')
+                             '(default: two days of passes)')
     parser.add_argument('--seed', type=int, default=0, help='random seed (default 0)')
     parser.set_defaults(func=run)
 

@@ -36,6 +36,10 @@ WHEEL_SPREAD = 0.15
 NOISE_FACTOR = (0.8, 1.25)
 # Wear of a wearing wheel: dry level growth per day, as a fraction of nominal dry.
 WEAR_PER_DAY = (0.002, 0.01)
+# Default commissioning period (days of passes, fault-free): one day of six 10-minute
+# passes left speeds uncovered and the calibrated detector raised alarms on fault-free
+# wheels in a trial (docs/fleet.md); two days did not.
+COMMISSIONING_DAYS = 2
 # Step faults: size as a fraction of the nominal parameter.
 FAULT_SIZE = (0.5, 1.0)
 
@@ -97,8 +101,8 @@ def plan_fleet(*, spacecraft: int = 4, days: float = 7.0, rate_hz: float = 10.0,
     ``wear_fraction`` of the wheels wear (dry level growing linearly from the archive
     start); ``faults`` (default: one per five spacecraft, at least one) step faults of
     kind dry or viscous at uniform times after each spacecraft's first
-    ``commissioning_passes`` passes (default: the first day's; they stay fault-free, for
-    a commissioning calibration; fewer when the archive is shorter than a day).
+    ``commissioning_passes`` passes (default: the first COMMISSIONING_DAYS days'; they stay
+    fault-free, for a commissioning calibration; fewer when the archive is shorter).
     """
     n_sc = check_int('spacecraft', spacecraft, 1, 10_000)
     days = check_real('days', days, 0.0, 3660.0, low_open=True)
@@ -111,7 +115,7 @@ def plan_fleet(*, spacecraft: int = 4, days: float = 7.0, rate_hz: float = 10.0,
     if pass_s * rate_hz < 20:
         raise ValueError(f'a pass of {pass_s:g} s at {rate_hz:g} Hz has fewer than 20 samples')
     n_slots = max(int(math.floor(days * per_day + 1e-9)), 1)
-    commissioning = check_int('commissioning_passes', min(per_day, n_slots)
+    commissioning = check_int('commissioning_passes', min(COMMISSIONING_DAYS * per_day, n_slots)
                               if commissioning_passes is None else commissioning_passes,
                               1, n_slots)
     rng = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(0,)))
