@@ -38,11 +38,14 @@ def client():
 
 def test_events_equal_detect_on_joined_passes(archive, client):
     folder, reference, _ = archive
-    result = run_archive(folder, client=client)
+    result = run_archive(folder, client=client, task_bytes=1)   # a task per pass
     assert len(client.scheduler_info()['workers']) == 2
     for craft, events in reference.items():
         assert events, 'the reference must find something for the test to mean anything'
         assert events_of(result.events, craft) == events
+    grouped = run_archive(folder, client=client)            # all passes in one task
+    assert grouped.events == result.events
+    assert json.dumps(grouped.trend) == json.dumps(result.trend)   # NaN-safe
     summary = result.summary['spacecraft']
     # Time order by first stamp, never by name; the overlap of 100 rows dropped.
     assert summary['sat-a']['passes'] == [name for _, _, name in CUTS_A]
@@ -100,7 +103,7 @@ def test_resumed_state_equals_full_run(archive, client, tmp_path):
     growing = tmp_path / 'archive'
     _partial(folder, growing, first)
     kept = tmp_path / 'state'
-    one = run_archive(growing, client=client, state_dir=kept)
+    one = run_archive(growing, client=client, state_dir=kept, task_bytes=1)
     _partial(folder, growing, {name for _, _, name in CUTS_A + CUTS_B})
     two = run_archive(growing, client=client, state_dir=kept)
     for craft, events in reference.items():

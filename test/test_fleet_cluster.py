@@ -76,7 +76,8 @@ def test_worker_killed_mid_run_gives_the_same_events(cluster, tmp_path):
 
         def run():
             try:
-                outcome['result'] = run_archive(tmp_path / 'archive', client=client)
+                outcome['result'] = run_archive(tmp_path / 'archive', client=client,
+                                                task_bytes=1)
             except BaseException as err:  # reported by the assertion below
                 outcome['error'] = err
 

@@ -18,6 +18,7 @@ the passes joined into one file.
 from __future__ import annotations
 
 from dataclasses import dataclass
+import functools
 import math
 import resource
 import time as _time
@@ -29,6 +30,7 @@ from rwa_monitor.core.schema import VSADC
 from rwa_monitor.core.vsadc import STATE_NAMES
 from rwa_monitor.fleet import codec
 from rwa_monitor.fleet.archive import after, GYRO_COMPONENT
+from rwa_monitor.fleet.feed import feed
 from rwa_monitor.telemetry import Telemetry
 from rwa_monitor.telemetry.streams import paired_gyro
 
@@ -70,48 +72,64 @@ def persistent(chain: Mapping[str, Any]) -> dict[str, Any]:
 
 def build(spec: ComponentSpec) -> tuple[Any, Any]:
     """Return a fresh detector of the spec and the wheel's nominal model (or None)."""
+    path = spec.params.get('calibration_file')
     if spec.detector == 'vsadc':
         from rwa_monitor.pipelines import vsadc
-        return vsadc.make_detector(spec.params), None
-    from rwa_monitor.core.calibrate import NominalWheel
+        return vsadc.make_detector(spec.params, _gyro_calibration(path) if path
+                                   else None), None
     from rwa_monitor.core.llr import LLRDetector
     from rwa_monitor.pipelines import llr
-    from rwa_monitor.telemetry.calibration_file import load
     detector = LLRDetector(spec.component, **llr.detector_kwargs(spec.params))
-    path = spec.params.get('calibration_file')
-    nominal = NominalWheel(load(path)['wheels'][spec.component]) if path else None
-    return detector, nominal
+    return detector, _nominal(path, spec.component) if path else None
 
 
-def step(spec: ComponentSpec, chain: Mapping[str, Any], read: tuple[Any, dict],
-         name: str, count_read: bool = False) -> dict[str, Any]:
-    """Return the chain after pass ``name`` (``read``: telemetry or reason, work facts).
+@functools.lru_cache(maxsize=64)
+def _nominal(path: str, wheel: str) -> Any:
+    """Return a wheel's nominal model of a calibration file (read once per worker)."""
+    from rwa_monitor.core.calibrate import NominalWheel
+    from rwa_monitor.telemetry.calibration_file import load
+    return NominalWheel(load(path)['wheels'][wheel])
 
-    ``count_read``: add the read's CPU time to this chain's (one component per pass).
+
+@functools.lru_cache(maxsize=64)
+def _gyro_calibration(path: str) -> Any:
+    """Return the gyro block of a calibration file (read once per worker)."""
+    from rwa_monitor.telemetry.calibration_file import load_gyro_calibration
+    return load_gyro_calibration(path)
+
+
+def step(spec: ComponentSpec, chain: Mapping[str, Any], reads: list[tuple[Any, dict]],
+         names: list[str], count_read: bool = False) -> dict[str, Any]:
+    """Return the chain after passes ``names`` (``reads``: telemetry or reason, facts).
+
+    ``count_read``: add the reads' CPU time to this chain's (one component per pass).
     """
     start = _time.process_time()
-    tele, read_work = read
     out = dict(chain)
     out['events'] = list(chain['events'])
     out['passes'] = list(chain['passes'])
     out['trend'] = list(chain['trend'])
     out['not_tested'] = dict(chain['not_tested'])
-    if isinstance(tele, str):
-        out['passes'].append({'pass': name, 'error': tele})
-    else:
-        kept, dropped = after(tele, chain['last_time'])
-        out['last_time'] = max(chain['last_time'], float(tele.time[-1]))
-        detector, nominal = build(spec)
-        if chain['detector'] is not None:
-            tree, arrays = chain['detector']
-            codec.restore(detector, tree, arrays)
+    detector = nominal = None
+    for (tele, _), name in zip(reads, names):
+        if isinstance(tele, str):
+            out['passes'].append({'pass': name, 'error': tele})
+            continue
+        if detector is None:
+            detector, nominal = build(spec)
+            if chain['detector'] is not None:
+                codec.restore(detector, *chain['detector'])
+        kept, dropped = after(tele, out['last_time'])
+        out['last_time'] = max(out['last_time'], float(tele.time[-1]))
         feed = _feed_gyro if spec.detector == 'vsadc' else _feed_wheel
         fact = feed(spec, detector, nominal, kept, out, name)
         out['passes'].append({'pass': name, 'rows_dropped': dropped, **fact})
+    if detector is not None:
         out['detector'] = codec.encode(detector)
         out['facts'] = _facts(spec, detector, out)
     own = worker_facts(_time.process_time() - start)
-    out['work'] = _account(chain['work'], [read_work, own] if count_read else [own])
+    read_work = [work for _, work in reads] if count_read else []
+    out['work'] = _account(chain['work'], read_work + [own])
     return out
 
 
@@ -128,11 +146,7 @@ def _feed_wheel(spec: ComponentSpec, det: Any, nominal: Any, kept: Telemetry,
         residual, skipped = nominal.residual(t, w, f)
         for reason in NOT_TESTED:
             out['not_tested'][reason] += int(skipped[reason])
-    events = out['events']
-    for row in zip(t.tolist(), w.tolist(), residual.tolist()):
-        found = det.update(*row)
-        if found:
-            events.extend(found)
+    out['events'].extend(feed(det, t, w, residual))
     if len(t):
         out['trend'].append(_trend_row(spec, name, t, w, f, nominal))
     return {'samples': len(t)}

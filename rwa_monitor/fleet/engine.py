@@ -31,6 +31,9 @@ from rwa_monitor.fleet import archive as arc, components as comp, state
 from rwa_monitor.telemetry.parameters_file import block_values, read_parameters_file
 
 CALIBRATION_KEY = 'calibration_file'
+# Passes of one component taken by one task: consecutive ones up to about this many bytes
+# of files (a short pass is ~1 ms of detector work, less than a task's own cost).
+TASK_BYTES = 32 << 20
 
 
 @dataclass
@@ -82,12 +85,13 @@ def node_blocks(config_path: pathlib.Path | None) -> dict[str, dict[str, Any]]:
 
 def run_archive(archive: str | pathlib.Path, *, client: Any = None, workers: int = 2,
                 scheduler: str | None = None, config: pathlib.Path | None = None,
-                state_dir: pathlib.Path | None = None, progress: bool = False
-                ) -> FleetResult:
+                state_dir: pathlib.Path | None = None, progress: bool = False,
+                task_bytes: int = TASK_BYTES) -> FleetResult:
     """Run the fleet over ``archive`` and return the result (saves the state if given).
 
     ``client``: an existing distributed Client (else one is made from ``workers`` or
-    ``scheduler``). Raise ConfigError for bad parameters or a refused state.
+    ``scheduler``); ``task_bytes``: passes per ``step`` task, by their files' bytes (1:
+    one pass per task). Raise ConfigError for bad parameters or a refused state.
     """
     blocks = node_blocks(config)
     fleet = arc.list_archive(archive)
@@ -96,7 +100,7 @@ def run_archive(archive: str | pathlib.Path, *, client: Any = None, workers: int
         if client is None:
             client = stack.enter_context(dask_client(workers, scheduler))
         plan = _plan(client, fleet, blocks, state_dir)
-        finals = _submit(client, plan)
+        finals = _submit(client, plan, task_bytes)
         if progress and sys.stderr.isatty():
             from distributed import progress as bar
             bar([f for f in finals.values() if not isinstance(f, dict)])
@@ -183,25 +187,41 @@ def _specs(craft: arc.Spacecraft, names: list[str], blocks: Mapping[str, Any],
         specs.append(comp.ComponentSpec(craft.id, name, params))
     if calibration:
         from rwa_monitor.core.calibrate import check_wheels
-        from rwa_monitor.telemetry.calibration_file import load
+        from rwa_monitor.telemetry.calibration_file import load, load_gyro_calibration
         check_wheels(load(calibration), [n for n in names if n != arc.GYRO_COMPONENT],
                      calibration)
+        if arc.GYRO_COMPONENT in names:
+            load_gyro_calibration(calibration)   # detect --calibration needs it too
     return specs
 
 
-def _submit(client: Any, plan: list[dict[str, Any]]) -> dict[tuple[str, str], Any]:
+def _submit(client: Any, plan: list[dict[str, Any]], task_bytes: int
+            ) -> dict[tuple[str, str], Any]:
     """Submit every chain; return (spacecraft, component) -> future of its last step."""
     finals = {}
     for entry in plan:
         reads = [client.submit(comp.read, p.path, key=f'read-{entry["craft"].id}-{p.name}'
                                f'-{p.size}') for p in entry['passes']]
+        groups = _groups(entry['passes'], task_bytes)
         for n, spec in enumerate(entry['specs']):
             chain = comp.new_chain(entry['prior'].get(spec.component))
-            for p, read in zip(entry['passes'], reads):
-                chain = client.submit(comp.step, spec, chain, read, p.name, n == 0)
+            for first, end in groups:
+                chain = client.submit(comp.step, spec, chain, reads[first:end],
+                                      [p.name for p in entry['passes'][first:end]], n == 0)
             finals[(spec.spacecraft, spec.component)] = chain  # a dict if no pass to run
         del reads
     return finals
+
+
+def _groups(passes: list[arc.PassFile], task_bytes: int) -> list[tuple[int, int]]:
+    """Return runs of consecutive passes of about ``task_bytes``, one task each."""
+    groups, first, size = [], 0, 0
+    for i, p in enumerate(passes):
+        size += p.size
+        if size >= task_bytes or i == len(passes) - 1:
+            groups.append((first, i + 1))
+            first, size = i + 1, 0
+    return groups
 
 
 def _assemble(plan: list[dict[str, Any]], chains: Mapping[tuple[str, str], Any],
