@@ -48,6 +48,10 @@ def test_trend_table_finds_the_wearing_wheel_and_projects_the_limit():
     assert wear['dry_slope_per_day'] == pytest.approx(2e-6, rel=0.05)
     assert wear['dry_crossing_low_s'] < 15 * SECONDS_PER_DAY < wear['dry_crossing_high_s']
     assert wear['viscous_crossing_s'] is None and wear['passes'] == 30
+    for row in rows[:10]:
+        row['relative_to'] = 'nominal'          # sc1 rw1: calibrated for its first passes
+    mixed = wheel_trends(rows)[0]
+    assert (mixed['wheel'], mixed['passes'], mixed['relative_to']) == ('rw1', 20, 'zero')
 
 
 def test_report_is_self_contained_and_shows_every_wheel(tmp_path):

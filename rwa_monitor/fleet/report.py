@@ -40,7 +40,9 @@ def wheel_trends(trend_rows: Sequence[Mapping[str, Any]],
 
     Each pass's level is placed at its mid time ``(t_start + t_end) / 2``; the trend is
     :func:`rwa_monitor.core.trend.wheel_trend`; ``limits`` (``dry``/``viscous``, in the
-    levels' own reference: ``relative_to`` of the rows) adds the projected crossing.
+    levels' own reference: ``relative_to`` of the rows) adds the projected crossing. A
+    wheel whose passes mix references (a calibration added later) is fitted on the passes
+    in the reference of its latest pass only (``passes`` counts them).
     Keys: ``spacecraft``, ``wheel``, ``passes``, ``relative_to`` and per level ``<level>_``
     ``slope_per_day``, ``slope_se``, ``p_value``, ``crossing_s``, ``crossing_low_s``,
     ``crossing_high_s`` (None without a crossing).
@@ -48,9 +50,11 @@ def wheel_trends(trend_rows: Sequence[Mapping[str, Any]],
     limits = dict(limits or {})
     out = []
     for (craft, wheel), rows in sorted(_by_wheel(trend_rows).items()):
+        latest = rows[-1].get('relative_to', '')
+        rows = [r for r in rows if r.get('relative_to', '') == latest]
         mid = np.array([0.5 * (_num(r.get('t_start')) + _num(r.get('t_end'))) for r in rows])
         entry: dict[str, Any] = {'spacecraft': craft, 'wheel': wheel, 'passes': len(rows),
-                                 'relative_to': rows[0].get('relative_to', '')}
+                                 'relative_to': latest}
         for level in LEVELS:
             values = np.array([_num(r.get(level)) for r in rows])
             errors = np.array([_num(r.get(f'{level}_se')) for r in rows])
