@@ -113,6 +113,9 @@ def test_resumed_state_equals_full_run(archive, client, tmp_path):
     assert done == ['pass_k.csv', 'pass_b.parquet']
     three = run_archive(growing, client=client, state_dir=kept)
     assert three.events == [] and not three.incomplete
+    # The friction trend covers the wheel's life: earlier passes' rows come from the state.
+    full = run_archive(folder, client=client)
+    assert json.dumps(two.trend) == json.dumps(full.trend) == json.dumps(three.trend)
 
 
 def test_foreign_state_is_refused(archive, client, tmp_path):

@@ -59,15 +59,17 @@ def new_chain(saved: Mapping[str, Any] | None = None) -> dict[str, Any]:
     chain: dict[str, Any] = {'detector': None, 'last_time': -math.inf, 'offset': 0,
                              'last_ref': None, 'not_tested': dict.fromkeys(NOT_TESTED, 0)}
     if saved:
-        chain.update(saved)
+        chain.update({k: v for k, v in saved.items() if k != 'history'})
     chain.update(events=[], passes=[], trend=[], facts={}, work={})
     return chain
 
 
-def persistent(chain: Mapping[str, Any]) -> dict[str, Any]:
-    """Return the part of a chain a state file keeps (detector, last stamp, offsets)."""
-    return {k: chain[k] for k in ('detector', 'last_time', 'offset', 'last_ref',
+def persistent(chain: Mapping[str, Any], history: list[dict[str, Any]]) -> dict[str, Any]:
+    """Return what a state file keeps: detector, last stamp, offsets, trend rows so far."""
+    kept = {k: chain[k] for k in ('detector', 'last_time', 'offset', 'last_ref',
                                   'not_tested')}
+    kept['history'] = list(history) + list(chain['trend'])
+    return kept
 
 
 def build(spec: ComponentSpec) -> tuple[Any, Any]:

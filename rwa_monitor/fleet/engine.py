@@ -200,8 +200,7 @@ def _submit(client: Any, plan: list[dict[str, Any]], task_bytes: int
     """Submit every chain; return (spacecraft, component) -> future of its last step."""
     finals = {}
     for entry in plan:
-        reads = [client.submit(comp.read, p.path, key=f'read-{entry["craft"].id}-{p.name}'
-                               f'-{p.size}') for p in entry['passes']]
+        reads = [client.submit(comp.read, p.path, pure=False) for p in entry['passes']]
         groups = _groups(entry['passes'], task_bytes)
         for n, spec in enumerate(entry['specs']):
             chain = comp.new_chain(entry['prior'].get(spec.component))
@@ -239,7 +238,9 @@ def _assemble(plan: list[dict[str, Any]], chains: Mapping[tuple[str, str], Any],
         found.sort(key=lambda e: (e.time, e.component, e.revision))
         anomaly |= any(e.kind != 'healthy' for e in found)
         events.extend({'spacecraft': craft.id, **e.to_json()} for e in found)
-        trend.extend(row for c in mine.values() for row in c['trend'])
+        for spec in entry['specs']:
+            trend.extend(_history(entry, spec.component))
+            trend.extend(mine[spec.component]['trend'])
         crafts[craft.id] = spacecraft_summary(entry, mine, found)
         incomplete |= bool(crafts[craft.id]['not_examined'])
     summary = {'spacecraft': crafts, 'events': len(events), 'engine': engine}
@@ -275,7 +276,12 @@ def _save_states(folder: pathlib.Path, plan: list[dict[str, Any]],
         done = list(entry['done']) + [{'name': p.name, 'size': p.size, 'first': p.first}
                                       for p in entry['passes'] if p.name not in failed]
         state.save(folder, craft.id, entry['print'], done,
-                   {k: comp.persistent(c) for k, c in mine.items()})
+                   {k: comp.persistent(c, _history(entry, k)) for k, c in mine.items()})
+
+
+def _history(entry: Mapping[str, Any], component: str) -> list[dict[str, Any]]:
+    """Return the trend rows of a component's passes before this run (from the state)."""
+    return entry['prior'].get(component, {}).get('history', [])
 
 
 def measure(archive: str | pathlib.Path, *, workers: int = 1,

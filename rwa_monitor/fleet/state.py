@@ -2,7 +2,8 @@
 
 ``STATE/<spacecraft>.json`` (format, version, package version, configuration
 fingerprint, the passes processed, and per component the detector tree of
-:mod:`rwa_monitor.fleet.codec` with the last stamp and offsets) and
+:mod:`rwa_monitor.fleet.codec` with the last stamp and offsets, and the trend rows of
+the passes processed, non-finite values as null) and
 ``STATE/<spacecraft>.npz`` (the trees' arrays, ``<component>/<key>``; read with
 ``allow_pickle=False``). The JSON names the SHA-256 of the ``.npz``; both are written
 atomically, the ``.npz`` first. A state whose format, version or fingerprint differs
@@ -15,6 +16,7 @@ from __future__ import annotations
 import hashlib
 import io
 import json
+import math
 import pathlib
 from typing import Any, Mapping
 
@@ -46,6 +48,8 @@ def save(folder: pathlib.Path, spacecraft: str, print_: str, passes: list[dict],
     for component, chain in chains.items():
         entry = {k: v for k, v in chain.items() if k != 'detector'}
         entry['last_time'] = _float(entry['last_time'])
+        entry['history'] = [{k: None if isinstance(v, float) and not np.isfinite(v) else v
+                             for k, v in row.items()} for row in entry.get('history', [])]
         if chain['detector'] is not None:
             tree, found = chain['detector']
             arrays.update({f'{component}/{k}': v for k, v in found.items()})
@@ -95,6 +99,8 @@ def load(folder: pathlib.Path, spacecraft: str, print_: str
     for component, entry in document['components'].items():
         chain = dict(entry)
         chain['last_time'] = float(chain['last_time'])
+        chain['history'] = [{k: math.nan if v is None else v for k, v in row.items()}
+                            for row in chain.get('history', [])]
         if 'detector' in entry:
             prefix = f'{component}/'
             chain['detector'] = (entry['detector'], {k[len(prefix):]: v for k, v in
