@@ -74,10 +74,15 @@ def test_cli_outputs_and_unreadable_pass(tmp_path):
     (craft / 'p0.csv').write_text('\n'.join(broken) + '\n')   # readable first row only
     (craft / 'notes.txt').write_text('not telemetry')
     (craft / 'p9.csv').write_bytes(b'\xff\xfe junk')
+    (craft / 'p8.csv').write_text(broken[0] + '\n')              # header only
+    (tmp_path / 'archive' / 'sat-empty').mkdir()
     out = tmp_path / 'out'
     code = main(['fleet', str(tmp_path / 'archive'), '-o', str(out), '--workers', '1'])
     assert code == 3
-    summary = json.loads((out / 'summary.json').read_text())['spacecraft']['sat-c']
+    fleet = json.loads((out / 'summary.json').read_text())['spacecraft']
+    assert 'no readable pass' in fleet['sat-empty']['not_examined']['spacecraft']
+    summary = fleet['sat-c']
+    assert summary['not_examined']['pass p8.csv'].endswith('no rows')
     assert 'not a number' in summary['not_examined']['pass p0.csv']
     assert 'pass p9.csv' in summary['not_examined']
     assert summary['ignored'] == {'notes.txt': summary['ignored']['notes.txt']}
@@ -86,6 +91,9 @@ def test_cli_outputs_and_unreadable_pass(tmp_path):
     for name in ('events.json', 'events.parquet', 'summary.json', 'trend.parquet',
                  'report.html'):
         assert (out / name).stat().st_size > 0
+    inside = tmp_path / 'archive' / 'out'
+    assert main(['fleet', str(tmp_path / 'archive'), '-o', str(inside)]) == 2
+    assert not inside.exists()
 
 
 def _partial(folder, target, keep):

@@ -14,6 +14,7 @@ import argparse
 import pathlib
 
 from rwa_monitor.cli.cmd_detect import EXIT_ANOMALY, EXIT_NOT_EXAMINED, EXIT_NOTHING_FOUND
+from rwa_monitor.exceptions import OutputError
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -48,6 +49,11 @@ def run(args: argparse.Namespace) -> int:
     """Run the fleet and write OUT; return the exit code."""
     from rwa_monitor.fleet.engine import run_archive
     from rwa_monitor.fleet.outputs import write_outputs
+    archive = args.archive.resolve()
+    for name, path in (('output', args.output), ('state', args.state)):
+        if path is not None and archive in (path.resolve(), *path.resolve().parents):
+            raise OutputError(f'{path}: the {name} folder must be outside the archive '
+                              f'{args.archive} (it would be read as a spacecraft)')
     result = run_archive(args.archive, workers=args.workers, scheduler=args.scheduler,
                          config=args.config, state_dir=args.state, progress=True)
     write_outputs(args.output, result)

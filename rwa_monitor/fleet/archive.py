@@ -107,8 +107,12 @@ def _csv_first(path: str) -> tuple[float, list[str]]:
     import csv
     with open(path, newline='', encoding='utf-8-sig') as handle:
         reader = csv.reader(handle)
-        header = [c.strip() for c in next(reader)]
-        row = next(reader)
+        header = [c.strip() for c in next(reader, [])]
+        row = next(reader, None)
+    if TIME not in header:
+        raise ValueError(f'{path}: no {TIME} column in the header')
+    if row is None:
+        raise ValueError(f'{path}: no rows')
     return float(row[header.index(TIME)]), header
 
 

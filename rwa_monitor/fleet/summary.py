@@ -24,6 +24,8 @@ def spacecraft_summary(entry: Mapping[str, Any], chains: Mapping[str, Mapping[st
     missing: dict[str, str] = {}
     if entry['error']:
         missing['spacecraft'] = entry['error']
+    elif not entry['specs']:
+        missing['spacecraft'] = 'no readable pass with a wheel friction or gyro column'
     missing.update({f'pass {name}': why for name, why in entry['unreadable'].items()})
     components = {}
     dropped = 0
