@@ -123,3 +123,17 @@ def references(archive: pathlib.Path, joined_files: dict[str, pathlib.Path]
         cal = archive / craft / 'calibration.yaml'
         out[craft] = detect_events(path, cal if cal.exists() else None)
     return out
+
+
+def joined_from_files(paths: list[pathlib.Path], target: pathlib.Path) -> pathlib.Path:
+    """Join pass files (in time order) as read back, overlap once, into one Parquet file."""
+    parts = []
+    last = -np.inf
+    for path in paths:
+        cols = read_telemetry(path).columns()
+        keep = cols['time'] > last
+        parts.append({k: v[keep] for k, v in cols.items()})
+        last = max(last, cols['time'][-1])
+    joined = {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+    write_parquet(target, Telemetry.from_columns(joined))
+    return target

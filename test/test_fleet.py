@@ -10,15 +10,17 @@ import json
 import shutil
 
 from distributed import Client, LocalCluster
-from fleet_archive import CUTS_A, CUTS_B, events_of, make_archive, references, rows
+from fleet_archive import (CUTS_A, CUTS_B, detect_events, events_of, joined_from_files,
+                           make_archive, references, rows)
 import pytest
 
 from rwa_monitor.cli.main import main
 from rwa_monitor.exceptions import ConfigError
 from rwa_monitor.fleet import state
 from rwa_monitor.fleet.engine import run_archive
-from rwa_monitor.sim.friction import simulate_friction
+from rwa_monitor.sim.friction import parse_anomaly, simulate_friction
 from rwa_monitor.telemetry import write_telemetry
+from rwa_monitor.telemetry.parquet_io import write_parquet
 
 
 @pytest.fixture(scope='module')
@@ -142,3 +144,27 @@ def test_foreign_state_is_refused(archive, client, tmp_path):
     code = main(['fleet', str(folder), '-o', str(tmp_path / 'out'), '--state', str(kept),
                  '--workers', '1'])
     assert code == 2
+
+
+def test_recording_passes_equal_detect(client, tmp_path):
+    """Passes as a rosbag2 folder, a bare .mcap, a bare .db3 and a Parquet file."""
+    tele = simulate_friction(duration_s=2400, rate_hz=10, wheels=('rw1', 'rw2'), seed=31,
+                             anomalies=[parse_anomaly('rw1:dry:1300:3e-4')])
+    craft = tmp_path / 'archive' / 'sat-r'
+    craft.mkdir(parents=True)
+    names = ['q_bag', 'c.mcap', 'x.db3', 'a.parquet']
+    for (first, end), name in zip([(0, 6000), (7000, 13000), (12900, 18000),
+                                   (19000, 24000)], names):
+        target = craft / name
+        part = rows(tele, first, end)
+        if name.endswith('.parquet'):
+            write_parquet(target, part)
+        else:
+            write_telemetry(target, part)     # rosbag2 folder, bare .mcap or .db3
+    reference = detect_events(joined_from_files([craft / n for n in names],
+                                                tmp_path / 'joined.parquet'))
+    assert reference
+    result = run_archive(tmp_path / 'archive', client=client, task_bytes=1)
+    assert events_of(result.events, 'sat-r') == reference
+    summary = result.summary['spacecraft']['sat-r']
+    assert summary['passes'] == names and summary['rows_dropped'] == 100
