@@ -32,10 +32,11 @@ import numpy as np
 
 from rwa_monitor.exceptions import RwaMonitorError
 
-# The registry: module -> class names (qualified by module in the tree).
+# The registry: module -> class names (the tree names a class by its own module). A name
+# a module does not have is skipped, so the list may name the classes of the detector's
+# past and next layouts (a typed record of the last change, ring views) side by side.
 DATA_CLASSES: dict[str, tuple[str, ...]] = {
-    'rwa_monitor.core.llr': ('LLRDetector', '_Column'),
-    'rwa_monitor.core.llr_common': ('NoiseModel',),
+    'rwa_monitor.core.llr': ('LLRDetector', 'NoiseModel', 'DeclaredChange', '_Column'),
     'rwa_monitor.core.events': ('AnomalyEvent',),
     'rwa_monitor.core.vsadc': ('VsadcDetector', 'VsadcAxis', '_Window', '_SlidingMax',
                                'Transition'),
@@ -60,8 +61,9 @@ def _classes(registry: dict[str, tuple[str, ...]]) -> dict[str, type]:
     for module, names in registry.items():
         loaded = importlib.import_module(module)
         for name in names:
-            cls = getattr(loaded, name)
-            found[_name(cls)] = cls
+            cls = getattr(loaded, name, None)
+            if isinstance(cls, type):
+                found[_name(cls)] = cls
     return found
 
 

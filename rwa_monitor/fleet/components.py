@@ -204,7 +204,9 @@ def _facts(spec: ComponentSpec, det: Any, chain: Mapping[str, Any]) -> dict[str,
     counters = det.counters
     facts: dict[str, Any] = {'rows_seen': det.n_samples, 'rejected': counters}
     if spec.params.get('calibration_file'):
-        counters['nonfinite'] -= sum(chain['not_tested'].values())
+        # Samples not tested were fed as NaN: not counted as non-finite (calibrated.py).
+        key = 'non_finite' if 'non_finite' in counters else 'nonfinite'
+        counters[key] -= sum(chain['not_tested'].values())
         facts['not_tested'] = dict(chain['not_tested'])
     return facts
 

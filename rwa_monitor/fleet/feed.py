@@ -11,8 +11,9 @@ checks against ``detect``); about five times less CPU than calling ``update`` fr
 Python for each sample.
 
 It reads the detector's kernel state (``_fs``, ``_ints``, ``_fast``, ``_after``): the
-natural home of this loop is the detector itself (an ``update`` over arrays), where it
-should move once the detector's internals settle.
+natural home of this loop is the detector itself. A detector that has its own loop over
+arrays (``process_arrays``, same contract) is fed through that instead; this module's
+loop then goes.
 """
 
 from __future__ import annotations
@@ -41,6 +42,8 @@ def _until_flag(fs, ints, t, w, f, start):
 def feed(detector: Any, time: np.ndarray, speed: np.ndarray, friction: np.ndarray
          ) -> list[AnomalyEvent]:
     """Feed the samples to ``detector`` in order; return the events (as ``update``)."""
+    if hasattr(detector, 'process_arrays'):     # the detector's own loop, where it has one
+        return detector.process_arrays(time, speed, friction)
     t, w, f = (np.ascontiguousarray(a, dtype=float) for a in (time, speed, friction))
     events: list[AnomalyEvent] = []
     i, n = 0, t.shape[0]
