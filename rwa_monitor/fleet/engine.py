@@ -197,18 +197,25 @@ def _specs(craft: arc.Spacecraft, names: list[str], blocks: Mapping[str, Any],
 
 def _submit(client: Any, plan: list[dict[str, Any]], task_bytes: int
             ) -> dict[tuple[str, str], Any]:
-    """Submit every chain; return (spacecraft, component) -> future of its last step."""
+    """Submit every chain; return (spacecraft, component) -> future of its last step.
+
+    Submitted group by group (the group's reads, then each component's step): earlier
+    tasks have the higher priority, so the scheduler reads a pass when the steps before
+    it are done or running, and a worker holds a few passes, not a spacecraft's archive.
+    """
     finals = {}
     for entry in plan:
-        reads = [client.submit(comp.read, p.path, pure=False) for p in entry['passes']]
-        groups = _groups(entry['passes'], task_bytes)
-        for n, spec in enumerate(entry['specs']):
-            chain = comp.new_chain(entry['prior'].get(spec.component))
-            for first, end in groups:
-                chain = client.submit(comp.step, spec, chain, reads[first:end],
-                                      [p.name for p in entry['passes'][first:end]], n == 0)
-            finals[(spec.spacecraft, spec.component)] = chain  # a dict if no pass to run
-        del reads
+        chains = {s.component: comp.new_chain(entry['prior'].get(s.component))
+                  for s in entry['specs']}
+        for first, end in _groups(entry['passes'], task_bytes):
+            passes = entry['passes'][first:end]
+            reads = [client.submit(comp.read, p.path, pure=False) for p in passes]
+            for n, spec in enumerate(entry['specs']):
+                chains[spec.component] = client.submit(
+                    comp.step, spec, chains[spec.component], reads, [p.name for p in passes],
+                    n == 0)
+        for spec in entry['specs']:
+            finals[(spec.spacecraft, spec.component)] = chains[spec.component]
     return finals
 
 
