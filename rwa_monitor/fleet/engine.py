@@ -213,7 +213,7 @@ def _submit(client: Any, plan: list[dict[str, Any]], task_bytes: int
             for n, spec in enumerate(entry['specs']):
                 chains[spec.component] = client.submit(
                     comp.step, spec, chains[spec.component], reads, [p.name for p in passes],
-                    n == 0)
+                    n == 0, pure=False)
         for spec in entry['specs']:
             finals[(spec.spacecraft, spec.component)] = chains[spec.component]
     return finals
