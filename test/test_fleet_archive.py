@@ -57,3 +57,13 @@ def test_rows_at_or_before_the_last_time_are_dropped(record):
     assert len(kept.wheels['rw1'].friction) == len(kept) == len(record) - 21
     same, none = archive.after(record, -np.inf)
     assert same is record and none == 0
+
+
+def test_events_parquet_takes_fields_of_mixed_types():
+    import io
+    from rwa_monitor.fleet.outputs import _parquet
+    rows = [{'spacecraft': 'a', 'x': 1.5, 'y': None}, {'spacecraft': 'b', 'x': 'text',
+                                                       'y': [1, 2]}]
+    table = pq.read_table(io.BytesIO(_parquet(rows, {})))
+    assert table.column('x').to_pylist() == ['1.5', '"text"']
+    assert table.column('y').to_pylist() == [None, '[1, 2]']

@@ -111,6 +111,8 @@ def run_archive(archive: str | pathlib.Path, *, client: Any = None, workers: int
     result = _assemble(plan, chains, engine)
     result.timings = _timings(chains, wall, _time.process_time() - start_cpu)
     result.summary['engine'].update(result.timings)
+    result.summary['config'] = str(config or 'installed parameters')
+    result.summary['state'] = None if state_dir is None else str(state_dir)
     if state_dir is not None:
         _save_states(pathlib.Path(state_dir), plan, chains)
     return result

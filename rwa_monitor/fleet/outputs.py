@@ -1,7 +1,8 @@
 """The fleet's output folder (docs/contracts.md "Fleet outputs"), every file atomic.
 
 ``events.json`` and ``events.parquet`` (detect's event fields plus ``spacecraft``; in
-Parquet a detail an event lacks is null), ``summary.json``, ``trend.parquet`` (one row per
+Parquet a detail an event lacks is null, and a field whose values differ in type between
+events is written as JSON text), ``summary.json``, ``trend.parquet`` (one row per
 spacecraft, wheel and pass) and ``report.html`` (rwa_monitor/fleet/report.py).
 """
 
@@ -39,9 +40,25 @@ def _parquet(rows: list[dict[str, Any]], empty: dict[str, str]) -> bytes:
     import pyarrow as pa
     import pyarrow.parquet as pq
     if rows:
-        table = pa.Table.from_pylist(rows)
+        try:
+            table = pa.Table.from_pylist(rows)
+        except pa.ArrowException:      # a field of mixed types: that column as JSON text
+            table = pa.Table.from_pylist(_uniform(rows))
     else:
         table = pa.table({k: pa.array([], type=getattr(pa, t)()) for k, t in empty.items()})
     buffer = io.BytesIO()
     pq.write_table(table, buffer)
     return buffer.getvalue()
+
+
+def _uniform(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Return the rows with every field of more than one type written as JSON text."""
+    kinds: dict[str, set] = {}
+    for row in rows:
+        for key, value in row.items():
+            if value is not None:
+                kinds.setdefault(key, set()).add(float if type(value) is int
+                                                 else type(value))
+    mixed = {k for k, found in kinds.items() if len(found) > 1 or found & {list, dict}}
+    return [{k: json.dumps(v) if k in mixed and v is not None else v
+             for k, v in row.items()} for row in rows]
