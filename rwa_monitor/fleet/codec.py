@@ -6,7 +6,10 @@ which every numpy array is replaced by a reference into a dict of arrays (saved 
 :data:`CONFIG_CLASSES` are passed over (a detector's configuration objects, rebuilt from
 its parameters); anything else is refused with :class:`StateError` naming the class, so
 a detector that gains a new kind of attribute fails loudly rather than being half saved.
-To let a new class be saved, add it to the registry below (one place).
+To let a new class be saved, add it to the registry below (one place). Written here
+rather than taken from a library: pickle runs code on load (never on disk here), and the
+general serialisers neither restrict the classes they rebuild nor restore into views of
+a detector's shared state arrays.
 
 :func:`restore` puts a tree back into a freshly constructed detector with the same
 parameters, in place: an array whose shape and dtype match the fresh one is copied into
