@@ -10,14 +10,18 @@ import json
 import shutil
 
 from distributed import Client, LocalCluster
-from fleet_archive import (CUTS_A, CUTS_B, detect_events, events_of, joined_from_files,
-                           make_archive, references, rows)
+from fleet_archive import (as_read, CUTS_A, CUTS_B, detect_events, events_of, joined,
+                           joined_from_files, make_archive, references, rows, write_passes)
 import pytest
+import yaml
 
 from rwa_monitor.cli.main import main
+from rwa_monitor.core.identify.model import plain
 from rwa_monitor.exceptions import ConfigError
 from rwa_monitor.fleet import state
 from rwa_monitor.fleet.engine import run_archive
+from rwa_monitor.pipelines import calibrated
+from rwa_monitor.sim.aocs import add_gyro_channels, named_fault
 from rwa_monitor.sim.friction import parse_anomaly, simulate_friction
 from rwa_monitor.telemetry import write_telemetry
 from rwa_monitor.telemetry.parquet_io import write_parquet
@@ -174,3 +178,24 @@ def test_recording_passes_equal_detect(client, tmp_path):
     assert events_of(result.events, 'sat-r') == reference
     summary = result.summary['spacecraft']['sat-r']
     assert summary['passes'] == names and summary['rows_dropped'] == 100
+
+
+def test_calibrated_gyro_equals_detect(client, tmp_path):
+    """A calibration with a gyro block: the gyro diagnosis uses its thresholds."""
+    healthy = add_gyro_channels(simulate_friction(duration_s=2500, rate_hz=10,
+                                                  wheels=('rw1',), seed=41), seed=42)
+    document, _, _ = calibrated.commission([as_read(healthy, tmp_path)])
+    assert set(document['calibration']['gyro']) == {'x', 'y', 'z'}
+    craft = tmp_path / 'archive' / 'sat-g'
+    craft.mkdir(parents=True)
+    (craft / 'calibration.yaml').write_text(yaml.safe_dump(plain(document), sort_keys=False))
+    tele = simulate_friction(duration_s=3000, rate_hz=10, wheels=('rw1',), seed=43)
+    tele = as_read(add_gyro_channels(tele, fault=named_fault('fast', 2, 1500.0), seed=44),
+                   tmp_path)
+    cuts = [(0, 10000, 'b.csv'), (11000, 20000, 'a.parquet'), (20000, 30000, 'c.csv')]
+    write_passes(craft, tele, cuts)
+    reference = detect_events(joined(tele, cuts, tmp_path / 'joined.csv'),
+                              craft / 'calibration.yaml')
+    assert any(e['component'] == 'gyro_z' for e in reference)
+    result = run_archive(tmp_path / 'archive', client=client, task_bytes=1)
+    assert events_of(result.events, 'sat-g') == reference
