@@ -82,11 +82,16 @@ def test_cli_outputs_and_unreadable_pass(tmp_path):
     (craft / 'p9.csv').write_bytes(b'\xff\xfe junk')
     (craft / 'p8.csv').write_text(broken[0] + '\n')              # header only
     (tmp_path / 'archive' / 'sat-empty').mkdir()
+    broken_cal = tmp_path / 'archive' / 'sat-d'
+    broken_cal.mkdir()
+    shutil.copy(craft / 'p1.csv', broken_cal / 'p1.csv')
+    (broken_cal / 'calibration.yaml').write_text('calibration: [not, a, mapping\n')
     out = tmp_path / 'out'
     code = main(['fleet', str(tmp_path / 'archive'), '-o', str(out), '--workers', '1'])
     assert code == 3
     fleet = json.loads((out / 'summary.json').read_text())['spacecraft']
     assert 'no readable pass' in fleet['sat-empty']['not_examined']['spacecraft']
+    assert 'calibration.yaml' in fleet['sat-d']['not_examined']['spacecraft']
     summary = fleet['sat-c']
     assert summary['not_examined']['pass p8.csv'].endswith('no rows')
     assert 'not a number' in summary['not_examined']['pass p0.csv']
@@ -103,6 +108,7 @@ def test_cli_outputs_and_unreadable_pass(tmp_path):
     for name in ('p0.csv', 'p8.csv', 'p9.csv'):
         (craft / name).unlink()
     (tmp_path / 'archive' / 'sat-empty').rmdir()
+    shutil.rmtree(broken_cal)
     # All examined, nothing found: 0 (seeded; a false alarm in these 6000 fault-free
     # samples has probability below 6000 x 1e-5 = 0.06 by the union bound).
     assert main(['fleet', str(tmp_path / 'archive'), '-o', str(out), '--workers', '1']) == 0

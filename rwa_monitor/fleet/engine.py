@@ -126,7 +126,8 @@ def _plan(client: Any, fleet: list[arc.Spacecraft], blocks: Mapping[str, Any],
     plan = []
     for craft in fleet:
         entry: dict[str, Any] = {'craft': craft, 'unreadable': {}, 'passes': [],
-                                 'specs': [], 'prior': {}, 'done': [], 'error': None}
+                                 'specs': [], 'prior': {}, 'done': [], 'error': None,
+                                 'skipped': []}
         plan.append(entry)
         readable = []
         for path in craft.candidates:
@@ -136,7 +137,11 @@ def _plan(client: Any, fleet: list[arc.Spacecraft], blocks: Mapping[str, Any],
             else:
                 readable.append(found)
         readable.sort(key=lambda p: (p.first, p.name))
-        cal = _calibration(craft)
+        try:
+            cal = _calibration(craft)
+        except ConfigError as err:
+            entry['error'] = str(err)
+            continue
         entry['print'] = state.fingerprint({'llr': blocks['llr'], 'vsadc': blocks['vsadc'],
                                             'calibration': cal[1]})
         if state_dir is not None:
@@ -172,7 +177,7 @@ def _components(entry: dict[str, Any], readable: list[arc.PassFile]) -> list[str
                                      else [])
     for p in list(readable):
         found = arc.components(p.columns)
-        if found != names:
+        if set(found) != set(names):        # column order may differ between passes
             readable.remove(p)
             entry['unreadable'][p.name] = (f'components {", ".join(found) or "none"} differ '
                                            f'from the spacecraft\'s {", ".join(names)}')
