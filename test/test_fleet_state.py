@@ -14,7 +14,8 @@ import pytest
 
 from rwa_monitor.core.llr import LLRDetector
 from rwa_monitor.core.schema import LLR, llr_kwargs, VSADC
-from rwa_monitor.fleet import codec
+from rwa_monitor.exceptions import ConfigError
+from rwa_monitor.fleet import codec, state
 from rwa_monitor.pipelines import vsadc
 from rwa_monitor.sim.aocs import add_gyro_channels, named_fault
 from rwa_monitor.sim.friction import parse_anomaly, simulate_friction
@@ -97,3 +98,30 @@ def test_plain_values_round_trip():
     assert back['a'] == (1, 2.5, float('inf'), None)
     assert back[3] == [0.5, 7] and type(back[3][1]) is np.int64
     assert back['b'] == {1, 2} and np.isnan(back['c'])
+
+
+def _saved_chain(rows):
+    detector = LLRDetector('rw2', **llr_kwargs(LLR.validate({})))
+    for row in rows:
+        detector.update(*row)
+    return {'detector': codec.encode(detector), 'last_time': rows[-1][0], 'offset': 0,
+            'last_ref': None, 'not_tested': {}, 'history': [{'dry': float('nan')}]}
+
+
+def test_state_save_cut_short_keeps_the_previous_state(wheel_rows, tmp_path):
+    first = _saved_chain(wheel_rows[:2000])
+    state.save(tmp_path, 'sat', 'print', [{'name': 'p', 'size': 1}], {'rw2': first})
+    # A later save that wrote its arrays but not its JSON: the old state still loads.
+    state.save(tmp_path / 'next', 'sat', 'print', [], {'rw2': _saved_chain(wheel_rows)})
+    for npz in (tmp_path / 'next').glob('sat.*.npz'):
+        npz.rename(tmp_path / npz.name)
+    passes, chains = state.load(tmp_path, 'sat', 'print')
+    assert passes == [{'name': 'p', 'size': 1}]
+    assert chains['rw2']['last_time'] == first['last_time']
+    assert np.isnan(chains['rw2']['history'][0]['dry'])
+    # A completed save leaves one arrays file; a damaged one is refused.
+    state.save(tmp_path, 'sat', 'print', [], {'rw2': first})
+    (only,) = tmp_path.glob('sat.*.npz')
+    only.write_bytes(only.read_bytes()[:-1] + b'x')
+    with pytest.raises(ConfigError, match='does not match'):
+        state.load(tmp_path, 'sat', 'print')

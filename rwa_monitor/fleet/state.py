@@ -4,15 +4,17 @@
 fingerprint, the passes processed, and per component the detector tree of
 :mod:`rwa_monitor.fleet.codec` with the last stamp and offsets, and the trend rows of
 the passes processed, non-finite values as null) and
-``STATE/<spacecraft>.npz`` (the trees' arrays, ``<component>/<key>``; read with
-``allow_pickle=False``). The JSON names the SHA-256 of the ``.npz``; both are written
-atomically, the ``.npz`` first. A state whose format, version or fingerprint differs
-from this run's is refused (:class:`StateMismatch`), never mixed (docs/contracts.md
-"Fleet state").
+``STATE/<spacecraft>.<sha>.npz`` (the trees' arrays, ``<component>/<key>``; read with
+``allow_pickle=False``), named by the first 16 hex digits of its SHA-256, which the JSON
+holds in full. The ``.npz`` is written first, then the JSON atomically, then the older
+``.npz`` removed: a save cut short leaves the previous state whole. A state whose
+format, version or fingerprint differs from this run's is refused
+(:class:`StateMismatch`), never mixed (docs/contracts.md "Fleet state").
 """
 
 from __future__ import annotations
 
+import glob
 import hashlib
 import io
 import json
@@ -62,8 +64,13 @@ def save(folder: pathlib.Path, spacecraft: str, print_: str, passes: list[dict],
                 'package_version': rwa_monitor.__version__, 'spacecraft': spacecraft,
                 'fingerprint': print_, 'arrays_sha256': hashlib.sha256(data).hexdigest(),
                 'passes': passes, 'components': components}
-    write_bytes_atomic(folder / f'{spacecraft}.npz', data)
+    arrays_file = f'{spacecraft}.{document["arrays_sha256"][:16]}.npz'
+    document['arrays_file'] = arrays_file
+    write_bytes_atomic(folder / arrays_file, data)
     write_text_atomic(folder / f'{spacecraft}.json', json.dumps(document, indent=1) + '\n')
+    for old in folder.glob(f'{glob.escape(spacecraft)}.*.npz'):
+        if old.name != arrays_file:
+            old.unlink()
 
 
 def load(folder: pathlib.Path, spacecraft: str, print_: str
@@ -78,7 +85,7 @@ def load(folder: pathlib.Path, spacecraft: str, print_: str
         return None
     try:
         document = json.loads(path.read_text())
-        data = (folder / f'{spacecraft}.npz').read_bytes()
+        data = (folder / str(document.get('arrays_file'))).read_bytes()
     except (OSError, ValueError) as err:
         raise ConfigError(f'{path}: cannot read the fleet state: {err}') from None
     found = (document.get('format'), document.get('version'),
