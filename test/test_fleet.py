@@ -112,6 +112,15 @@ def test_cli_outputs_and_unreadable_pass(tmp_path):
     # All examined, nothing found: 0 (seeded; a false alarm in these 6000 fault-free
     # samples has probability below 6000 x 1e-5 = 0.06 by the union bound).
     assert main(['fleet', str(tmp_path / 'archive'), '-o', str(out), '--workers', '1']) == 0
+    # Outputs that cannot be written: exit 2 and the state does not move on.
+    blocked, kept = tmp_path / 'blocked', tmp_path / 'state'
+    blocked.write_text('a file, not a folder')
+    assert main(['fleet', str(tmp_path / 'archive'), '-o', str(blocked), '--state',
+                 str(kept), '--workers', '1']) == 2
+    assert not list(kept.glob('*.json'))
+    assert main(['fleet', str(tmp_path / 'archive'), '-o', str(out), '--state', str(kept),
+                 '--workers', '1']) == 0
+    assert (kept / 'sat-c.json').exists()
 
 
 def _partial(folder, target, keep):

@@ -55,8 +55,10 @@ def run(args: argparse.Namespace) -> int:
             raise OutputError(f'{path}: the {name} folder must be outside the archive '
                               f'{args.archive} (it would be read as a spacecraft)')
     result = run_archive(args.archive, workers=args.workers, scheduler=args.scheduler,
-                         config=args.config, state_dir=args.state, progress=True)
+                         config=args.config, state_dir=args.state, progress=True,
+                         commit=False)
     write_outputs(args.output, result)
+    result.commit()          # the state moves on only once this run's outputs are written
     crafts = result.summary['spacecraft']
     print(f'wrote {args.output}: {len(result.events)} events from {len(crafts)} spacecraft '
           f'in {result.timings["wall_s"]:.1f} s')

@@ -17,13 +17,14 @@ The cluster is a ``LocalCluster`` of ``workers`` processes started here, or the 
 from __future__ import annotations
 
 import contextlib
-from dataclasses import dataclass, field
+from dataclasses import dataclass
+import functools
 import logging
 import math
 import pathlib
 import sys
 import time as _time
-from typing import Any, Iterator, Mapping
+from typing import Any, Callable, Iterator, Mapping
 
 from rwa_monitor.core.schema import LLR, VSADC
 from rwa_monitor.exceptions import ConfigError
@@ -46,7 +47,13 @@ class FleetResult:
     timings: dict[str, Any]
     anomaly: bool = False
     incomplete: bool = False
-    states: dict[str, Any] = field(default_factory=dict)
+    save_state: Callable[[], None] | None = None
+
+    def commit(self) -> None:
+        """Write the detector state of this run into the ``--state`` folder (if any)."""
+        if self.save_state is not None:
+            self.save_state()
+            self.save_state = None
 
 
 @contextlib.contextmanager
@@ -86,12 +93,15 @@ def node_blocks(config_path: pathlib.Path | None) -> dict[str, dict[str, Any]]:
 def run_archive(archive: str | pathlib.Path, *, client: Any = None, workers: int = 2,
                 scheduler: str | None = None, config: pathlib.Path | None = None,
                 state_dir: pathlib.Path | None = None, progress: bool = False,
-                task_bytes: int = TASK_BYTES) -> FleetResult:
+                task_bytes: int = TASK_BYTES, commit: bool = True) -> FleetResult:
     """Run the fleet over ``archive`` and return the result (saves the state if given).
 
     ``client``: an existing distributed Client (else one is made from ``workers`` or
     ``scheduler``); ``task_bytes``: passes per ``step`` task, by their files' bytes (1:
-    one pass per task). Raise ConfigError for bad parameters or a refused state.
+    one pass per task). ``commit``: save the state at once; else the caller calls
+    ``result.commit()`` once the outputs are written (the command does, so that a run
+    whose outputs fail leaves the state where it was). Raise ConfigError for bad
+    parameters or a refused state.
     """
     blocks = node_blocks(config)
     fleet = arc.list_archive(archive)
@@ -114,7 +124,10 @@ def run_archive(archive: str | pathlib.Path, *, client: Any = None, workers: int
     result.summary['config'] = str(config or 'installed parameters')
     result.summary['state'] = None if state_dir is None else str(state_dir)
     if state_dir is not None:
-        _save_states(pathlib.Path(state_dir), plan, chains)
+        result.save_state = functools.partial(_save_states, pathlib.Path(state_dir), plan,
+                                              chains)
+        if commit:
+            result.commit()
     return result
 
 

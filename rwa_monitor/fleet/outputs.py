@@ -13,6 +13,7 @@ import json
 import pathlib
 from typing import Any
 
+from rwa_monitor.exceptions import OutputError
 from rwa_monitor.telemetry.atomic import write_bytes_atomic, write_text_atomic
 
 TREND_COLUMNS = {'spacecraft': 'string', 'wheel': 'string', 'pass': 'string',
@@ -23,7 +24,10 @@ TREND_COLUMNS = {'spacecraft': 'string', 'wheel': 'string', 'pass': 'string',
 
 def write_outputs(out: pathlib.Path, result: Any) -> list[pathlib.Path]:
     """Write the five output files of a FleetResult into ``out``; return their paths."""
-    out.mkdir(parents=True, exist_ok=True)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise OutputError(f'{out}: cannot make the output folder: {err}') from None
     paths = [out / name for name in ('events.json', 'events.parquet', 'summary.json',
                                      'trend.parquet', 'report.html')]
     write_text_atomic(paths[0], json.dumps({'events': result.events}, indent=1) + '\n')
