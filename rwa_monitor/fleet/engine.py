@@ -70,8 +70,10 @@ def dask_client(workers: int = 2, scheduler: str | None = None) -> Iterator[Any]
         return
     if workers < 1:
         raise ConfigError(f'--workers must be at least 1, got {workers}')
+    # No dashboard; the scheduler's small HTTP server on a free port of this machine only.
     with LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                      dashboard_address=None, silence_logs=logging.ERROR) as cluster, \
+                      dashboard_address=None, silence_logs=logging.ERROR,
+                      scheduler_kwargs={'dashboard_address': '127.0.0.1:0'}) as cluster, \
             Client(cluster) as client:
         yield client
 
@@ -134,44 +136,64 @@ def run_archive(archive: str | pathlib.Path, *, client: Any = None, workers: int
 def _plan(client: Any, fleet: list[arc.Spacecraft], blocks: Mapping[str, Any],
           state_dir: pathlib.Path | None) -> list[dict[str, Any]]:
     """Return per spacecraft: specs, passes to run in time order, prior chains, issues."""
-    paths = [p for craft in fleet for p in craft.candidates]
+    plan = [_prior(craft, blocks, state_dir) for craft in fleet]
+    paths = [p for entry in plan for p in entry['to_scan']]
     scans = dict(zip(paths, client.gather(client.map(arc.scan_pass, paths, pure=False))))
-    plan = []
-    for craft in fleet:
-        entry: dict[str, Any] = {'craft': craft, 'unreadable': {}, 'passes': [],
-                                 'specs': [], 'prior': {}, 'done': [], 'error': None,
-                                 'skipped': []}
-        plan.append(entry)
+    for entry in plan:
         readable = []
-        for path in craft.candidates:
+        for path in entry.pop('to_scan'):
             found = scans[path]
             if isinstance(found, str):
                 entry['unreadable'][pathlib.Path(path).name] = found
             else:
                 readable.append(found)
-        readable.sort(key=lambda p: (p.first, p.name))
-        try:
-            cal = _calibration(craft)
-        except ConfigError as err:
-            entry['error'] = str(err)
+        if entry['error']:
             continue
-        entry['print'] = state.fingerprint({'llr': blocks['llr'], 'vsadc': blocks['vsadc'],
-                                            'calibration': cal[1]})
-        if state_dir is not None:
-            saved = state.load(pathlib.Path(state_dir), craft.id, entry['print'])
-            if saved is not None:
-                entry['done'], entry['prior'] = saved
-        done = {(p['name'], p['size']) for p in entry['done']}
-        entry['skipped'] = [p.name for p in readable if (p.name, p.size) in done]
-        readable = [p for p in readable if (p.name, p.size) not in done]
+        readable.sort(key=lambda p: (p.first, p.name))
         names = _components(entry, readable)
         try:
-            entry['specs'] = _specs(craft, names, blocks, cal[0])
+            entry['specs'] = _specs(entry['craft'], names, blocks, entry['calibration'])
         except ConfigError as err:
             entry['error'] = str(err)
             continue
         entry['passes'] = readable
     return plan
+
+
+def _prior(craft: arc.Spacecraft, blocks: Mapping[str, Any],
+           state_dir: pathlib.Path | None) -> dict[str, Any]:
+    """Return a spacecraft's plan entry: calibration, saved state, passes left to scan.
+
+    Passes the state holds (same name and size) are not scanned again.
+    """
+    entry: dict[str, Any] = {'craft': craft, 'unreadable': {}, 'passes': [], 'specs': [],
+                             'prior': {}, 'done': [], 'error': None, 'skipped': [],
+                             'to_scan': list(craft.candidates), 'calibration': ''}
+    try:
+        entry['calibration'], text = _calibration(craft)
+    except ConfigError as err:
+        entry['error'] = str(err)
+        return entry
+    entry['print'] = state.fingerprint({'llr': blocks['llr'], 'vsadc': blocks['vsadc'],
+                                        'calibration': text})
+    if state_dir is not None:
+        saved = state.load(pathlib.Path(state_dir), craft.id, entry['print'])
+        if saved is not None:
+            entry['done'], entry['prior'] = saved
+    done = {(p['name'], p['size']) for p in entry['done']}
+    here = {path: (pathlib.Path(path).name, _size(path)) for path in craft.candidates}
+    entry['skipped'] = [p['name'] for p in entry['done']
+                        if (p['name'], p['size']) in here.values()]
+    entry['to_scan'] = [path for path, key in here.items() if key not in done]
+    return entry
+
+
+def _size(path: str) -> int:
+    """Return a pass's size in bytes, or -1 if it cannot be read now."""
+    try:
+        return arc.size_of(path)
+    except OSError:
+        return -1
 
 
 def _calibration(craft: arc.Spacecraft) -> tuple[str, str | None]:
