@@ -114,7 +114,7 @@ def _env():
 
 # `detect` reports its finding in the exit code (its --help): 1 anomaly found, 3 not
 # everything examined; 2 is its error.
-RESULT_CODES = {'rwa-monitor detect': (0, 1, 3)}
+RESULT_CODES = {'rwa-monitor detect': (0, 1, 3), 'rwa-monitor fleet': (0, 1, 3)}
 
 
 def _run(command, cwd, env, timeout=600):

@@ -1,7 +1,8 @@
 """Telemetry files: CSV (the schema of DESIGN.md) and rosbag2 recordings, by path.
 
 A rosbag2 folder (``metadata.yaml`` with ``.mcap`` or ``.db3`` storage) or a bare ``.mcap``
-or ``.db3`` file is a recording (rosbag_io); anything else is read as CSV. Writing: a
+or ``.db3`` file is a recording (rosbag_io); a ``.parquet`` file is read by parquet_io;
+anything else is read as CSV. Writing: a
 ``.mcap`` or ``.db3`` path writes a bare file, a path without a suffix (or an existing
 recording folder) a rosbag2 folder, any other path CSV.
 """
@@ -54,6 +55,9 @@ def read_telemetry(path: str | os.PathLike,
     if os.path.isdir(path):
         raise TelemetrySchemaError(os.fspath(path), 'a folder without metadata.yaml is not '
                                    'a rosbag2 recording')
+    from rwa_monitor.telemetry import parquet_io
+    if parquet_io.is_parquet(path):
+        return parquet_io.read_parquet(path)
     return read_csv(path)
 
 

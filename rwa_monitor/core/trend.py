@@ -1,0 +1,226 @@
+"""Friction over a wheel's life: per-pass levels and their trend in time (docs/fleet.md).
+
+Not in the papers. :func:`pass_levels` fits the dry and viscous levels of one downlink
+pass of one wheel by least squares on model (1) of the llr-realtime paper (eq. (1)-(2),
+``f = -f_d sign(w) - f_v w + e``; with a calibration, on ``f`` minus the nominal model, so
+the levels are the change against nominal). :func:`wheel_trend` fits a straight line to a
+wheel's pass levels by weighted least squares, tests a zero slope and projects the time
+at which the line crosses a limit.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+import math
+
+import numpy as np
+import scipy.linalg
+import scipy.stats
+
+from rwa_monitor.core.friction import coulomb_viscous, least_squares
+from rwa_monitor.core.llr_noise import DEFAULT_AR_ORDER, fit_noise_model
+from rwa_monitor.core.params import check_int, check_real
+
+SECONDS_PER_DAY = 86400.0
+# Samples slower than this are dropped from a pass fit: at rest sign(w) carries no dry
+# information, and near zero real wheels leave model (1) (stiction, the low-speed band of
+# docs/calibration.md).
+MIN_SPEED_RAD_S = 1.0
+# A pass needs this many usable samples, and dry and viscous columns that are not nearly
+# collinear (det of their correlation matrix above MIN_EXCITATION, as the detector's
+# min_excitation), for its levels to be estimated.
+MIN_PASS_SAMPLES = 20
+MIN_EXCITATION = 1.0e-6
+# Two-sided level of the crossing-time interval.
+CROSSING_LEVEL = 0.95
+
+
+@dataclass(frozen=True)
+class PassLevels:
+    """Dry (N m) and viscous (N m s/rad) levels of one pass of one wheel, with standard errors.
+
+    ``samples``: samples used; ``nonfinite`` and ``slow`` (``|w| < min_speed``): samples
+    dropped. Levels and errors are NaN when the pass cannot separate them (``reason``
+    says why: ``too_few_samples`` or ``not_excited``; empty when estimated).
+    """
+
+    t_start: float
+    t_end: float
+    samples: int
+    dry: float
+    dry_se: float
+    viscous: float
+    viscous_se: float
+    nonfinite: int = 0
+    slow: int = 0
+    ar_order: int = 0
+    reason: str = ''
+
+
+@dataclass(frozen=True)
+class Crossing:
+    """Projected time (s, telemetry time) at which a trend line reaches ``limit``.
+
+    ``low``/``high``: the interval of times at which the line's two-sided
+    ``CROSSING_LEVEL`` confidence band contains the limit (``-inf``/``inf`` where the band
+    never leaves it: the slope is not known well enough to bound the crossing).
+    """
+
+    limit: float
+    time: float
+    low: float
+    high: float
+
+
+@dataclass(frozen=True)
+class Trend:
+    """Straight-line trend of one wheel's pass levels.
+
+    ``slope`` per day (level units / day) with ``slope_se``; ``p_value``: two-sided test
+    of a zero slope (Student t, ``dof = passes - 2``); ``intercept``: the line's level at
+    time 0 of the time axis; ``scale``: the factor fitted on the given standard errors
+    (sqrt of the reduced chi-square; 1 when they describe the scatter exactly);
+    ``crossing``: the projection onto ``limit`` (None without limit or with a zero slope).
+    NaN statistics when fewer than 3 passes have finite levels.
+    """
+
+    slope: float
+    slope_se: float
+    p_value: float
+    intercept: float
+    passes: int
+    dof: int
+    scale: float
+    crossing: Crossing | None = None
+
+
+def pass_levels(time: np.ndarray, speed: np.ndarray, friction: np.ndarray,
+                nominal_friction: np.ndarray | None = None, *,
+                min_speed: float = MIN_SPEED_RAD_S,
+                max_ar_order: int = DEFAULT_AR_ORDER) -> PassLevels:
+    """Return the least-squares dry and viscous levels of one pass (eq. (2)).
+
+    Rows ``h = -[sign(w), w]`` (eq. (1), core/friction.py), target ``friction -
+    nominal_friction`` (or ``friction``). Samples with any non-finite value, or ``|w| <
+    min_speed``, are dropped and counted. Standard errors: the residual of the fit gets
+    the project's AR noise model (llr_noise.fit_noise_model, order by BIC up to
+    ``max_ar_order``); the covariance is ``sigma_LR^2 (H^T H)^-1`` with ``sigma_LR^2`` the
+    long-run variance of the residual (its variance times ``long_run_ratio``), which is
+    the sandwich covariance of least squares under serially correlated noise when the
+    regressors vary slowly against the noise's correlation time (a wheel's speed does;
+    white noise gives the textbook ``s^2 (H^T H)^-1``).
+    """
+    t = np.asarray(time, dtype=float).reshape(-1)
+    w = np.asarray(speed, dtype=float).reshape(-1)
+    f = np.asarray(friction, dtype=float).reshape(-1)
+    if nominal_friction is not None:
+        f = f - np.asarray(nominal_friction, dtype=float).reshape(-1)
+    if not t.size == w.size == f.size:
+        raise ValueError(f'time, speed, friction (and nominal_friction) must have one length; '
+                         f'got {t.size}, {w.size}, {f.size}')
+    min_speed = check_real('min_speed', min_speed, 0.0)
+    max_ar_order = check_int('max_ar_order', max_ar_order, 0, 10)
+    finite = np.isfinite(t) & np.isfinite(w) & np.isfinite(f)
+    used = finite & (np.abs(w) >= min_speed)
+    n = int(np.count_nonzero(used))
+    t_used = t[used]
+    span = (float(t_used.min()), float(t_used.max())) if n else (
+        (float(np.nanmin(t)), float(np.nanmax(t))) if np.isfinite(t).any() else
+        (math.nan, math.nan))
+    counts = {'nonfinite': int(np.count_nonzero(~finite)),
+              'slow': int(np.count_nonzero(finite & ~used))}
+    nan = math.nan
+    if n < MIN_PASS_SAMPLES:
+        return PassLevels(*span, n, nan, nan, nan, nan, **counts, reason='too_few_samples')
+    h = coulomb_viscous().matrix(w[used])
+    y = f[used]
+    gram = h.T @ h
+    d = np.sqrt(np.diag(gram))
+    if not (d > 0).all() or np.linalg.det(gram / np.outer(d, d)) < MIN_EXCITATION:
+        return PassLevels(*span, n, nan, nan, nan, nan, **counts, reason='not_excited')
+    x = least_squares(h, y)
+    noise = fit_noise_model(h, y, max_ar_order)
+    variance = noise.residual_std ** 2 * noise.long_run_ratio
+    cov = variance * np.linalg.inv(gram)
+    return PassLevels(*span, n, float(x[0]), math.sqrt(cov[0, 0]), float(x[1]),
+                      math.sqrt(cov[1, 1]), **counts, ar_order=len(noise.ar))
+
+
+def wheel_trend(times: np.ndarray, levels: np.ndarray, standard_errors: np.ndarray,
+                limit: float | None = None) -> Trend:
+    """Return the weighted least-squares line through a wheel's pass levels.
+
+    ``times`` in s (e.g. each pass's mid time), ``levels`` and ``standard_errors`` from
+    :func:`pass_levels`; passes with a non-finite value or a standard error <= 0 are left
+    out. Model: ``level_i = a + b t_i + e_i``, ``e_i`` independent normal with variance
+    ``sigma^2 se_i^2`` and ``sigma`` unknown (fitted: the reduced chi-square), so the
+    t statistic ``b / se(b)`` has a Student t distribution with ``passes - 2`` degrees of
+    freedom under a zero slope (exact under the model; docs/fleet.md lists what breaks
+    it). With ``limit``: :class:`Crossing` of the line, its interval by inverting the
+    confidence band of the line (Fieller's method).
+    """
+    t = np.asarray(times, dtype=float).reshape(-1)
+    y = np.asarray(levels, dtype=float).reshape(-1)
+    se = np.asarray(standard_errors, dtype=float).reshape(-1)
+    if not t.size == y.size == se.size:
+        raise ValueError(f'times, levels and standard_errors must have one length; got '
+                         f'{t.size}, {y.size}, {se.size}')
+    if limit is not None:
+        limit = check_real('limit', limit)
+    ok = np.isfinite(t) & np.isfinite(y) & np.isfinite(se) & (se > 0)
+    t, y, se = t[ok], y[ok], se[ok]
+    n = int(t.size)
+    if n < 3 or np.ptp(t) == 0:
+        nan = math.nan
+        return Trend(nan, nan, nan, nan, n, max(n - 2, 0), nan)
+    weight = 1.0 / se ** 2
+    centre = float(np.sum(weight * t) / np.sum(weight))
+    days = (t - centre) / SECONDS_PER_DAY
+    root_w = np.sqrt(weight)
+    design = np.column_stack([root_w, root_w * days])
+    level_c, slope = scipy.linalg.lstsq(design, root_w * y)[0]
+    resid = root_w * (y - level_c - slope * days)
+    dof = n - 2
+    scale2 = float(resid @ resid) / dof
+    # Centred at the weighted mean time the two estimates are uncorrelated.
+    var_c = scale2 / float(np.sum(weight))
+    var_b = scale2 / float(np.sum(weight * days ** 2))
+    slope_se = math.sqrt(var_b)
+    p_value = (float(2.0 * scipy.stats.t.sf(abs(slope) / slope_se, dof)) if slope_se > 0
+               else (0.0 if slope != 0 else 1.0))
+    intercept = float(level_c - slope * centre / SECONDS_PER_DAY)
+    crossing = None
+    if limit is not None and slope != 0:
+        crossing = _crossing(limit, float(level_c), float(slope), var_c, var_b, dof, centre)
+    return Trend(float(slope), slope_se, p_value, intercept, n, dof, math.sqrt(scale2),
+                 crossing)
+
+
+def _crossing(limit: float, level_c: float, slope: float, var_c: float, var_b: float,
+              dof: int, centre: float) -> Crossing:
+    """Fieller interval of the time where ``level_c + slope u`` (u in days) equals ``limit``.
+
+    The times ``u`` at which the limit lies inside the confidence band: ``(level_c + slope
+    u - limit)^2 <= q^2 (var_c + u^2 var_b)``, ``q`` the two-sided t quantile; a quadratic
+    ``A u^2 + B u + C <= 0``. ``A > 0`` (slope significant at that level): a finite
+    interval; otherwise the set is unbounded on the side(s) the slope cannot exclude.
+    """
+    q = float(scipy.stats.t.ppf(0.5 + CROSSING_LEVEL / 2.0, dof))
+    gap = level_c - limit
+    u_hat = -gap / slope
+    a = slope ** 2 - q ** 2 * var_b
+    b = 2.0 * slope * gap
+    c = gap ** 2 - q ** 2 * var_c
+    disc = b * b - 4.0 * a * c
+    if a > 0 and disc >= 0:
+        roots = sorted(((-b - math.sqrt(disc)) / (2 * a), (-b + math.sqrt(disc)) / (2 * a)))
+        low, high = roots
+    elif a < 0 and disc > 0:
+        # The band contains the limit outside the two roots: unbounded on both sides
+        # of the gap; the side holding the estimate is reported.
+        roots = sorted(((-b - math.sqrt(disc)) / (2 * a), (-b + math.sqrt(disc)) / (2 * a)))
+        low, high = (roots[1], math.inf) if u_hat >= roots[1] else (-math.inf, roots[0])
+    else:
+        low, high = -math.inf, math.inf
+    to_s = SECONDS_PER_DAY
+    return Crossing(limit, centre + u_hat * to_s, centre + low * to_s, centre + high * to_s)

@@ -1,0 +1,156 @@
+"""A fleet archive on disk: one folder per spacecraft, its passes and its calibration.
+
+``ARCHIVE/<spacecraft>/`` holds recordings in any number and names: CSV files
+(``.csv``), Parquet files (``.parquet``) with the same columns, rosbag2 folders and bare
+``.mcap`` / ``.db3`` files (:func:`rwa_monitor.telemetry.read_telemetry` reads them all),
+and optionally ``calibration.yaml`` (``rwa-monitor calibrate``). Anything else is listed
+as ignored. :func:`scan_pass` finds a pass's first stamp and columns cheaply (the first
+row of a CSV file, the time column of a Parquet file, the whole of a recording), so
+that passes are ordered by time, never by name.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+import os
+import pathlib
+
+import numpy as np
+
+from rwa_monitor.exceptions import ConfigError, RwaMonitorError
+from rwa_monitor.telemetry import parquet_io, read_telemetry, rosbag_io, Telemetry, Wheel
+from rwa_monitor.telemetry.schema import ATTITUDE, FRICTION_SUFFIX, GYRO, SPEED_SUFFIX, TIME
+
+CALIBRATION = 'calibration.yaml'
+GYRO_COMPONENT = 'gyro'
+
+
+@dataclass(frozen=True)
+class PassFile:
+    """A readable pass: its name in the spacecraft's folder, path, size and first stamp."""
+
+    name: str
+    path: str
+    size: int
+    first: float
+    columns: tuple[str, ...]
+
+
+@dataclass
+class Spacecraft:
+    """One spacecraft's folder: candidate passes, calibration and the entries ignored."""
+
+    id: str
+    folder: str
+    calibration: str | None
+    candidates: list[str] = field(default_factory=list)
+    ignored: dict[str, str] = field(default_factory=dict)
+
+
+def list_archive(archive: str | os.PathLike) -> list[Spacecraft]:
+    """Return the spacecraft of an archive (sorted by id); ConfigError if there are none."""
+    root = pathlib.Path(archive)
+    if not root.is_dir():
+        raise ConfigError(f'{root}: not a folder (expected ARCHIVE/<spacecraft>/<passes>)')
+    fleet = []
+    for folder in sorted(p for p in root.iterdir() if p.is_dir()
+                         and not p.name.startswith('.')):
+        cal = folder / CALIBRATION
+        craft = Spacecraft(folder.name, str(folder), str(cal) if cal.is_file() else None)
+        for entry in sorted(folder.iterdir()):
+            if entry.name.startswith('.') or entry.name == CALIBRATION:
+                continue
+            if is_pass(entry):
+                craft.candidates.append(str(entry))
+            else:
+                craft.ignored[entry.name] = ('not a recording (expected .csv, .parquet, '
+                                             '.mcap, .db3 or a rosbag2 folder)')
+        fleet.append(craft)
+    if not fleet:
+        raise ConfigError(f'{root}: no spacecraft folder')
+    return fleet
+
+
+def is_pass(path: pathlib.Path) -> bool:
+    """Return True for a path the readers take as a pass."""
+    if rosbag_io.is_recording(path):
+        return True
+    return path.is_file() and (path.suffix.lower() == '.csv' or parquet_io.is_parquet(path))
+
+
+def size_of(path: str) -> int:
+    """Return the size in bytes of a file or of a folder's files."""
+    target = pathlib.Path(path)
+    if target.is_dir():
+        return sum(p.stat().st_size for p in target.rglob('*') if p.is_file())
+    return target.stat().st_size
+
+
+def scan_pass(path: str) -> PassFile | str:
+    """Return the pass's first stamp and columns, or the reason it cannot be read."""
+    name = pathlib.Path(path).name
+    try:
+        if parquet_io.is_parquet(path):
+            first, columns = parquet_io.first_stamp(path)
+        elif rosbag_io.is_recording(path):
+            tele = read_telemetry(path)
+            first, columns = float(tele.time[0]), list(tele.columns())
+        else:
+            first, columns = _csv_first(path)
+        return PassFile(name, path, size_of(path), first, tuple(columns))
+    except (RwaMonitorError, OSError, ValueError, IndexError) as err:
+        return f'{type(err).__name__}: {err}'
+
+
+def _csv_first(path: str) -> tuple[float, list[str]]:
+    """Return the first time and the header of a CSV file (its first two lines only)."""
+    import csv
+    with open(path, newline='', encoding='utf-8-sig') as handle:
+        reader = csv.reader(handle)
+        header = [c.strip() for c in next(reader, [])]
+        row = next(reader, None)
+    if TIME not in header:
+        raise ValueError(f'{path}: no {TIME} column in the header')
+    if row is None:
+        raise ValueError(f'{path}: no rows')
+    return float(row[header.index(TIME)]), header
+
+
+def components(columns: tuple[str, ...]) -> list[str]:
+    """Return the components a pass with these columns feeds: wheels (friction), gyro."""
+    found = [c[:-len(FRICTION_SUFFIX)] for c in columns if c.endswith(FRICTION_SUFFIX)
+             and c[:-len(FRICTION_SUFFIX)] + SPEED_SUFFIX in columns]
+    if all(c in columns for c in GYRO + ATTITUDE):
+        found.append(GYRO_COMPONENT)
+    return found
+
+
+def read_pass(path: str) -> Telemetry | str:
+    """Return a pass's telemetry, or the reason it cannot be read (never raises on data)."""
+    try:
+        tele = read_telemetry(path)
+    except (RwaMonitorError, OSError, ValueError) as err:
+        return f'{type(err).__name__}: {err}'
+    if not len(tele):
+        return 'no rows'
+    return tele
+
+
+def after(tele: Telemetry, last_time: float) -> tuple[Telemetry, int]:
+    """Return the rows stamped after ``last_time`` and the number dropped (a prefix)."""
+    start = int(np.searchsorted(tele.time, last_time, side='right'))
+    if start == 0:
+        return tele, 0
+
+    def cut(values: np.ndarray | None) -> np.ndarray | None:
+        return None if values is None else values[start:]
+
+    kept = Telemetry(
+        time=tele.time[start:],
+        wheels={k: Wheel(cut(w.speed), cut(w.friction)) for k, w in tele.wheels.items()},
+        gyro=cut(tele.gyro), attitude=cut(tele.attitude),
+        reference_rate=cut(tele.reference_rate),
+        aux={k: cut(v) for k, v in tele.aux.items()},
+        truth={k: cut(v) for k, v in tele.truth.items()}, source=tele.source,
+        present={k: cut(m) for k, m in tele.present.items()})
+    return kept, start

@@ -1,0 +1,83 @@
+"""Telemetry Parquet files: the CSV schema's columns (docs/contracts.md), one row per sample.
+
+Read with pyarrow: every column must be numeric (null cells are read as NaN, as empty CSV
+cells are); ``time`` must be finite and strictly increasing, checked as for CSV. Written
+by :func:`write_parquet` (tests and the archive tools).
+"""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+
+from rwa_monitor.exceptions import TelemetrySchemaError
+from rwa_monitor.telemetry.atomic import atomic_write
+from rwa_monitor.telemetry.csv_io import _check_time
+from rwa_monitor.telemetry.schema import Telemetry, TIME
+
+SUFFIX = '.parquet'
+
+
+def is_parquet(path: str | os.PathLike) -> bool:
+    """Return True for a path ending in ``.parquet`` (any case)."""
+    return os.fspath(path).lower().endswith(SUFFIX)
+
+
+def read_parquet(path: str | os.PathLike, columns: list[str] | None = None) -> Telemetry:
+    """Read a telemetry Parquet file; raise TelemetrySchemaError naming the file and column.
+
+    ``columns``: read only these (``time`` is always read); None: every column.
+    """
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+    path = os.fspath(path)
+    try:
+        names = pq.read_schema(path).names
+        wanted = names if columns is None else [c for c in names
+                                                if c == TIME or c in columns]
+        table = pq.read_table(path, columns=wanted)
+    except (OSError, pa.ArrowException) as err:
+        raise TelemetrySchemaError(path, f'not a readable Parquet file: {err}') from None
+    if TIME not in table.column_names:
+        raise TelemetrySchemaError(path, 'missing required column', column=TIME)
+    data: dict[str, np.ndarray] = {}
+    for name in table.column_names:
+        column = table.column(name)
+        if not (pa.types.is_floating(column.type) or pa.types.is_integer(column.type)):
+            raise TelemetrySchemaError(path, f'not a numeric column ({column.type})',
+                                       column=name)
+        data[name] = column.to_numpy(zero_copy_only=False).astype(float)
+    _check_time(path, data[TIME])
+    try:
+        return Telemetry.from_columns(data, source=path)
+    except KeyError as err:
+        raise TelemetrySchemaError(path, 'missing column(s) of a group',
+                                   column=err.args[0]) from None
+
+
+def first_stamp(path: str | os.PathLike) -> tuple[float, list[str]]:
+    """Return the first ``time`` of a Parquet file and its column names (reads one column)."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+    path = os.fspath(path)
+    try:
+        names = pq.read_schema(path).names
+        if TIME not in names:
+            raise TelemetrySchemaError(path, 'missing required column', column=TIME)
+        times = pq.read_table(path, columns=[TIME]).column(TIME)
+    except (OSError, pa.ArrowException) as err:
+        raise TelemetrySchemaError(path, f'not a readable Parquet file: {err}') from None
+    if len(times) == 0:
+        raise TelemetrySchemaError(path, 'no rows')
+    return float(times[0].as_py()), names
+
+
+def write_parquet(path: str | os.PathLike, telemetry: Telemetry) -> None:
+    """Write a telemetry record as Parquet (float64 columns, canonical order), atomically."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+    table = pa.table({name: np.asarray(values, dtype=float)
+                      for name, values in telemetry.columns().items()})
+    with atomic_write(path, 'wb', encoding=None) as handle:
+        pq.write_table(table, handle)

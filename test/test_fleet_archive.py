@@ -1,0 +1,69 @@
+"""Fleet archive pieces without a cluster: Parquet passes, scans, the drop of old rows."""
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
+import pytest
+
+from rwa_monitor.exceptions import TelemetrySchemaError
+from rwa_monitor.fleet import archive
+from rwa_monitor.sim.friction import simulate_friction
+from rwa_monitor.telemetry import read_telemetry, Telemetry, write_telemetry
+from rwa_monitor.telemetry.parquet_io import write_parquet
+
+
+@pytest.fixture
+def record():
+    return simulate_friction(duration_s=60, rate_hz=10, wheels=('rw1', 'rw2'), seed=1)
+
+
+def test_parquet_round_trip_and_detect_reader(record, tmp_path):
+    path = tmp_path / 'p.parquet'
+    write_parquet(path, record)
+    back = read_telemetry(path)
+    for name, values in record.columns().items():
+        assert np.array_equal(back.columns()[name], values)
+
+
+@pytest.mark.parametrize('table, message', [
+    ({'t': [0.0, 1.0]}, "column 'time'"),
+    ({'time': [0.0, 0.0], 'rw1_speed': [1.0, 2.0]}, 'strictly increasing'),
+    ({'time': [0.0, 1.0], 'rw1_speed': ['a', 'b']}, 'not a numeric column'),
+    ({'time': [0.0, 1.0], 'rw1_friction': [1.0, 2.0]}, 'rw1_speed'),
+])
+def test_parquet_schema_errors_name_file_and_column(tmp_path, table, message):
+    path = tmp_path / 'bad.parquet'
+    pq.write_table(pa.table(table), path)
+    with pytest.raises(TelemetrySchemaError, match=message) as err:
+        read_telemetry(path)
+    assert str(path) in str(err.value)
+
+
+def test_scan_orders_by_first_stamp_and_names_components(record, tmp_path):
+    cols = record.columns()
+    first = {k: v[:300] for k, v in cols.items()}
+    second = {k: v[300:] for k, v in cols.items()}
+    write_telemetry(tmp_path / 'b.csv', Telemetry.from_columns(first))
+    write_parquet(tmp_path / 'a.parquet', Telemetry.from_columns(second))
+    scans = [archive.scan_pass(str(tmp_path / n)) for n in ('a.parquet', 'b.csv')]
+    assert [s.first for s in scans] == [30.0, 0.0]
+    assert archive.components(scans[0].columns) == ['rw1', 'rw2']
+    assert archive.scan_pass(str(tmp_path / 'missing.csv')).startswith('FileNotFoundError')
+
+
+def test_rows_at_or_before_the_last_time_are_dropped(record):
+    kept, dropped = archive.after(record, 2.0)
+    assert dropped == 21 and kept.time[0] == pytest.approx(2.1)
+    assert len(kept.wheels['rw1'].friction) == len(kept) == len(record) - 21
+    same, none = archive.after(record, -np.inf)
+    assert same is record and none == 0
+
+
+def test_events_parquet_takes_fields_of_mixed_types():
+    import io
+    from rwa_monitor.fleet.outputs import _parquet
+    rows = [{'spacecraft': 'a', 'x': 1.5, 'y': None}, {'spacecraft': 'b', 'x': 'text',
+                                                       'y': [1, 2]}]
+    table = pq.read_table(io.BytesIO(_parquet(rows, {})))
+    assert table.column('x').to_pylist() == ['1.5', '"text"']
+    assert table.column('y').to_pylist() == [None, '[1, 2]']

@@ -1,0 +1,83 @@
+"""The fleet's report.html (rwa_monitor/fleet/report.py): self-contained, every wheel shown."""
+
+import base64
+import re
+
+import numpy as np
+import pytest
+
+from rwa_monitor.core.trend import SECONDS_PER_DAY
+from rwa_monitor.fleet.report import wheel_trends, write_report
+
+
+def rows_of(craft, wheel, wear_per_day, seed, passes=30):
+    rng = np.random.default_rng(seed)
+    out = []
+    for i in range(passes):
+        t0 = i * SECONDS_PER_DAY / 3
+        out.append({'spacecraft': craft, 'wheel': wheel, 'pass': f'p{i}', 't_start': t0,
+                    't_end': t0 + 600.0, 'samples': 6000,
+                    'dry': 2e-4 + wear_per_day * (t0 + 300) / SECONDS_PER_DAY
+                    + rng.normal(0, 1e-6), 'dry_se': 1e-6,
+                    'viscous': 5e-7 + rng.normal(0, 1e-9), 'viscous_se': 1e-9,
+                    'relative_to': 'zero'})
+    return out
+
+
+def fleet_inputs():
+    rows = (rows_of('sc1', 'rw1', 0.0, 1) + rows_of('sc1', 'rw2', 2e-6, 2)
+            + rows_of('sc<2>', 'rw1', 0.0, 3) + rows_of('sc<2>', 'rw2', 0.0, 4))
+    events = [{'spacecraft': 'sc<2>', 'component': 'rw1', 'kind': 'dry',
+               'time': 4.5 * SECONDS_PER_DAY, 'detector': 'llr'},
+              {'spacecraft': 'sc1', 'component': 'gyro_y', 'kind': 'drift',
+               'time': 2.25 * SECONDS_PER_DAY, 'detector': 'vsadc'}]
+    summary = {'spacecraft': {'sc1': {'components': {}, 'not_examined': {}},
+                              'sc<2>': {'components': {'rw2': {'not_examined': 'no rows'}},
+                                        'not_examined': {'pass x.csv': 'unreadable'}}},
+               'engine': {'wall_s': 12.5, 'workers': 2}}
+    return events, summary, rows
+
+
+def test_trend_table_finds_the_wearing_wheel_and_projects_the_limit():
+    *_, rows = fleet_inputs()
+    table = {(t['spacecraft'], t['wheel']): t for t in wheel_trends(rows, {'dry': 2.3e-4})}
+    assert sorted(table) == [('sc1', 'rw1'), ('sc1', 'rw2'), ('sc<2>', 'rw1'),
+                             ('sc<2>', 'rw2')]
+    wear = table[('sc1', 'rw2')]
+    assert wear['dry_p_value'] < 1e-10
+    assert wear['dry_slope_per_day'] == pytest.approx(2e-6, rel=0.05)
+    assert wear['dry_crossing_low_s'] < 15 * SECONDS_PER_DAY < wear['dry_crossing_high_s']
+    assert wear['viscous_crossing_s'] is None and wear['passes'] == 30
+    for row in rows[:10]:
+        row['relative_to'] = 'nominal'          # sc1 rw1: calibrated for its first passes
+    mixed = wheel_trends(rows)[0]
+    assert (mixed['wheel'], mixed['passes'], mixed['relative_to']) == ('rw1', 20, 'zero')
+
+
+def test_report_is_self_contained_and_shows_every_wheel(tmp_path):
+    events, summary, rows = fleet_inputs()
+    path = tmp_path / 'out' / 'report.html'
+    write_report(path, events, summary, rows)
+    text = path.read_text()
+    assert not re.search(r'https?:', text) and '<script' not in text and '<link' not in text
+    images = re.findall(r'src="([^"]*)"', text)
+    assert len(images) == 4 and all(i.startswith('data:image/png;base64,') for i in images)
+    assert all(base64.b64decode(i.split(',', 1)[1])[:8] == b'\x89PNG\r\n\x1a\n'
+               for i in images)
+    for craft, wheel in [('sc1', 'rw1'), ('sc1', 'rw2'), ('sc&lt;2&gt;', 'rw1')]:
+        assert f'<td>{wheel}</td>' in text and craft in text
+    assert 'sc<2>' not in text                       # names are escaped
+    assert 'trend (dry)' in text and 'events (dry)' in text
+    assert 'sc1 gyro_y: vsadc drift at day 2.250' in text
+    assert 'not examined: no rows' in text and 'pass x.csv: unreadable' in text
+    assert list(tmp_path.joinpath('out').iterdir()) == [path]   # atomic: no leftovers
+
+
+def test_report_of_an_empty_fleet_and_of_unusable_passes(tmp_path):
+    write_report(tmp_path / 'empty.html', [], {}, [])
+    assert 'Fleet friction report' in (tmp_path / 'empty.html').read_text()
+    nan_rows = [{'spacecraft': 'sc1', 'wheel': 'rw1', 'pass': 'a', 't_start': float('nan'),
+                 't_end': float('nan'), 'samples': 0, 'dry': float('nan'),
+                 'dry_se': float('nan'), 'viscous': None, 'viscous_se': None}]
+    write_report(tmp_path / 'nan.html', [], {}, nan_rows)
+    assert 'rw1' in (tmp_path / 'nan.html').read_text()
