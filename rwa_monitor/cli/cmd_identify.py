@@ -27,9 +27,10 @@ from rwa_monitor.cli.options import add_topics, INPUT_HELP
 from rwa_monitor.core.schema import AUTO, default_text, help_text, IDENTIFY, Param
 from rwa_monitor.exceptions import RwaMonitorError
 from rwa_monitor.pipelines.identify import identify_wheel, identify_wheels
-from rwa_monitor.pipelines.identify_report import side_by_side, wheels_markdown, write_outputs
+from rwa_monitor.pipelines.identify_report import (OUTPUT_FILES, side_by_side, wheels_markdown,
+                                                   write_outputs)
 from rwa_monitor.telemetry import read_telemetry
-from rwa_monitor.telemetry.atomic import write_text_atomic
+from rwa_monitor.telemetry.atomic import child, FolderOutput, write_text_atomic
 from rwa_monitor.telemetry.coastdown import coastdown_folder, coastdown_runs
 from rwa_monitor.telemetry.coastdown import pendulum_inertia, read_coastdown
 
@@ -112,6 +113,7 @@ def run(args: argparse.Namespace) -> int:
             _fail('the file has no <id>_speed column: nothing to identify')
     title = str(args.file) + (f' [{args.run}]' if args.run else '')
     results = {}
+    output = FolderOutput(args.out, OUTPUT_FILES, 'identify outputs')   # refused before the work
     try:
         if len(wheels) > 1:
             found, agreement = identify_wheels(tele, wheels, args.identical_wheels, inertia,
@@ -126,8 +128,17 @@ def run(args: argparse.Namespace) -> int:
         if isinstance(err, RwaMonitorError):
             raise
         raise RwaMonitorError(str(err)) from None
+    with output as work:
+        _write(args, found, wheels, title, work, results, agreement if len(wheels) > 1
+               else None)
+    return 0
+
+
+def _write(args, found, wheels, title, work, results, agreement) -> None:
+    """Write every output into ``work`` (swapped onto ``args.out`` by the caller)."""
     for wheel, (selection, extra) in found.items():
-        out = args.out / wheel if len(wheels) > 1 else args.out
+        out, shown = ((child(work, wheel), child(args.out, wheel)) if len(wheels) > 1
+                      else (work, args.out))
         result = write_outputs(selection, out, title=title, extra=extra)
         results[selection.data.wheel] = result
         speed = result.get('speed_rmse')
@@ -136,13 +147,12 @@ def run(args: argparse.Namespace) -> int:
               f'{result["noise_floor"]:.4g}); effects: '
               f'{", ".join(e["name"] for e in result["effects"]) or "none"}'
               + (f'; speed RMSE {speed["before"]:.4g} -> {speed["after"]:.4g} rad/s'
-                 if speed else '') + f'; report in {out}')
+                 if speed else '') + f'; report in {shown}')
     if len(wheels) > 1:
         summary = side_by_side(results, agreement)
-        write_text_atomic(args.out / 'wheels.json', json.dumps(summary, indent=2) + '\n')
-        write_text_atomic(args.out / 'wheels.md', wheels_markdown(summary))
+        write_text_atomic(work / 'wheels.json', json.dumps(summary, indent=2) + '\n')
+        write_text_atomic(work / 'wheels.md', wheels_markdown(summary))
         print(wheels_markdown(summary))
-    return 0
 
 
 def _fail(message: str) -> int:

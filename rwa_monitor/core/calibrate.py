@@ -31,6 +31,7 @@ import numpy as np
 from scipy import stats
 
 from rwa_monitor.core import llr_kernel
+from rwa_monitor.core.calibration_values import check_values
 from rwa_monitor.exceptions import ConfigError
 
 VERSION = 1
@@ -420,6 +421,7 @@ def check_calibration(cal: Any, source: str = 'calibration') -> dict[str, Any]:
     wheels = inner.get('wheels')
     if not isinstance(wheels, Mapping):
         raise ConfigError(f'{source}: key calibration.wheels: expected a mapping')
+    check_values(inner, source)
     for name, block in wheels.items():
         key = f'calibration.wheels.{name}'
         if not isinstance(block, Mapping):

@@ -50,16 +50,14 @@ def friction_model(path: str, tele: Telemetry) -> RefinedModel | None:
     """
     if not path:
         return None
-    import yaml
-
+    from rwa_monitor.core.calibration_values import check_model_values
     from rwa_monitor.core.identify.model import aux_channels, regressors_from_config
-    try:
-        with open(path) as handle:
-            cfg = yaml.safe_load(handle)
-    except (OSError, yaml.YAMLError) as err:
-        raise ConfigError(f'{MODEL_KEY} {path!r}: cannot read: {err}') from None
-    if not isinstance(cfg, Mapping):
+    from rwa_monitor.telemetry.yaml_file import read_yaml
+    cfg = read_yaml(path)
+    if not isinstance(cfg, Mapping) or not isinstance(cfg.get('friction_model', cfg),
+                                                      Mapping):
         raise ConfigError(f'{MODEL_KEY} {path!r}: expected a friction_model mapping')
+    check_model_values(cfg.get('friction_model', cfg), f'{MODEL_KEY} {path!r}')
     missing = [c for c in aux_channels(cfg) if c not in tele.aux]
     if missing:
         raise ConfigError(f'{MODEL_KEY} {path!r} reads channel(s) the file lacks: '
