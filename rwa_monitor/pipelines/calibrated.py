@@ -55,7 +55,7 @@ def commission(records: Sequence[Telemetry]
         w = np.concatenate([np.asarray(r.wheels[name].speed, dtype=float) for r in records])
         f = np.concatenate([np.asarray(r.wheels[name].friction, dtype=float)
                             for r in records])
-        block, found = core.calibrate_wheel(name, t, w, f)
+        block, found = _calibrate_wheel(name, t, w, f)
         wheels[name] = block
         warnings += found
         arrays[name] = {'time': t, 'speed': w, 'friction': f}
@@ -67,6 +67,31 @@ def commission(records: Sequence[Telemetry]
     document = {'calibration': {'version': core.VERSION, 'sources': sources,
                                 'wheels': wheels, 'gyro': gyro, 'warnings': warnings}}
     return document, warnings, arrays
+
+
+def _calibrate_wheel(name: str, t: np.ndarray, w: np.ndarray, f: np.ndarray
+                     ) -> tuple[dict[str, Any], list[str]]:
+    """Return core.calibrate_wheel's result; ConfigError for values no wheel can have.
+
+    The plausibility limits are the detector's own (max_abs_speed, max_abs_friction of
+    the llr_detector schema): a sample beyond them is one the detector would never test,
+    so a nominal model fitted on it (or overflowing on it) is refused, naming the column.
+    """
+    from rwa_monitor.core.schema import LLR
+    for column, values, limit, unit in (
+            ('speed', w, LLR['max_abs_speed'].default, 'rad/s'),
+            ('friction', f, LLR['max_abs_friction'].default, 'N m')):
+        with np.errstate(invalid='ignore'):
+            top = np.max(np.abs(values), initial=0.0, where=np.isfinite(values))
+        if not top < limit:
+            raise ConfigError(f'{name}_{column}: values up to {top:g} {unit} are not '
+                              f'physical (the detector ignores |{column}| >= {limit:g} '
+                              f'{unit}): check the column and its unit')
+    try:
+        return core.calibrate_wheel(name, t, w, f)
+    except OverflowError as err:
+        raise ConfigError(f'{name}: the calibration overflows on these values ({err}); '
+                          'check the units of the speed and friction columns') from None
 
 
 def _stack(tele: Telemetry, prefix: str) -> np.ndarray | None:
