@@ -31,7 +31,7 @@ import numpy as np
 from scipy import stats
 
 from rwa_monitor.core import llr_kernel
-from rwa_monitor.core.calibration_values import check_values
+from rwa_monitor.core.calibration_values import check_values, MALFORMED
 from rwa_monitor.exceptions import ConfigError
 
 VERSION = 1
@@ -439,7 +439,7 @@ def check_calibration(cal: Any, source: str = 'calibration') -> dict[str, Any]:
                               f'speed_abs_below_rad_s: expected a number')
         try:
             nominal_prediction(block['friction_model'], np.array([1.0, -1.0]))
-        except ConfigError as err:
+        except MALFORMED as err:
             raise ConfigError(f'{source}: key {key}.friction_model: {err}') from None
     return dict(inner)
 

@@ -14,6 +14,8 @@ from typing import Any, Callable, Mapping
 
 from rwa_monitor.exceptions import ConfigError
 
+# What evaluating a malformed model block may raise (turned into ConfigError by callers).
+MALFORMED = (ConfigError, TypeError, ValueError, KeyError, AttributeError, IndexError)
 # Keys that must be > 0 (a scale) or >= 0; every other number must only be finite.
 _POSITIVE = {'std_nm', 'noise_std_nm', 'block_std_rad_s', 'block_s', 'block_samples',
              'level_threshold_rad_s', 'slope_threshold_rad_s2'}
@@ -73,10 +75,21 @@ def check_values(inner: Mapping[str, Any], source: str = 'calibration') -> None:
             if not isinstance(wheel, Mapping):
                 fail(key, 'expected a mapping')
             _walk(wheel, key, fail)
-            noise = wheel.get('noise')
-            if part == 'wheels' and not (isinstance(noise, Mapping)
-                                         and _number(noise.get('std_nm'))):
-                fail(f'{key}.noise.std_nm', 'missing (a number > 0 is needed)')
+            if part == 'wheels':
+                _check_wheel_shape(wheel, key, fail)
+
+
+def _check_wheel_shape(wheel: Mapping[str, Any], key: str,
+                       fail: Callable[[str, str], None]) -> None:
+    for name in ('friction_model', 'noise', 'fss'):
+        if name in wheel and not isinstance(wheel[name], Mapping):
+            fail(f'{key}.{name}', 'expected a mapping')
+    noise = wheel.get('noise') or {}
+    if not _number(noise.get('std_nm')):
+        fail(f'{key}.noise.std_nm', 'missing (a number > 0 is needed)')
+    band = noise.get('low_speed_band', {})
+    if not isinstance(band, Mapping):
+        fail(f'{key}.noise.low_speed_band', 'expected a mapping')
 
 
 def check_model_values(model: Mapping[str, Any], source: str = 'friction_model') -> None:

@@ -67,8 +67,9 @@ def _children(node: yaml.Node) -> list[yaml.Node]:
 
 def load_yaml(text: str, source: str = 'YAML', limit: int = MAX_VALUES) -> Any:
     """Return the safe-loaded document of ``text`` (None if empty); ConfigError if refused."""
-    loader = yaml.SafeLoader(text)
+    loader = None
     try:
+        loader = yaml.SafeLoader(text)
         node = loader.get_single_node()
         if node is None:
             return None
@@ -87,7 +88,8 @@ def load_yaml(text: str, source: str = 'YAML', limit: int = MAX_VALUES) -> Any:
     except RecursionError:
         raise ConfigError(f'{source}: refused: nested too deeply') from None
     finally:
-        loader.dispose()
+        if loader is not None:
+            loader.dispose()
 
 
 def read_yaml(path: str | os.PathLike, limit: int = MAX_VALUES) -> Any:
