@@ -135,22 +135,22 @@ def calibrate_fails_mid_way(folder: pathlib.Path) -> str:
     return outcome + '; previous folder byte-identical, no temporary left'
 
 
-def calibrate_foreign_folder(folder: pathlib.Path) -> str:
-    out = folder / 'cal'
+def _foreign_folder(folder: pathlib.Path, name: str, foreign: str) -> str:
+    """Run ``name`` (calibrate or identify) into a folder holding a file of the user's."""
+    out = folder / 'out'
     out.mkdir()
-    (out / 'thesis.tex').write_text('mine')
-    outcome = refused(*command('calibrate', wheels_csv(folder), '-o', out), 'thesis.tex')
-    assert digest(out) == {'thesis.tex': hashlib.sha256(b'mine').hexdigest()}
-    return outcome
+    (out / foreign).write_text('mine')
+    outcome = refused(*command(name, wheels_csv(folder), '-o', out), foreign)
+    assert digest(out) == {foreign: hashlib.sha256(b'mine').hexdigest()}
+    return outcome + '; folder untouched'
+
+
+def calibrate_foreign_folder(folder: pathlib.Path) -> str:
+    return _foreign_folder(folder, 'calibrate', 'thesis.tex')
 
 
 def identify_foreign_folder(folder: pathlib.Path) -> str:
-    out = folder / 'id'
-    out.mkdir()
-    (out / 'keep.txt').write_text('mine')
-    outcome = refused(*command('identify', wheels_csv(folder), '-o', out), 'keep.txt')
-    assert digest(out) == {'keep.txt': hashlib.sha256(b'mine').hexdigest()}
-    return outcome
+    return _foreign_folder(folder, 'identify', 'keep.txt')
 
 
 # -------------------------------------------------------------------------- 2. names
@@ -179,7 +179,7 @@ def journal_foreign_file(folder: pathlib.Path) -> str:
     try:
         AlarmStore(path).load()
     except JournalError as err:
-        outcome = f'JournalError: "{str(err)[-80:]}"'
+        outcome = f'JournalError: "{str(err).split(": ", 1)[-1][:110]}"'
     else:
         raise AssertionError('a foreign file was accepted as a journal')
     assert path.read_text() == 'three years of notes\n'
@@ -192,7 +192,7 @@ def journal_folder(folder: pathlib.Path) -> str:
     try:
         AlarmStore(folder).load()
     except JournalError as err:
-        return f'JournalError: "{str(err)[-70:]}"'
+        return f'JournalError: "{str(err).split(": ", 1)[-1][:110]}"'
     raise AssertionError('a folder was accepted as a journal')
 
 
