@@ -133,3 +133,19 @@ def test_recording_writer_refuses_a_folder_of_other_files(tmp_path):
     write_telemetry(tmp_path / 'ok', Telemetry(
         time=np.array([0.0, 1.0]), wheels={'rw1': Wheel(np.array([1.0, 2.0]))}))
     assert sorted(p.name for p in (tmp_path / 'ok').iterdir()) == ['metadata.yaml', 'ok.mcap']
+
+
+def test_owned_patterns_match_per_level():
+    from rwa_monitor.telemetry.atomic import foreign_files
+    import tempfile
+    with tempfile.TemporaryDirectory() as tmp:
+        root = pathlib.Path(tmp)
+        (root / 'rw1').mkdir()
+        (root / 'rw1' / 'report.json').write_text('{}')
+        (root / 'wheels.md').write_text('')
+        owned = ['wheels.md', '*/', '*/report.json']
+        assert foreign_files(root, owned) == []
+        (root / 'rw1' / 'deep').mkdir()
+        (root / 'rw1' / 'notes.txt').write_text('')
+        assert foreign_files(root, owned) == ['rw1/deep/', 'rw1/notes.txt']
+        assert foreign_files(root, ['*']) == ['rw1/']
