@@ -243,6 +243,7 @@ def random_inputs(folder: pathlib.Path, per_reader: int = 40) -> str:
     from rwa_monitor.telemetry import read_telemetry, Telemetry, Wheel, write_telemetry
     from rwa_monitor.telemetry.alarms import AlarmStore
     from rwa_monitor.telemetry.calibration_file import load
+    from rwa_monitor.telemetry.fss_model import load_model
     from rwa_monitor.telemetry.parameters_file import read_parameters_file
     repo = pathlib.Path(__file__).resolve().parents[1]
     tele = Telemetry(time=np.arange(50.0), wheels={'rw1': Wheel(np.linspace(-5, 5, 50),
@@ -259,6 +260,8 @@ def random_inputs(folder: pathlib.Path, per_reader: int = 40) -> str:
         'friction model': ('.yaml', (repo / 'bench' / 'results' / 'identify_example_drag' /
                                      'friction_model.yaml').read_bytes(),
                            lambda p: friction_model(str(p), tele)),
+        'FSS model': ('.json', (repo / 'rwa_monitor' / 'data' / 'fss_model.json').read_bytes(),
+                      load_model),
         'journal': ('.jsonl', b'{"record": "acknowledged", "key": "k", "wall_time_s": 1}\n',
                     lambda p: AlarmStore(p).load()),
     }

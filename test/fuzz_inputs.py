@@ -92,4 +92,5 @@ def seeds(folder: pathlib.Path) -> dict[str, bytes]:
         'friction_model': (REPO / 'bench' / 'results' / 'identify_example_drag' /
                            'friction_model.yaml').read_bytes(),
         'journal': journal.encode(),
+        'fss_model': (REPO / 'rwa_monitor' / 'data' / 'fss_model.json').read_bytes(),
     }

@@ -54,6 +54,11 @@ def _model(path):
     friction_model(str(path), small_telemetry(20))
 
 
+def _fss_model(path):
+    from rwa_monitor.telemetry.fss_model import load_model
+    load_model(path)
+
+
 # name -> (seed kind, input file name, argv(input, out), does the input read?)
 COMMANDS = {
     'detect': ('csv', 'in.csv', lambda f, o: ['detect', f, '-o', o / 'events.json'],
@@ -74,6 +79,9 @@ COMMANDS = {
     'detect-friction-model': ('friction_model', 'm.yaml',
                               lambda f, o: ['detect', GOOD, '--friction-model', f],
                               _reads(_model)),
+    'diagnose-model': ('fss_model', 'model.json',
+                       lambda f, o: ['diagnose', GOOD, '-o', o / 'd.json', '--model', f],
+                       _reads(_fss_model)),
 }
 
 

@@ -1,9 +1,9 @@
 """Every reader, given arbitrary bytes or a damaged valid file, raises only its own errors.
 
 Issue 24, item 7: CSV, MCAP, rosbag2 folder (metadata and storage), parameters YAML,
-calibration, friction model and alarm journal. A reader may accept a damaged file (a
-cut CSV is still a CSV) but may never raise anything but the package's own errors
-(RwaMonitorError); the journal reader may never change a file it refuses.
+calibration, friction model, FSS classifier model and alarm journal. A reader may accept
+a damaged file (a cut CSV is still a CSV) but may never raise anything but the package's
+own errors (RwaMonitorError); the journal reader may never change a file it refuses.
 """
 
 import contextlib
@@ -99,6 +99,14 @@ def test_friction_model_reader(data):
     tele = small_telemetry(20)
     with file_of(data, 'friction_model.yaml') as path:
         only_own_errors(lambda: friction_model(str(path), tele))
+
+
+@READER_SETTINGS
+@given(damaged('fss_model'))
+def test_fss_model_reader(data):
+    from rwa_monitor.telemetry.fss_model import load_model
+    with file_of(data, 'model.json') as path:
+        only_own_errors(lambda: load_model(path))
 
 
 @READER_SETTINGS
