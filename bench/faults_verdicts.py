@@ -237,8 +237,8 @@ def too_short_gyro_calibrate(folder: pathlib.Path) -> str:
     return 'calibrate 3: ' + err.strip().splitlines()[-1].split('not examined: ')[-1][:100]
 
 
-def unexpected_exception(folder: pathlib.Path) -> str:
-    """Check a 200 KB header cell: exit 2 and one line on stderr; --debug adds the traceback."""
+def huge_header_cell(folder: pathlib.Path) -> str:
+    """Check a 200 KB header cell: exit 2 and one line on stderr (never 1, "anomaly")."""
     source = _wheels(folder, 30).read_text().splitlines()
     cells = source[0].split(',')
     cells[1] += 'x' * 200_000
@@ -248,7 +248,33 @@ def unexpected_exception(folder: pathlib.Path) -> str:
     _expect(result.returncode, ERROR, 'detect with a 200 KB header cell', result.stderr)
     lines = result.stderr.strip().splitlines()
     assert len(lines) == 1 and 'Traceback' not in result.stderr, result.stderr[-500:]
-    debug = _process('--debug', 'detect', str(path))
+    return f'exit 2, one line: {lines[0][:110]}'
+
+
+# A command whose reader fails in a way the package does not expect (a RuntimeError from
+# inside read_telemetry), run through the real entry point in its own process.
+_FAILING_READER = (
+    'import sys\n'
+    'import rwa_monitor.cli.cmd_detect as detect\n'
+    'from rwa_monitor.cli.main import main\n'
+    'def broken(*args, **kwargs):\n'
+    '    raise RuntimeError("reader failed")\n'
+    'detect.read_telemetry = broken\n'
+    'sys.exit(main(sys.argv[1:]))\n')
+
+
+def unexpected_exception(folder: pathlib.Path) -> str:
+    """Check an unexpected exception: exit 2 and one line; --debug adds the traceback."""
+    path = _wheels(folder, 30)
+    run = [sys.executable, '-c', _FAILING_READER]
+    result = subprocess.run([*run, 'detect', str(path)], capture_output=True, text=True,
+                            timeout=300)
+    _expect(result.returncode, ERROR, 'detect with a failing reader', result.stderr)
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and 'Traceback' not in result.stderr, result.stderr[-500:]
+    assert 'unexpected error: RuntimeError: reader failed' in lines[0], lines[0]
+    debug = subprocess.run([*run, '--debug', 'detect', str(path)], capture_output=True,
+                           text=True, timeout=300)
     _expect(debug.returncode, ERROR, '--debug detect', debug.stderr)
     assert 'Traceback' in debug.stderr
     return f'exit 2, one line: {lines[0][:110]}'
@@ -274,6 +300,7 @@ CASES: list[tuple[str, Callable[[pathlib.Path], str]]] = [
     ('too-short file (identify, calibrate)', too_short_identify_calibrate),
     ('all-rejected wheel in identify --wheel all', rejected_wheel_identify),
     ('too-short gyro record (calibrate)', too_short_gyro_calibrate),
-    ('unexpected exception (200 KB header cell)', unexpected_exception),
+    ('200 KB header cell', huge_header_cell),
+    ('unexpected exception (a failing reader)', unexpected_exception),
     ('package error (missing file)', package_error),
 ]

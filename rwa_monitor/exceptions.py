@@ -27,6 +27,10 @@ class ConfigError(RwaMonitorError, ValueError):
     """A configuration file or value that cannot be used."""
 
 
+class JournalError(ConfigError):
+    """An ``events_file`` that is not an alarm journal (foreign file, folder, device)."""
+
+
 class NotIdentifiableError(RwaMonitorError, ValueError):
     """Data that cannot determine the parameters asked for (the message says which)."""
 

@@ -107,7 +107,7 @@ def test_writing_replaces_a_recording_whole_and_refuses_other_folders(tmp_path):
     other.mkdir()
     (other / 'keep.txt').write_text('x')
     from rwa_monitor.exceptions import OutputError
-    with pytest.raises(OutputError, match='not a rosbag2 recording'):
+    with pytest.raises(OutputError, match='not part of a rosbag2 recording'):
         write_telemetry(other, _telemetry(n=4))
     assert (other / 'keep.txt').read_text() == 'x'
 

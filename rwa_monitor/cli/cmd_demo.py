@@ -100,9 +100,7 @@ def demo_file(directory: pathlib.Path, hours: float = DEFAULT_HOURS,
         from rwa_monitor.sim.aocs import add_gyro_channels, named_fault
         tele = add_gyro_channels(tele, fault=named_fault('medium', 'y', round(duration / 2)),
                                  seed=seed)
-    partial = path.with_suffix(f'.{os.getpid()}.part')
-    write_telemetry(partial, tele)
-    os.replace(partial, path)
+    write_telemetry(path, tele)   # atomic: a concurrent reader sees the whole file or none
     return path
 
 

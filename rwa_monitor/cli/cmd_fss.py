@@ -10,6 +10,7 @@ import numpy as np
 
 from rwa_monitor.core.fss.classify import detection_matrix, train_model
 from rwa_monitor.exceptions import ConfigError
+from rwa_monitor.telemetry.atomic import write_text_atomic
 from rwa_monitor.telemetry.fss_model import save_model
 
 DEFAULT_DATASET = 'data/generated/fss'
@@ -115,6 +116,5 @@ def _evaluate(args: argparse.Namespace) -> int:
     for status, row in matrix.items():
         print(f'{status:<12}' + ''.join(f'{100 * row[n]:8.1f}%' for n in names))
     if args.output:
-        with open(args.output, 'w') as handle:
-            json.dump({'detection': matrix}, handle, indent=1)
+        write_text_atomic(args.output, json.dumps({'detection': matrix}, indent=1))
     return 0

@@ -29,9 +29,10 @@ from rwa_monitor.cli.options import add_topics, INPUT_HELP
 from rwa_monitor.core.schema import AUTO, default_text, help_text, IDENTIFY, Param
 from rwa_monitor.exceptions import NotExaminedError, RwaMonitorError
 from rwa_monitor.pipelines.identify import examinable, identify_wheel, identify_wheels
-from rwa_monitor.pipelines.identify_report import side_by_side, wheels_markdown, write_outputs
+from rwa_monitor.pipelines.identify_report import (OUTPUT_FILES, side_by_side, wheels_markdown,
+                                                   write_outputs)
 from rwa_monitor.telemetry import read_telemetry
-from rwa_monitor.telemetry.atomic import write_text_atomic
+from rwa_monitor.telemetry.atomic import child, FolderOutput, write_text_atomic
 from rwa_monitor.telemetry.coastdown import coastdown_folder, coastdown_runs
 from rwa_monitor.telemetry.coastdown import pendulum_inertia, read_coastdown
 
@@ -121,6 +122,7 @@ def run(args: argparse.Namespace) -> int:
     title = str(args.file) + (f' [{args.run}]' if args.run else '')
     results = {}
     agreement = None
+    output = FolderOutput(args.out, OUTPUT_FILES, 'identify outputs')   # refused before the work
     try:
         if len(wheels) > 1:
             found, agreement = identify_wheels(tele, wheels, args.identical_wheels, inertia,
@@ -135,8 +137,18 @@ def run(args: argparse.Namespace) -> int:
         if isinstance(err, RwaMonitorError):
             raise
         raise RwaMonitorError(str(err)) from None
+    with output as work:
+        _write(args, found, many, title, work, results, agreement, not_examined)
+    for reason in not_examined.values():
+        print(f'rwa-monitor identify: not examined: {reason}', file=sys.stderr)
+    return EXIT_NOT_EXAMINED if not_examined else 0
+
+
+def _write(args, found, many, title, work, results, agreement, not_examined) -> None:
+    """Write every output into ``work`` (swapped onto ``args.out`` by the caller)."""
     for wheel, (selection, extra) in found.items():
-        out = args.out / wheel if many else args.out
+        out, shown = ((child(work, wheel), child(args.out, wheel)) if many
+                      else (work, args.out))
         result = write_outputs(selection, out, title=title, extra=extra)
         results[selection.data.wheel] = result
         speed = result.get('speed_rmse')
@@ -145,17 +157,14 @@ def run(args: argparse.Namespace) -> int:
               f'{result["noise_floor"]:.4g}); effects: '
               f'{", ".join(e["name"] for e in result["effects"]) or "none"}'
               + (f'; speed RMSE {speed["before"]:.4g} -> {speed["after"]:.4g} rad/s'
-                 if speed else '') + f'; report in {out}')
+                 if speed else '') + f'; report in {shown}')
     if many:
         summary = side_by_side(results, agreement)
         if not_examined:
             summary['not_examined'] = not_examined
-        write_text_atomic(args.out / 'wheels.json', json.dumps(summary, indent=2) + '\n')
-        write_text_atomic(args.out / 'wheels.md', wheels_markdown(summary))
+        write_text_atomic(work / 'wheels.json', json.dumps(summary, indent=2) + '\n')
+        write_text_atomic(work / 'wheels.md', wheels_markdown(summary))
         print(wheels_markdown(summary))
-    for reason in not_examined.values():
-        print(f'rwa-monitor identify: not examined: {reason}', file=sys.stderr)
-    return EXIT_NOT_EXAMINED if not_examined else 0
 
 
 def _fail(message: str) -> int:

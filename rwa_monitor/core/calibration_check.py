@@ -10,6 +10,7 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
+from rwa_monitor.core.calibration_values import check_values, MALFORMED
 from rwa_monitor.core.nominal import nominal_prediction
 from rwa_monitor.exceptions import ConfigError
 
@@ -30,6 +31,7 @@ def check_calibration(cal: Any, source: str = 'calibration') -> dict[str, Any]:
     wheels = inner.get('wheels')
     if not isinstance(wheels, Mapping):
         raise ConfigError(f'{source}: key calibration.wheels: expected a mapping')
+    check_values(inner, source)
     for name, block in wheels.items():
         key = f'calibration.wheels.{name}'
         if not isinstance(block, Mapping):
@@ -47,7 +49,7 @@ def check_calibration(cal: Any, source: str = 'calibration') -> dict[str, Any]:
                               f'speed_abs_below_rad_s: expected a number')
         try:
             nominal_prediction(block['friction_model'], np.array([1.0, -1.0]))
-        except ConfigError as err:
+        except MALFORMED as err:
             raise ConfigError(f'{source}: key {key}.friction_model: {err}') from None
     return dict(inner)
 

@@ -16,16 +16,19 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 from rwa_monitor.core import calibrate as core
+from rwa_monitor.core.calibration_values import check_values
 from rwa_monitor.core.coverage import (Coverage, judge, llr_samples_needed,
                                        MOSTLY_UNTESTED_SHARE, NOT_EXAMINED)
 from rwa_monitor.core.events import AnomalyEvent
 from rwa_monitor.core.identify.model import plain
 from rwa_monitor.exceptions import ConfigError, NotExaminedError
 from rwa_monitor.telemetry import Telemetry
-from rwa_monitor.telemetry.atomic import atomic_write, write_text_atomic
+from rwa_monitor.telemetry.atomic import atomic_write, child, FolderOutput, write_text_atomic
 from rwa_monitor.telemetry.calibration_file import load
 
 KEY = 'calibration_file'
+# What a calibration folder holds (an existing folder with anything else is not replaced).
+FILES = ('calibration.yaml', 'report.md', '*_friction.png')
 
 
 def commission(records: Sequence[Telemetry]
@@ -67,7 +70,7 @@ def commission(records: Sequence[Telemetry]
             not_examined[name] = verdict.reason
             warnings.append(f'{name}: not calibrated: {verdict.reason}')
             continue
-        block, found = core.calibrate_wheel(name, t, w, f)
+        block, found = _calibrate_wheel(name, t, w, f)
         wheels[name] = block
         warnings += found
         arrays[name] = {'time': t, 'speed': w, 'friction': f}
@@ -150,6 +153,31 @@ def untested_shares(document: Mapping[str, Any],
     return messages
 
 
+def _calibrate_wheel(name: str, t: np.ndarray, w: np.ndarray, f: np.ndarray
+                     ) -> tuple[dict[str, Any], list[str]]:
+    """Return core.calibrate_wheel's result; ConfigError for values no wheel can have.
+
+    The plausibility limits are the detector's own (max_abs_speed, max_abs_friction of
+    the llr_detector schema): a sample beyond them is one the detector would never test,
+    so a nominal model fitted on it (or overflowing on it) is refused, naming the column.
+    """
+    from rwa_monitor.core.schema import LLR
+    for column, values, limit, unit in (
+            ('speed', w, LLR['max_abs_speed'].default, 'rad/s'),
+            ('friction', f, LLR['max_abs_friction'].default, 'N m')):
+        with np.errstate(invalid='ignore'):
+            top = np.max(np.abs(values), initial=0.0, where=np.isfinite(values))
+        if not top < limit:
+            raise ConfigError(f'{name}_{column}: values up to {top:g} {unit} are not '
+                              f'physical (the detector ignores |{column}| >= {limit:g} '
+                              f'{unit}): check the column and its unit')
+    try:
+        return core.calibrate_wheel(name, t, w, f)
+    except OverflowError as err:
+        raise ConfigError(f'{name}: the calibration overflows on these values ({err}); '
+                          'check the units of the speed and friction columns') from None
+
+
 def _stack(tele: Telemetry, prefix: str) -> np.ndarray | None:
     value = getattr(tele, {'gyro': 'gyro', 'q': 'attitude', 'ref': 'reference_rate'}[prefix],
                     None)
@@ -158,11 +186,26 @@ def _stack(tele: Telemetry, prefix: str) -> np.ndarray | None:
 
 def write(document: Mapping[str, Any], arrays: Mapping[str, dict], out_dir: pathlib.Path
           ) -> list[pathlib.Path]:
-    """Write calibration.yaml, report.md and one PNG per wheel; return the paths."""
+    """Write calibration.yaml, report.md and one PNG per wheel; return the paths.
+
+    The folder is built beside ``out_dir`` and swapped in whole (telemetry/atomic.py
+    FolderOutput): a failure leaves the previous folder as it was, and a folder holding
+    other files than these is refused. A document with a value the loader would refuse
+    (non-finite, out of range: core/calibration_values.py) is refused before anything is
+    written (ConfigError naming the key).
+    """
     import yaml
-    out_dir.mkdir(parents=True, exist_ok=True)
+    check_values(document.get('calibration', {}), 'calibrate: the fitted calibration')
+    with FolderOutput(out_dir, FILES, 'calibrate outputs') as work:
+        text = yaml.safe_dump(plain(document), sort_keys=False)
+        names = _write_files(document, arrays, work, text)
+    return [pathlib.Path(out_dir) / name for name in names]
+
+
+def _write_files(document: Mapping[str, Any], arrays: Mapping[str, dict],
+                 out_dir: pathlib.Path, text: str) -> list[str]:
     cal_path = out_dir / 'calibration.yaml'
-    write_text_atomic(cal_path, yaml.safe_dump(plain(document), sort_keys=False))
+    write_text_atomic(cal_path, text)
     written = [cal_path]
     cal = document['calibration']
     lines = ['# Commissioning calibration', '',
@@ -183,7 +226,7 @@ def write(document: Mapping[str, Any], arrays: Mapping[str, dict], out_dir: path
                      f'{model["weights"]["viscous"]:.3g} | {noise["std_nm"]:.3g} | '
                      f'{band["speed_abs_below_rad_s"]:g} | {band["std_nm"]:.3g} | '
                      f'{lo:.1f} .. {hi:.1f} |')
-        png = out_dir / f'{name}_friction.png'
+        png = child(out_dir, name, '_friction.png')
         _plot(name, block, arrays.get(name), png)
         written.append(png)
     lines += ['', 'The detectors test changes against the nominal model; samples with '
@@ -194,7 +237,7 @@ def write(document: Mapping[str, Any], arrays: Mapping[str, dict], out_dir: path
     report = out_dir / 'report.md'
     write_text_atomic(report, '\n'.join(lines))
     written.append(report)
-    return written
+    return [path.name for path in written]
 
 
 def _plot(name: str, block: Mapping[str, Any], data: dict | None,

@@ -20,6 +20,12 @@ from rwa_monitor.core.identify.model import snippet
 from rwa_monitor.core.identify.select import Selection
 from rwa_monitor.telemetry.atomic import atomic_write, write_text_atomic
 
+# What ``rwa-monitor identify -o DIR`` writes (one wheel, or one sub-folder per wheel):
+# an existing DIR holding anything else is not replaced (telemetry/atomic.py).
+FILES = ('report.json', 'selection.json', 'report.md', 'friction_model.yaml',
+         'residuals_before.png', 'residuals_after.png')
+OUTPUT_FILES = FILES + ('wheels.json', 'wheels.md', '*/') + tuple(f'*/{f}' for f in FILES)
+
 
 def write_outputs(selection: Selection, out: pathlib.Path, title: str = '',
                   extra: dict | None = None) -> dict:

@@ -12,6 +12,8 @@ from __future__ import annotations
 import time as _time
 from typing import Any, Mapping, NamedTuple
 
+import numpy as np
+
 from rwa_monitor.core.coverage import judge, llr_samples_needed
 from rwa_monitor.core.events import AnomalyEvent
 from rwa_monitor.core.friction import RegressorSet
@@ -51,22 +53,29 @@ def friction_model(path: str, tele: Telemetry) -> RefinedModel | None:
     """
     if not path:
         return None
-    import yaml
-
+    from rwa_monitor.core.calibration_values import check_model_values, MALFORMED
     from rwa_monitor.core.identify.model import aux_channels, regressors_from_config
-    try:
-        with open(path) as handle:
-            cfg = yaml.safe_load(handle)
-    except (OSError, yaml.YAMLError) as err:
-        raise ConfigError(f'{MODEL_KEY} {path!r}: cannot read: {err}') from None
-    if not isinstance(cfg, Mapping):
+    from rwa_monitor.telemetry.yaml_file import read_yaml
+    cfg = read_yaml(path)
+    if not isinstance(cfg, Mapping) or not isinstance(cfg.get('friction_model', cfg),
+                                                      Mapping):
         raise ConfigError(f'{MODEL_KEY} {path!r}: expected a friction_model mapping')
-    missing = [c for c in aux_channels(cfg) if c not in tele.aux]
-    if missing:
-        raise ConfigError(f'{MODEL_KEY} {path!r} reads channel(s) the file lacks: '
-                          f'{", ".join(missing)}')
+    check_model_values(cfg.get('friction_model', cfg), f'{MODEL_KEY} {path!r}')
+    try:
+        missing = [c for c in aux_channels(cfg) if c not in tele.aux]
+        if missing:
+            raise ConfigError(f'{MODEL_KEY} {path!r} reads channel(s) the file lacks: '
+                              f'{", ".join(map(str, missing))}')
+        regressors = regressors_from_config(cfg)
+        regressors.matrix(np.array([1.0, -1.0]), np.zeros(2),
+                          {c: np.zeros(2) for c in tele.aux})
+    except MALFORMED as err:
+        if isinstance(err, ConfigError):
+            raise
+        raise ConfigError(f'{MODEL_KEY} {path!r}: malformed friction_model: {err!r}') from None
     wheel = cfg.get('friction_model', cfg).get('wheel')
-    return RefinedModel(wheel if wheel in tele.wheels else None, regressors_from_config(cfg))
+    return RefinedModel(wheel if isinstance(wheel, str) and wheel in tele.wheels else None,
+                        regressors)
 
 
 def run_with_summary(tele: Telemetry, config: Mapping[str, Any]) -> Detection:

@@ -4,7 +4,8 @@ A rosbag2 folder (``metadata.yaml`` with ``.mcap`` or ``.db3`` storage) or a bar
 or ``.db3`` file is a recording (rosbag_io); a ``.parquet`` file is read by parquet_io;
 anything else is read as CSV. Writing: a
 ``.mcap`` or ``.db3`` path writes a bare file, a path without a suffix (or an existing
-recording folder) a rosbag2 folder, any other path CSV.
+recording folder) a rosbag2 folder, any other path CSV; a FIFO or a device (``-o
+/dev/null``) gets CSV written straight into it (telemetry/atomic.py).
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ import pathlib
 from typing import Mapping
 
 from rwa_monitor.exceptions import TelemetrySchemaError
+from rwa_monitor.telemetry.atomic import is_stream
 from rwa_monitor.telemetry.csv_io import read_csv, write_csv
 from rwa_monitor.telemetry.schema import STREAMS, Telemetry, Wheel
 
@@ -87,7 +89,9 @@ def write_telemetry(path: str | os.PathLike, telemetry: Telemetry) -> None:
     """
     from rwa_monitor.telemetry import rosbag_io
     target = pathlib.Path(path)
-    if rosbag_io.is_recording(target) or not target.suffix:
+    if is_stream(target):
+        write_csv(target, telemetry)   # a FIFO or device (-o /dev/null): CSV, streamed
+    elif rosbag_io.is_recording(target) or not target.suffix:
         rosbag_io.write(target, telemetry)
     else:
         write_csv(target, telemetry)

@@ -11,7 +11,9 @@ every acknowledgement is appended to that file as one JSON object per line, flus
 fsynced before :meth:`AlarmStore.declare` returns; :meth:`AlarmStore.load` reads it back
 at start and keeps the unacknowledged records (a line cut short by a crash is skipped and
 counted), then rewrites the journal with only those (through ``atomic_write``), so the
-file does not grow without bound across restarts.
+file does not grow without bound across restarts. A path that is not a journal (a foreign
+file, a folder, a device) is refused with :class:`~rwa_monitor.exceptions.JournalError`
+and left untouched (:func:`check_journal`).
 """
 
 from __future__ import annotations
@@ -21,15 +23,19 @@ import json
 import math
 import os
 import pathlib
+import stat
 import time
 from typing import Any, Callable, Iterable
 
 from rwa_monitor.core import keys
 from rwa_monitor.core.events import AnomalyEvent
-from rwa_monitor.telemetry.atomic import write_text_atomic
+from rwa_monitor.exceptions import JournalError
+from rwa_monitor.telemetry.atomic import append_bytes, write_text_atomic
 
 RECOVERY_KINDS = ('healthy',)
 MAX_ALARMS = 10_000
+# Every journal line starts so (json.dumps of a dict whose first key is 'record').
+JOURNAL_START = b'{"record": "'
 _CORE = (keys.DETECTOR, keys.COMPONENT, keys.KIND, keys.CHANGE_TIME, keys.CHANGE_INDEX,
          keys.DECLARATION_TIME, keys.DECLARATION_INDEX, keys.P_VALUE, keys.REVISION)
 
@@ -67,6 +73,37 @@ def event_from_record(fields: dict[str, Any]) -> AnomalyEvent:
         declared_index=int(fields[keys.DECLARATION_INDEX]), p_value=real(keys.P_VALUE),
         revision=int(fields.get(keys.REVISION) or 0),
         details={k: v for k, v in fields.items() if k not in _CORE})
+
+
+def check_journal(path: str | os.PathLike) -> None:
+    """Raise JournalError unless ``path`` is missing, empty, or a journal this module wrote.
+
+    A journal's first line is a record written by :class:`AlarmStore` (JOURNAL_START, a
+    line cut short by a crash included); a folder, a FIFO, a device or a file starting
+    with anything else is refused and left untouched.
+    """
+    path = pathlib.Path(path)
+    try:
+        mode = path.stat().st_mode
+    except FileNotFoundError:
+        return
+    except OSError as err:
+        raise JournalError(f'events_file {path}: cannot examine: {err.strerror or err}'
+                           ) from None
+    if not stat.S_ISREG(mode):
+        kind = 'a folder' if stat.S_ISDIR(mode) else 'not a regular file'
+        raise JournalError(f'events_file {path}: is {kind}, not an alarm journal; '
+                           'refusing to use it (give a new file name)')
+    try:
+        with open(path, 'rb') as handle:
+            head = handle.read(len(JOURNAL_START) + 64).lstrip()
+    except OSError as err:
+        raise JournalError(f'events_file {path}: cannot read: {err.strerror or err}') from None
+    first = head.split(b'\n', 1)[0].strip()
+    if first and not (first.startswith(JOURNAL_START) or JOURNAL_START.startswith(first)):
+        raise JournalError(f'events_file {path}: exists and is not an alarm journal (its '
+                           'first line is not a journal record); refusing to use or '
+                           'overwrite it (give a new file name)')
 
 
 @dataclass
@@ -111,7 +148,10 @@ class AlarmStore:
         A missing file is an empty journal. Lines that are not a journal record (a write
         cut short by a crash) are skipped and counted.
         """
-        if self.path is None or not self.path.exists():
+        if self.path is None:
+            return []
+        check_journal(self.path)
+        if not self.path.exists():
             return []
         try:
             text = self.path.read_text(encoding='utf-8', errors='replace')
@@ -148,15 +188,7 @@ class AlarmStore:
             return
         line = (json.dumps(record, allow_nan=False) + '\n').encode('utf-8')
         try:
-            self.path.parent.mkdir(parents=True, exist_ok=True)
-            fd = os.open(self.path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
-            try:
-                view = memoryview(line)
-                while view:
-                    view = view[os.write(fd, view):]
-                os.fsync(fd)
-            finally:
-                os.close(fd)
+            append_bytes(self.path, line)
         except OSError as err:
             self._failed(err)
 

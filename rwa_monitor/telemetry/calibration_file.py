@@ -9,28 +9,18 @@ gyro diagnosis reads (``detect`` and the ``vsadc_detector`` node).
 from __future__ import annotations
 
 import os
-import pathlib
 from typing import Any
 
-import yaml
-
 from rwa_monitor.core.calibrate import check_calibration
+from rwa_monitor.core.calibration_values import check_values
 from rwa_monitor.exceptions import ConfigError
+from rwa_monitor.telemetry.yaml_file import read_yaml
 
 AXES = ('x', 'y', 'z')
 
 
 def _read(path: str | os.PathLike) -> Any:
-    try:
-        text = pathlib.Path(path).read_text()
-    except OSError as err:
-        raise ConfigError(f'{path}: cannot read: {err.strerror}') from None
-    except UnicodeDecodeError:
-        raise ConfigError(f'{path}: not a text file') from None
-    try:
-        return yaml.safe_load(text)
-    except yaml.YAMLError as err:
-        raise ConfigError(f'{path}: not valid YAML: {err}') from None
+    return read_yaml(path)
 
 
 def load(path: str | os.PathLike) -> dict[str, Any]:
@@ -53,4 +43,5 @@ def load_gyro_calibration(path: str | os.PathLike) -> dict[str, dict[str, Any]]:
     bad = [a for a in block if a not in AXES or not isinstance(block[a], dict)]
     if bad:
         raise ConfigError(f'{path}: calibration.gyro: unknown axis entries {bad}')
+    check_values({'gyro': block}, str(path))
     return block

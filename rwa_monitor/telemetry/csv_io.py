@@ -16,7 +16,7 @@ import numpy as np
 
 from rwa_monitor.exceptions import TelemetrySchemaError
 from rwa_monitor.telemetry.atomic import atomic_write
-from rwa_monitor.telemetry.schema import Telemetry, TIME
+from rwa_monitor.telemetry.schema import name_problem, Telemetry, TIME, wheel_id_of
 
 
 _ENCODING = 'utf-8-sig'  # UTF-8, with or without a byte-order mark
@@ -39,12 +39,17 @@ def _read(path: str) -> Telemetry:
             header = next(csv.reader(handle), None)
     except OSError as err:
         raise TelemetrySchemaError(path, f'cannot read: {err.strerror}') from None
+    except csv.Error as err:
+        raise TelemetrySchemaError(path, f'not a CSV header row: {err}', 1) from None
     if not header:
         raise TelemetrySchemaError(path, 'empty file: expected a header row', line=1)
     header = [name.strip() for name in header]
     for i, name in enumerate(header):
         if not name:
             raise TelemetrySchemaError(path, f'empty column name at position {i + 1}', 1)
+        problem = name_problem(name, wheel_id_of(name))
+        if problem:
+            raise TelemetrySchemaError(path, problem, 1, name[:80])
         if header.index(name) != i:
             raise TelemetrySchemaError(path, 'duplicate column', 1, name)
     if TIME not in header:
@@ -80,20 +85,28 @@ def _parse_slowly(path: str, header: list[str]) -> np.ndarray:
     with open(path, newline='', encoding=_ENCODING) as handle:
         reader = csv.reader(handle)
         next(reader)
-        for line, row in enumerate(reader, start=2):
-            if len(row) != len(header):
-                raise TelemetrySchemaError(
-                    path, f'expected {len(header)} values, found {len(row)}', line)
-            values = []
-            for name, cell in zip(header, row):
-                text = cell.strip()
-                try:
-                    values.append(float(text) if text else np.nan)
-                except ValueError:
-                    raise TelemetrySchemaError(
-                        path, f'not a number: {cell!r}', line, name) from None
-            rows.append(values)
+        try:
+            for line, row in enumerate(reader, start=2):
+                rows.append(_values(path, header, line, row))
+        except csv.Error as err:
+            raise TelemetrySchemaError(path, f'not a CSV row: {err}',
+                                       reader.line_num) from None
     return np.array(rows, dtype=float).reshape(len(rows), len(header))
+
+
+def _values(path: str, header: list[str], line: int, row: list[str]) -> list[float]:
+    if len(row) != len(header):
+        raise TelemetrySchemaError(
+            path, f'expected {len(header)} values, found {len(row)}', line)
+    values = []
+    for name, cell in zip(header, row):
+        text = cell.strip()
+        try:
+            values.append(float(text) if text else np.nan)
+        except ValueError:
+            shown = repr(cell) if len(cell) <= 80 else repr(cell[:80]) + '...'
+            raise TelemetrySchemaError(path, f'not a number: {shown}', line, name) from None
+    return values
 
 
 def _check_time(path: str, time: np.ndarray) -> None:

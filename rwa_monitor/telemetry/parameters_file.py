@@ -15,11 +15,10 @@ from __future__ import annotations
 import pathlib
 from typing import Any, Mapping
 
-import yaml
-
 from rwa_monitor import paths
 from rwa_monitor.core.schema import Schema, SCHEMAS, SHARED_NAMES
 from rwa_monitor.exceptions import ConfigError
+from rwa_monitor.telemetry.yaml_file import read_yaml
 
 SHARED_BLOCK = '/**'
 
@@ -31,13 +30,7 @@ def read_parameters_file(path: str | pathlib.Path | None) -> dict[str, Any]:
             path = paths.config_file()
         except FileNotFoundError:
             return {}
-    try:
-        document = yaml.safe_load(pathlib.Path(path).read_text())
-    except OSError as err:
-        raise ConfigError(f'{path}: cannot read: {err.strerror}') from None
-    except yaml.YAMLError as err:
-        first = str(err).splitlines()[0] if str(err) else type(err).__name__
-        raise ConfigError(f'{path}: not valid YAML: {first}') from None
+    document = read_yaml(path)
     if document is None:
         return {}
     if not isinstance(document, dict):

@@ -24,7 +24,6 @@ from __future__ import annotations
 
 import os
 import pathlib
-import shutil
 import tempfile
 from typing import Any, Callable, Iterable, Mapping
 
@@ -32,7 +31,9 @@ import numpy as np
 
 from rwa_monitor.exceptions import ConfigError, OutputError, TelemetrySchemaError
 from rwa_monitor.telemetry import codecs
-from rwa_monitor.telemetry.schema import Telemetry, TRUTH_PREFIX, Wheel
+from rwa_monitor.telemetry.atomic import FolderOutput, install_file
+from rwa_monitor.telemetry.schema import name_problem, Telemetry, TRUTH_PREFIX, Wheel
+from rwa_monitor.telemetry.yaml_file import read_yaml
 
 # Stream -> default topic (DESIGN.md topic names, absolute as a recorder stores them).
 DEFAULT_TOPICS = {'wheels': '/telemetry/wheels', 'gyro': '/telemetry/gyro',
@@ -44,6 +45,8 @@ MSG_TYPES = {'wheels': 'sensor_msgs/msg/JointState', 'gyro': 'sensor_msgs/msg/Im
              'reference_rate': 'geometry_msgs/msg/Vector3Stamped',
              'columns': 'sensor_msgs/msg/JointState'}
 BAG_SUFFIXES = ('.mcap', '.db3')
+# What a recording folder may hold: an existing folder with anything else is not replaced.
+RECORDING_FILES = ('metadata.yaml', '*.mcap', '*.db3', '*.db3-wal', '*.db3-shm')
 _FRAME = 'body'
 
 
@@ -98,6 +101,12 @@ def read(path: str | os.PathLike, topics: str | Mapping[str, str] | None = None)
     samples: dict[str, list[tuple[int, Any]]] = {s: [] for s in MSG_TYPES}
     if not os.path.exists(name):
         raise TelemetrySchemaError(name, 'no such file or folder')
+    metadata = pathlib.Path(name, 'metadata.yaml')
+    if metadata.is_file():   # its aliases bounded before the library reads it
+        try:
+            read_yaml(metadata)
+        except ConfigError as err:
+            raise TelemetrySchemaError(name, f'metadata.yaml: {err}') from None
     try:
         with Reader(name) as reader:
             connections = []
@@ -200,12 +209,22 @@ def _telemetry(path: str, samples: dict[str, list[tuple[int, Any]]],
     if samples['wheels']:
         speed = _named(samples['wheels'], 'velocity')
         friction = _named(samples['wheels'], 'effort')
+        for wheel_id in speed:
+            problem = name_problem(wheel_id, wheel_id)
+            if problem:
+                topic = topics['wheels']
+                raise TelemetrySchemaError(path, f'{topic} joint name: {problem}',
+                                           column=topic)
         for wheel_id, values in speed.items():
             f = friction.get(wheel_id)
             tele.wheels[wheel_id] = Wheel(
                 place('wheels', values, 1)[:, 0],
                 None if f is None else place('wheels', f, 1)[:, 0])
     for name, values in _named(samples['columns'], 'position').items():
+        problem = name_problem(name, None)
+        if problem:
+            raise TelemetrySchemaError(path, f'{COLUMNS_TOPIC} column name: {problem}',
+                                       column=COLUMNS_TOPIC)
         column = place('columns', values, 1)[:, 0]
         if name.startswith(TRUTH_PREFIX):
             tele.truth[name[len(TRUTH_PREFIX):]] = column
@@ -233,50 +252,35 @@ def _named(items: list[tuple[int, Any]], field: str) -> dict[str, np.ndarray]:
 def write(path: str | os.PathLike, tele: Telemetry) -> None:
     """Write ``tele`` as a rosbag2 directory, or a bare ``.mcap``/``.db3`` file by suffix.
 
-    The recording is built in a temporary folder beside ``path`` and renamed into place,
-    so an interrupted run leaves the previous output whole (or none).
+    Through telemetry/atomic.py: a folder is built beside ``path`` and swapped in whole
+    (an existing folder may hold only a recording: RECORDING_FILES), a bare file is
+    written like every other output file.
     """
     target = pathlib.Path(path)
     bare = target.suffix.lower() in BAG_SUFFIXES
     storage = 'sqlite3' if target.suffix.lower() == '.db3' else 'mcap'
-    parent = target.parent
-    try:
-        parent.mkdir(parents=True, exist_ok=True)
-        work = pathlib.Path(tempfile.mkdtemp(prefix=f'.{target.name}.', dir=parent))
-    except OSError as err:
-        raise OutputError(f'{target}: cannot write in {parent}: {err.strerror or err}') from None
-    try:
-        bag = work / (target.stem if bare else target.name)
-        _write_bag(bag, tele, storage)
-        if bare:
-            written = next(bag.glob('*' + target.suffix.lower()))
-            if target.is_dir():
-                raise OutputError(f'{target}: is a folder, not a file')
-            os.replace(written, target)
-        else:
-            _replace_folder(bag, target)
-    except OSError as err:
-        raise OutputError(f'{target}: write failed: {err.strerror or err}') from None
-    finally:
-        shutil.rmtree(work, ignore_errors=True)
-
-
-def _replace_folder(new: pathlib.Path, target: pathlib.Path) -> None:
-    """Rename ``new`` onto ``target``; an existing recording there is replaced whole."""
-    if target.exists() and not target.is_dir():
-        raise OutputError(f'{target}: exists and is not a rosbag2 folder')
-    if target.is_dir() and any(target.iterdir()):
-        if not (target / 'metadata.yaml').is_file():
-            raise OutputError(f'{target}: folder exists and is not a rosbag2 recording: '
-                              'not replacing it')
-        old = new.with_name(new.name + '.old')
-        os.replace(target, old)
-        os.replace(new, target)
-        shutil.rmtree(old, ignore_errors=True)
+    if not bare:
+        output = FolderOutput(target, RECORDING_FILES, 'part of a rosbag2 recording')
+        try:
+            _write_bag(output.open(), tele, storage)
+            output.commit()
+        except OSError as err:
+            if isinstance(err, OutputError):
+                raise
+            raise OutputError(f'{target}: write failed: {err.strerror or err}') from None
+        finally:
+            output.abort()
         return
-    if target.is_dir():
-        target.rmdir()
-    os.replace(new, target)
+    try:
+        target.parent.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryDirectory(prefix=f'.{target.name}.', dir=target.parent) as work:
+            bag = pathlib.Path(work) / target.stem
+            _write_bag(bag, tele, storage)
+            install_file(next(bag.glob('*' + target.suffix.lower())), target)
+    except OSError as err:
+        if isinstance(err, OutputError):
+            raise
+        raise OutputError(f'{target}: write failed: {err.strerror or err}') from None
 
 
 def _write_bag(bag: pathlib.Path, tele: Telemetry, storage: str) -> None:
@@ -341,14 +345,8 @@ class RecordingWriter:
         self.path = pathlib.Path(path)
         if self.path.suffix:
             raise OutputError(f'{self.path}: a recording folder needs a name without suffix')
-        try:
-            self.path.parent.mkdir(parents=True, exist_ok=True)
-            self._work = pathlib.Path(tempfile.mkdtemp(prefix=f'.{self.path.name}.',
-                                                       dir=self.path.parent))
-        except OSError as err:
-            raise OutputError(f'{self.path}: cannot write in {self.path.parent}: '
-                              f'{err.strerror or err}') from None
-        self._writer = Writer(self._work / self.path.name, version=9,
+        self._output = FolderOutput(self.path, RECORDING_FILES, 'part of a rosbag2 recording')
+        self._writer = Writer(self._output.open(), version=9,
                               storage_plugin=StoragePlugin.MCAP)
         self._writer.open()
         self._store = typestore()
@@ -374,13 +372,13 @@ class RecordingWriter:
         self.counts[topic] = self.counts.get(topic, 0) + 1
 
     def close(self) -> None:
-        """Finish the recording and rename it onto ``path``."""
+        """Finish the recording and swap it onto ``path``."""
         try:
             self._writer.close()
-            _replace_folder(self._work / self.path.name, self.path)
+            self._output.commit()
         finally:
-            shutil.rmtree(self._work, ignore_errors=True)
+            self._output.abort()
 
     def abort(self) -> None:
         """Drop the recording (``path`` is left as it was)."""
-        shutil.rmtree(self._work, ignore_errors=True)
+        self._output.abort()

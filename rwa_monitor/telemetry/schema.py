@@ -14,6 +14,7 @@ NaN). A stream without an entry in ``present`` has a sample on every row (a CSV 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+import re
 
 import numpy as np
 
@@ -27,6 +28,36 @@ REFERENCE = ('ref_x', 'ref_y', 'ref_z')
 VECTOR_GROUPS = {'gyro': GYRO, 'attitude': ATTITUDE, 'reference_rate': REFERENCE}
 # The streams of a recording, each with its own stamps (``columns``: aux and truth).
 STREAMS = ('wheels', 'gyro', 'star_tracker', 'reference_rate', 'columns')
+# Names from data are data (docs/contracts.md, "Names"): a wheel id becomes part of
+# file names and diagnostics keys, so it is checked where it is read and again where a
+# path is built from it (telemetry/atomic.py ``child``).
+NAME_PATTERN = re.compile(r'[A-Za-z0-9_-]{1,64}')
+NAME_RULE = '1 to 64 letters, digits, "_" or "-"'
+MAX_COLUMN_NAME = 256
+
+
+def valid_name(name: object) -> bool:
+    """Return True if ``name`` is a safe name from data (NAME_RULE)."""
+    return isinstance(name, str) and NAME_PATTERN.fullmatch(name) is not None
+
+
+def name_problem(column: str, wheel_id: str | None) -> str | None:
+    """Return why a column name (and the wheel id it gives, if any) is refused, or None."""
+    if len(column) > MAX_COLUMN_NAME:
+        return f'column name longer than {MAX_COLUMN_NAME} characters'
+    if wheel_id is not None and not valid_name(wheel_id):
+        return f'wheel id {wheel_id[:80]!r} is not a valid name ({NAME_RULE})'
+    return None
+
+
+def wheel_id_of(column: str) -> str | None:
+    """Return the wheel id of a ``<id>_speed`` or ``<id>_friction`` column, else None."""
+    if column in (TIME, *GYRO, *ATTITUDE, *REFERENCE) or column.startswith(TRUTH_PREFIX):
+        return None
+    for suffix in (SPEED_SUFFIX, FRICTION_SUFFIX):
+        if column.endswith(suffix):
+            return column[:-len(suffix)]
+    return None
 
 
 @dataclass
