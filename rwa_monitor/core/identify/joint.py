@@ -20,7 +20,8 @@ together, the way one would argue from several specimens of one part:
    counted once). Among significant effects the largest summed held-out LR wins, with
    select.py's precedence between alternative explanations of one structure (cosine
    and Vuong's test on the wheels' pooled, variance-weighted rows). The fallback is
-   scored the same way (each wheel its own knots).
+   scored the same way (each wheel its own knots) and added only when no named effect
+   is significant (physics first, select.py).
 3. The loop stops when every wheel's residual passes the structure and whiteness tests,
    when nothing pooled is significant, or after ``max_effects``.
 4. Each wheel is then refitted with the common set: the continuous parameter of each
@@ -47,7 +48,7 @@ from rwa_monitor.core.identify.consistency import sibling_name as canonical_name
 from rwa_monitor.core.identify.data import IdentData
 from rwa_monitor.core.identify.fitting import Design, Fit, held_out_mask
 from rwa_monitor.core.identify.residuals import diagnose
-from rwa_monitor.core.identify.select import AddedEffect, FALLBACK_FACTOR, free_parameters
+from rwa_monitor.core.identify.select import AddedEffect, free_parameters
 from rwa_monitor.core.identify.select import likelihood_ratio, PRECEDENCE, SAME_STRUCTURE
 from rwa_monitor.core.identify.select import Selection, selection_step, significant
 from rwa_monitor.core.params import check_int, check_real
@@ -304,10 +305,6 @@ def _step(wheels: _Wheels, residuals: list[np.ndarray], tried: set[str], alpha: 
             if not generic['significant']:
                 generic = None
     chosen = _preferred(wheels, winners, level, record) if winners else generic
-    if (chosen is not None and generic is not None and chosen is not generic
-            and generic['evidence']['lr_held_out']
-            > FALLBACK_FACTOR * chosen['evidence']['lr_held_out']):
-        chosen = generic
     record['added'] = None if chosen is None else chosen['candidate'].name
     return chosen, record
 
