@@ -68,7 +68,7 @@ def test_detect_round_trip_finds_the_step(simulated):
     assert llr['components']['rw1']['events'] == 0
     assert llr['components']['rw2']['changes'] == 1
     assert sum(llr['components']['rw2']['by_kind'].values()) == 1
-    assert llr['components']['rw1']['rejected']['nonfinite'] == 0
+    assert llr['components']['rw1']['rejected']['non_finite'] == 0
 
 
 def test_nonfinite_samples_are_counted_not_fatal(tmp_path):
@@ -81,7 +81,7 @@ def test_nonfinite_samples_are_counted_not_fatal(tmp_path):
     assert main(['detect', str(path), '-o', str(out)]) == 0
     rejected = json.loads(out.read_text())['summary']['pipelines']['llr']['components'][
         'rw1']['rejected']
-    assert rejected['nonfinite'] == 4
+    assert rejected['non_finite'] == 4
 
 
 def test_detect_prints_a_table_without_output(simulated, capsys):

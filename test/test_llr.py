@@ -77,8 +77,7 @@ def test_lemma1_nominal_statistic_follows_the_generalised_chi_square(k, w):
         return np.column_stack([np.full(runs, a), np.full(runs, b), np.full(runs, c), u, v, e])
 
     cfg = {'min_excitation': 1e-6, 'noise_std': 1.0}
-    ok, testable, y, tr, dm, _, _ = _stats(sums(k).T, sums(k + w).T, np.full(runs, float(k)),
-                                           cfg)
+    ok, testable, y, tr, dm = _stats(sums(k).T, sums(k + w).T, np.full(runs, float(k)), cfg)
     assert np.all(ok)
     half = 0.5 * tr[0]
     disc = math.sqrt(half * half - dm[0])
@@ -92,8 +91,8 @@ def test_lemma1_nominal_statistic_follows_the_generalised_chi_square(k, w):
     np.testing.assert_allclose(sorted(weights), sorted(lemma), rtol=1e-9)
     # The detector's default: sigma^2 estimated on the reference (k - 2 degrees of
     # freedom, independent of the statistic): studentised tail.
-    _, _, y_est, _, _, _, _ = _stats(sums(k).T, sums(k + w).T, np.full(runs, float(k)),
-                                     {'min_excitation': 1e-6, 'noise_std': None})
+    _, _, y_est, _, _ = _stats(sums(k).T, sums(k + w).T, np.full(runs, float(k)),
+                               {'min_excitation': 1e-6, 'noise_std': None})
     for level in (0.1, 0.01, 0.001):
         bound = 4.5 * math.sqrt(runs * level * (1.0 - level))
         # Binomial(runs, level): 4.5 standard deviations (false failure ~7e-6 per level).
@@ -386,7 +385,7 @@ def test_nonfinite_samples_are_dropped_counted_and_harmless():
             assert dirty.update(math.nan, b, c) == []
             assert dirty.update(a + 0.3, None, c) == []
             np.testing.assert_equal(_state(dirty), before)
-    assert dirty.counters['nonfinite'] == 4 * len(range(0, 3000, 97))
+    assert dirty.counters['non_finite'] == 4 * len(range(0, 3000, 97))
     np.testing.assert_equal(_state(dirty), _state(clean))
 
 
@@ -449,7 +448,7 @@ def test_reset_restores_the_constructed_state():
     first = stream(det, t, w, f)
     det.update(math.nan, 0.0, 0.0)
     det.reset()
-    assert det.n_samples == 0 and det.counters['nonfinite'] == 0 and det.p_min == 1.0
+    assert det.n_samples == 0 and det.counters['non_finite'] == 0 and det.p_min == 1.0
     assert stream(det, t, w, f) == first
 
 
@@ -457,8 +456,9 @@ def test_memory_is_bounded_by_the_windows():
     t, w, f = friction_signal(6000, 16, ((3000, 0.5, 0.0),))
     det = LLRDetector('rw1', window=100, k_verif=30)
     stream(det, t, w, f)
-    sizes = [len(det._rpref), len(det._rterm), len(det._rrow), len(det._rtime)]
-    assert sizes == [2 * 100 + 30 + 2] * 4
+    # Rings of the last samples: the smallest power of two >= 2 w + k_verif + 2 (the kernel
+    # indexes them by mask), whatever the length of the stream.
+    assert [len(ring) for ring in det._rings()] == [256] * 4
 
 
 # -- parameter validation ------------------------------------------------------------------
@@ -514,7 +514,7 @@ def test_custom_model_with_auxiliary_channel_batch_equals_streaming():
         streamed.extend(det.update(t[i], w[i], f[i], {'gain': gain[i]}))
     batch, counters = detect_batch_with_counters(t, w, f, aux={'gain': gain}, **params)
     assert streamed == batch and counters == det.counters
-    assert counters['nonfinite'] == np.count_nonzero(np.isnan(gain))
+    assert counters['non_finite'] == np.count_nonzero(np.isnan(gain))
     assert counters['non_increasing_time'] == 1
     assert [guess(e) for e in batch if e.revision == 0] == ['dry']
 
@@ -546,9 +546,9 @@ def test_bounds_never_change_a_decision():
     for event in events:
         pref = np.cumsum(np.concatenate([np.zeros((6, 1)), terms[:, c:]], axis=1), axis=1)
         ks = np.arange(c + window + 1, t.size - window + 1)
-        ok, testable, y, tr, dm, _, _ = _stats(pref[:, ks - c], pref[:, ks + window - c],
-                                               (ks - c).astype(float),
-                                               {'min_excitation': 1e-6, 'noise_std': None})
+        ok, testable, y, tr, dm = _stats(pref[:, ks - c], pref[:, ks + window - c],
+                                         (ks - c).astype(float),
+                                         {'min_excitation': 1e-6, 'noise_std': None})
         log_p_min, k_min = 0.0, c
         for i, k in enumerate(ks):
             if testable[i]:
@@ -632,3 +632,28 @@ def test_realistic_profile_unconfirmed_kind_is_reported_as_such_and_streaming_eq
             assert abs(ev.details[keys.Z_DRY]) <= limit
             assert abs(ev.details[keys.Z_VISCOUS]) <= limit
             assert ev.details[keys.DELTA_DRY] + ev.details[keys.DELTA_VISCOUS] > 0.0
+
+
+def test_state_restored_into_a_fresh_detector_continues_the_stream():
+    # The detector's state is its instance attributes, plain data (arrays, scalars, str,
+    # None, containers, NamedTuple, dataclass): copied into a fresh detector of the same
+    # parameters between two halves of a stream, it gives the events of one detector fed
+    # the whole stream (nothing hidden in views shared between attributes).
+    import copy
+    import dataclasses
+    t, w, f = friction_signal(8000, 17, ((2500, 0.6, 0.0), (5200, 0.0, 0.03)),
+                              profile='crossing')
+    params = dict(window=150, noise_ar_max_order=2)
+    whole = stream(LLRDetector('rw1', **params), t, w, f)
+    first = LLRDetector('rw1', **params)
+    events = stream(first, t[:4000], w[:4000], f[:4000])
+    assert events   # the first change is declared before the cut
+    plain = (np.ndarray, int, float, str, bool, type(None), tuple, list, dict)
+    for name, value in vars(first).items():
+        assert name == '_cfg' or isinstance(value, plain) or dataclasses.is_dataclass(value), \
+            name
+    second = LLRDetector('rw1', **params)
+    for name, value in vars(first).items():
+        setattr(second, name, copy.deepcopy(value))
+    events += stream(second, t[4000:], w[4000:], f[4000:])
+    assert len(whole) >= 2 and [e.to_json() for e in events] == [e.to_json() for e in whole]

@@ -17,10 +17,12 @@ import numpy as np
 sys.path.insert(0, {test_dir!r})
 from test_llr import friction_signal, stream
 from rwa_monitor.core.calibrate import NominalWheel
-from rwa_monitor.core.llr import LLRDetector
+from rwa_monitor.core.llr import detect_batch, LLRDetector
 t, w, f = friction_signal(4000, 61, ((2000, 0.6, 0.0),), profile='crossing')
 det = LLRDetector('rw1', window=150)
-print(json.dumps([e.to_json() for e in stream(det, t, w, f)] + [det.counters]))
+events = [e.to_json() for e in stream(det, t, w, f)] + [det.counters]
+batch = [e.to_json() for e in detect_batch(t, w, f, window=150)]
+print(json.dumps([events, batch]))
 '''
 
 
@@ -40,13 +42,14 @@ def test_inputs_other_than_floats_give_the_events_of_floats():
         got.extend(mixed.update(a, b, c))
     assert [e.to_json() for e in got] == [e.to_json() for e in expected]
     assert mixed.counters == plain.counters
-    assert mixed.update(None, 1.0, 0.0) == [] and mixed.counters['nonfinite'] == 1
-    assert mixed.update(t[-1] + 1.0, 'x', 0.0) == [] and mixed.counters['nonfinite'] == 2
+    assert mixed.update(None, 1.0, 0.0) == [] and mixed.counters['non_finite'] == 1
+    assert mixed.update(t[-1] + 1.0, 'x', 0.0) == [] and mixed.counters['non_finite'] == 2
     assert mixed.n_samples == plain.n_samples + 2
 
 
 def test_uncompiled_kernel_gives_the_same_events():
-    # NUMBA_DISABLE_JIT runs the kernel's functions as plain Python: one implementation.
+    # NUMBA_DISABLE_JIT runs the kernel's functions as plain Python: one implementation,
+    # streaming and batch (the compiled loop over arrays, then a Python loop).
     t, w, f = friction_signal(4000, 61, ((2000, 0.6, 0.0),), profile='crossing')
     det = LLRDetector('rw1', window=150)
     compiled = [e.to_json() for e in stream(det, t, w, f)] + [det.counters]
@@ -56,7 +59,26 @@ def test_uncompiled_kernel_gives_the_same_events():
                          text=True, timeout=300,
                          env=dict(os.environ, NUMBA_DISABLE_JIT='1'))
     assert len(compiled) > 1
-    assert json.loads(out.stdout.strip().splitlines()[-1]) == json.loads(json.dumps(compiled))
+    plain_stream, plain_batch = json.loads(out.stdout.strip().splitlines()[-1])
+    assert plain_stream == json.loads(json.dumps(compiled))
+    assert plain_batch == json.loads(json.dumps(compiled[:-1]))
+
+
+def test_batch_and_streaming_can_take_turns_on_one_detector():
+    # process_arrays and update act on the same state: chunks of arrays, then samples one
+    # by one, give the events of one pass (the noise fit and a declaration span the cuts).
+    t, w, f = friction_signal(6000, 64, ((2500, 0.6, 0.0), (4200, 0.0, 0.03)),
+                              profile='crossing')
+    whole = LLRDetector('rw1', window=120)
+    expected = whole.process_arrays(t, w, f)
+    det = LLRDetector('rw1', window=120)
+    got = det.process_arrays(t[:100], w[:100], f[:100])
+    got += det.process_arrays(t[100:2600], w[100:2600], f[100:2600])
+    got += stream(det, t[2600:3000], w[2600:3000], f[2600:3000])
+    got += det.process_arrays(t[3000:], w[3000:], f[3000:])
+    assert len(expected) >= 2
+    assert [e.to_json() for e in got] == [e.to_json() for e in expected]
+    assert det.counters == whole.counters and det.n_samples == whole.n_samples == len(t)
 
 
 def test_one_call_calibrated_update_equals_lookup_then_update():

@@ -12,7 +12,7 @@ import pytest
 from scipy import stats
 
 from rwa_monitor.core.llr import detect_batch, LLRDetector
-from rwa_monitor.core.llr_common import fit_noise_model, whiten
+from rwa_monitor.core.llr_noise import fit_noise_model, whiten
 
 
 def ar1(n: int, rho: float, rng: np.random.Generator) -> np.ndarray:
@@ -165,7 +165,7 @@ def test_speed_noise_level_is_recovered():
     per cent; 25 % is > 5 standard errors. White noise: the slope's t value exceeds
     3.29 with probability 5e-4 (one-sided), so no model on the fixed seed.
     """
-    from rwa_monitor.core.llr_common import fit_speed_std
+    from rwa_monitor.core.llr_noise import fit_speed_std
     _, w, f = speed_noise_signal(4000, 21)
     h = np.column_stack([-np.sign(w), -w])
     a, b, floor = fit_speed_std(h, f, np.abs(w))

@@ -186,8 +186,8 @@ def test_samples_not_tested_are_counted_across_calibration_reloads(tmp_path):
     feed(10.0, [high + 50.0] * 2)
     assert holder.not_tested('rw1') == {'low_speed_band': 0, 'outside_calibrated_range': 9}
     assert holder.values('rw1')['not_tested_outside_calibrated_range'] == 9
-    assert detector.counters['nonfinite'] == 9   # not tested = dropped as non-finite
+    assert detector.counters['non_finite'] == 9   # not tested = dropped as non-finite
     holder.set('')          # no calibration: the friction itself is tested
     feed(20.0, [high + 50.0] * 2)
     assert holder.not_tested('rw1')['outside_calibrated_range'] == 9
-    assert detector.counters['nonfinite'] == 9
+    assert detector.counters['non_finite'] == 9

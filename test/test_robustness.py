@@ -44,7 +44,7 @@ def test_llr_wheel_oscillating_through_zero_runs_to_the_end(period_s):
         batch, counters = detect_batch_with_counters(t, w, f)
         assert det.n_samples == t.size
         assert [(e.kind, e.index) for e in streamed] == [(e.kind, e.index) for e in batch]
-        assert counters['nonfinite'] == counters['out_of_range'] == 0
+        assert counters['non_finite'] == counters['out_of_range'] == 0
 
 
 def test_candidate_bound_with_equal_eigenvalues_rounded_apart():
@@ -106,9 +106,9 @@ def test_llr_streaming_never_raises_and_counts_every_unused_sample(stream):
     events = []
     for a, b, c in zip(t, w, f):
         events.extend(det.update(a, b, c))
-    used = det._pos + len(det._buffer)  # accepted: in the window or waiting for the noise fit
+    used = det.n_accepted  # in the window or waiting for the noise fit
     assert det.n_samples == len(t)
-    assert used + sum(det.counters[k] for k in ('nonfinite', 'out_of_range',
+    assert used + sum(det.counters[k] for k in ('non_finite', 'out_of_range',
                                                 'non_increasing_time')) == len(t)
     for e in events:
         assert math.isfinite(e.time) and 0.0 <= e.p_value <= 1.0
@@ -126,7 +126,7 @@ def test_llr_batch_never_raises_and_matches_streaming(stream):
         streamed.extend(det.update(a, b, c))
     assert [(e.kind, e.index, e.revision) for e in events] == \
         [(e.kind, e.index, e.revision) for e in streamed]
-    for name in ('nonfinite', 'out_of_range', 'non_increasing_time'):
+    for name in ('non_finite', 'out_of_range', 'non_increasing_time'):
         assert counters[name] == det.counters[name]
 
 

@@ -80,8 +80,8 @@ def test_auto_is_one_spelling_and_numbers_without_a_dot_are_floats():
         'k_verif': 'auto', 'noise_std': 'auto', 'false_alarm_rate': '1e-5'}}}, LLR)
     assert values['k_verif'] == AUTO and values['false_alarm_rate'] == 1e-5
     detector = LLRDetector('rw1', k_verif=AUTO, noise_std=AUTO, window=300)
-    assert detector.parameters['k_verif'] == 150 and detector.parameters['noise_std'] is None
-    assert LLRDetector('rw1', k_verif=0).parameters['k_verif'] == 0
+    assert detector.params['k_verif'] == 150 and detector.params['noise_std'] is None
+    assert LLRDetector('rw1', k_verif=0).params['k_verif'] == 0
     with pytest.raises(ConfigError, match='noise_std'):
         LLR.validate({'noise_std': 0.0})
     with pytest.raises(ConfigError, match='window'):

@@ -1,11 +1,10 @@
-"""What the streaming and the batch LLR detector share (llr-realtime paper, Algorithm 1).
+"""What the LLR detector's parts share (llr-realtime paper, Algorithm 1).
 
-Parameters and their validation, the per-test statistic (vectorised) and p_k, the
-declaration (change time, categorisation, restart point), events, and the noise model
-(autoregressive prewhitening fitted on the first reference segment, docs/llr.md "Noise
-beyond white"). :mod:`rwa_monitor.core.llr` (streaming) and
-:mod:`rwa_monitor.core.llr_batch` (whole arrays) both import this module and not each
-other.
+Parameters and their validation, p_k of one candidate (eq. (7) with Algorithm 2's skip
+bound), the statistic vectorised (eq. (5)), the declaration (change time, categorisation,
+restart point), the revision rules and events. Imported by the detector
+(:mod:`rwa_monitor.core.llr_detector`), its rules (:mod:`rwa_monitor.core.llr_changes`)
+and the batch entry (:mod:`rwa_monitor.core.llr_batch`).
 """
 
 from __future__ import annotations
@@ -18,25 +17,13 @@ import numpy as np
 from rwa_monitor.core import keys, llr_stats
 from rwa_monitor.core.events import AnomalyEvent
 from rwa_monitor.core.friction import coulomb_viscous, RegressorSet
-from rwa_monitor.core.gchi2 import log_lower_bound, log_lower_bound_array, log_sf2, log_sf2_t
+from rwa_monitor.core.gchi2 import log_lower_bound, log_sf2, log_sf2_t
+from rwa_monitor.core.llr_noise import AR_ORDER_LIMIT, DEFAULT_AR_ORDER
 from rwa_monitor.core.params import AUTO, check_int, check_real
 
-COUNTER_NAMES = ('nonfinite', 'out_of_range', 'non_increasing_time', 'missing_aux',
+COUNTER_NAMES = ('non_finite', 'out_of_range', 'non_increasing_time', 'missing_aux',
                  'ill_conditioned')
 _LN10 = math.log(10.0)
-_PI_4 = math.pi / 4.0
-# Largest autoregressive order of the noise model (docs/llr.md, "Noise beyond white").
-AR_ORDER_LIMIT = 10
-DEFAULT_AR_ORDER = 3
-# Noise growing with speed (docs/llr.md "Noise growing with speed"): the fit segment is
-# extended until |w| spans at least this fraction of its largest value, or this many times
-# noise_fit_samples; the slope of the noise level is used only if its t value exceeds
-# SPEED_SLOPE_Z; the modelled level is floored at its value at the slowest fitted sample
-# and at SPEED_FLOOR x its value at the mean |w|.
-SPEED_SPREAD = 0.5
-SPEED_FIT_CAP = 20
-SPEED_SLOPE_Z = 3.2905267314918945
-SPEED_FLOOR = 0.1
 
 
 def validate_parameters(component: str = 'rw1', *, window: int = 500,
@@ -265,12 +252,12 @@ def candidate_log_p2(y: float, tr: float, dm: float, log_p_min: float,
     return log_sf2_t(y, lam1, lam2, dof)
 
 
-def window_statistics(pp: np.ndarray, pt: np.ndarray, n_p: np.ndarray, cfg: Mapping[str, Any],
-                      bounds: bool = True):
-    """Vectorised statistic of the streaming path (same operations, same order).
+def window_statistics(pp: np.ndarray, pt: np.ndarray, n_p: np.ndarray, cfg: Mapping[str, Any]):
+    """Return ``(ok, testable, y, tr, dm)`` of eq. (5) for stacked candidates (numpy).
 
-    ``pp``, ``pt``: prefix rows at ``k`` and ``k + w``, shape ``(6, n)``. ``bounds``: False
-    leaves out the bounds of log p_k (returned as None; the batch scan forms cheaper ones).
+    The operations of core/llr_kernel.py ``test``, vectorised: ``pp``, ``pt`` are the
+    prefix rows at ``k`` and ``k + w``, shape ``(6, n)``; ``n_p`` the lengths of P_k. For
+    :attr:`LLRDetector.last_statistic` and the tests of Lemma 1.
     """
     A, B, C, U, V, E = pp[0], pp[1], pp[2], pp[3], pp[4], pp[5]
     At, Bt, Ct, Ut, Vt = pt[0], pt[1], pt[2], pt[3], pt[4]
@@ -297,182 +284,4 @@ def window_statistics(pp: np.ndarray, pt: np.ndarray, n_p: np.ndarray, cfg: Mapp
         y = (A * d1 * d1 + 2.0 * B * d1 * d2 + C * d2 * d2) / s2
         tr = (Ct * Aw - 2.0 * Bt * Bw + At * Cw) / dett
         dm = (Aw * Cw - Bw * Bw) / dett
-        if not bounds:
-            return ok, ok & (tr > 0.0) & (y > 0.0), y, tr, dm, None, None
-        half = 0.5 * tr
-        lam1 = half + np.sqrt(np.maximum(half * half - dm, 0.0))
-        testable = ok & (tr > 0.0) & (y > 0.0)
-        b = y / (2.0 * lam1)
-        rho = np.maximum(dm / lam1, 0.0) / lam1
-        a = np.maximum(b - b * rho, 0.0)
-        # Bounds of log p_k: candidate_log_p2 (lower); upper: J <= i0e(a/2) (gchi2) and
-        # i0e(z) = (1/pi) int_0^pi exp(-2 z sin^2(t/2)) dt <= int_0^1 exp(-2 z u^2) du
-        # <= sqrt(pi / (8 z)) (sin s >= 2 s / pi), i.e. log J <= log(pi / (4 a)) / 2.
-        if cfg['noise_std'] is None:
-            # Studentised tail (log_sf2_t): at most its value at psi = 0.
-            dof = n_p - 2.0
-            upper = np.where(testable, -0.5 * dof * np.log1p(2.0 * b / dof), 0.0)
-        else:
-            upper = np.where(testable, np.minimum(0.5 * np.log(_PI_4 / a), 0.0) - b, 0.0)
-        lower = log_lower_bound_array(a) - b * rho
-    return ok, testable, y, tr, dm, upper, lower
-
-
-# -- noise beyond white: autoregressive prewhitening (docs/llr.md) ------------------------
-class NoiseModel(NamedTuple):
-    """Autoregressive model of the friction residual fitted on the first reference.
-
-    ``e_l = sum_i ar[i] e_(l-1-i) + u_l``; ``innovation_std`` = std of ``u``,
-    ``residual_std`` = std of ``e``, ``long_run_ratio`` = long-run variance of ``e`` over
-    its variance (``sigma_u^2 / (1 - sum ar)^2 / sigma_e^2``; 1 for white noise): the factor
-    by which the plain statistic would be too large for slowly varying regressors.
-    ``speed_std = (a, b, floor)``: the noise level is ``max(a + b |w|, floor)`` (relative
-    units; None: constant), each sample is divided by it before the AR filter.
-    """
-
-    ar: tuple[float, ...]
-    innovation_std: float
-    residual_std: float
-    long_run_ratio: float
-    speed_std: tuple[float, float, float] | None = None
-
-
-def fit_noise_model(h: np.ndarray, f: np.ndarray, max_order: int,
-                    abs_speed: np.ndarray | None = None) -> NoiseModel:
-    """Fit the friction model and an AR model of its residual; order by BIC.
-
-    Not in the paper (whose Lemma 1 assumes white noise). ``h``: regressor rows ``(n,
-    p)``, ``f``: friction ``(n,)``. Least squares ``x`` (eq. (2)), residual ``e = f - h
-    x``, then for each order ``q <= max_order`` the conditional least-squares AR fit of
-    ``e[Q:]`` on its ``q`` lags (common targets, ``Q = max_order``) and
-    ``BIC_q = (n - Q) log(RSS_q / (n - Q)) + q log(n - Q)``; the order with the smallest
-    BIC whose characteristic roots lie inside the unit circle is kept (0: white noise,
-    the paper's case). With ``abs_speed`` (``|w|`` of the rows) the noise level is first
-    modelled against it (:func:`fit_speed_std`) and rows, friction and residual are divided
-    by that level (weighted least squares) before the AR fit. Deterministic for given
-    arrays, so the streaming and the batch path fit the same model.
-    """
-    h = np.asarray(h, dtype=float)
-    f = np.asarray(f, dtype=float)
-    speed_std = None
-    if abs_speed is not None:
-        speed_std = fit_speed_std(h, f, np.asarray(abs_speed, dtype=float))
-        if speed_std is not None:
-            scale = speed_scale(np.asarray(abs_speed, dtype=float), speed_std)
-            h = h / scale[:, None]
-            f = f / scale
-    pi = h.T @ h
-    x = llr_stats.solve_scaled(pi, h.T @ f)
-    e = f - h @ x
-    n = e.size
-    top = int(min(max_order, max((n - 10) // 10, 0)))
-    target = e[top:]
-    m = target.size
-    best: tuple[float, tuple[float, ...], float] = (math.inf, (), 0.0)
-    for q in range(top + 1):
-        if q == 0:
-            coef = np.zeros(0)
-            rss = float(target @ target)
-        else:
-            lags = np.column_stack([e[top - i - 1:n - i - 1] for i in range(q)])
-            coef = np.linalg.lstsq(lags, target, rcond=None)[0]
-            resid = target - lags @ coef
-            rss = float(resid @ resid)
-            roots = np.roots(np.concatenate([[1.0], -coef]))
-            if not np.all(np.abs(roots) < 0.999):
-                continue
-        s2 = max(rss / m, 1e-300)
-        bic = m * math.log(s2) + q * math.log(m)
-        if bic < best[0]:
-            best = (bic, tuple(float(a) for a in coef), s2)
-    _, ar, s2u = best
-    s2e = max(float(e @ e) / max(n - h.shape[1], 1), 1e-300)
-    ratio = s2u / (1.0 - sum(ar)) ** 2 / s2e
-    return NoiseModel(ar, math.sqrt(s2u), math.sqrt(s2e), ratio, speed_std)
-
-
-def fit_speed_std(h: np.ndarray, f: np.ndarray, abs_speed: np.ndarray
-                  ) -> tuple[float, float, float] | None:
-    """Return ``(a, b, floor)`` of a noise level growing with speed, or None if constant.
-
-    Not in the paper. Least-squares residual ``e`` of the model, then ``|e|`` regressed on
-    ``(1, |w|)``: ``E|e| = sqrt(2 / pi) (a' + b' |w|)`` for Gaussian noise whose std is
-    linear in ``|w|``, so ``a + b |w|`` is proportional to the std (the scale is irrelevant:
-    the level itself is estimated by the detector). Kept only if ``b`` is significant
-    (``t > SPEED_SLOPE_Z``, one-sided 5e-4) and positive. ``floor``: the level at the
-    smallest ``|w|`` of the fit (no extrapolation towards rest, where the intercept is
-    least certain: slower samples are weighted as if at that speed, the conservative
-    side), at least ``SPEED_FLOOR (a + b mean|w|)`` (positive).
-    """
-    x = llr_stats.solve_scaled(h.T @ h, h.T @ f)
-    y = np.abs(f - h @ x)
-    design = np.column_stack([np.ones_like(abs_speed), abs_speed])
-    gram = design.T @ design
-    if not np.linalg.det(gram) > 1e-12 * gram[0, 0] * gram[1, 1]:
-        return None
-    coef = np.linalg.solve(gram, design.T @ y)
-    resid = y - design @ coef
-    dof = max(y.size - 2, 1)
-    s2 = float(resid @ resid) / dof
-    se_b = math.sqrt(s2 * float(np.linalg.inv(gram)[1, 1]))
-    a, b = float(coef[0]), float(coef[1])
-    if not (se_b > 0.0 and b / se_b > SPEED_SLOPE_Z):
-        return None
-    floor = max(a + b * float(np.min(abs_speed)),
-                SPEED_FLOOR * (a + b * float(np.mean(abs_speed))))
-    return a, b, floor
-
-
-def speed_scale(abs_speed, speed_std: tuple[float, float, float]):
-    """Return the modelled noise level ``max(a + b |w|, floor)`` (scalar or array)."""
-    a, b, floor = speed_std
-    if isinstance(abs_speed, np.ndarray):
-        return np.maximum(a + b * abs_speed, floor)
-    level = a + b * abs_speed
-    return level if level > floor else floor
-
-
-def speed_fit_ready(count: int, fit_n: int, low: float, high: float) -> bool:
-    """Return True when ``count`` buffered samples may fit a speed-dependent noise model.
-
-    At least ``fit_n`` samples, and ``|w|`` spanning ``[low, high]`` with ``high - low >=
-    SPEED_SPREAD high`` (a slope needs speeds), or ``SPEED_FIT_CAP fit_n`` samples.
-    """
-    return count >= fit_n and (high - low >= SPEED_SPREAD * high
-                               or count >= SPEED_FIT_CAP * fit_n)
-
-
-def speed_fit_done(count: int, fit_n: int, model: NoiseModel) -> bool:
-    """Return True if a fit on ``count`` samples is final (else retry ``fit_n`` later).
-
-    Final when the noise level was found to grow with speed, or at ``SPEED_FIT_CAP
-    fit_n`` samples (a constant level then, as without the speed model).
-    """
-    return model.speed_std is not None or count >= SPEED_FIT_CAP * fit_n
-
-
-def speed_fit_length(abs_speed: np.ndarray, fit_n: int) -> int | None:
-    """Return the sample count at which :func:`speed_fit_ready` first holds, or None."""
-    n = abs_speed.size
-    if n < fit_n:
-        return None
-    high = np.maximum.accumulate(abs_speed)
-    low = np.minimum.accumulate(abs_speed)
-    count = np.arange(1, n + 1)
-    ok = (count >= fit_n) & ((high - low >= SPEED_SPREAD * high)
-                             | (count >= SPEED_FIT_CAP * fit_n))
-    idx = np.flatnonzero(ok)
-    return int(idx[0]) + 1 if idx.size else None
-
-
-def whiten(values: np.ndarray, ar: tuple[float, ...]) -> np.ndarray:
-    """Return ``v_l - sum_i ar[i] v_(l-1-i)`` along axis 0 (missing lags omitted).
-
-    The operations and their order are those of the streaming detector's per-sample
-    filter (subtract lag 1, then lag 2, ...), so both paths whiten to the same floats.
-    """
-    values = np.asarray(values, dtype=float)
-    out = values.copy()
-    for i, a in enumerate(ar):
-        out[i + 1:] -= a * values[:values.shape[0] - i - 1]
-    return out
+    return ok, ok & (tr > 0.0) & (y > 0.0), y, tr, dm

@@ -1,18 +1,22 @@
-"""Compiled per-sample path of the streaming LLR detector, paper's model (1) (p = 2).
+"""Compiled per-sample path of the LLR detector, paper's model (1) (p = 2).
 
-One call per sample (:func:`step`: acceptance, regressors, AR prewhitening, prefix sums,
-ring, the test of Algorithm 1 lines 9-18 with eq. (5)) on the detector's state, held in
-two preallocated arrays (:func:`allocate`): ``fs`` (floats: scalars, then the rings of
-prefix rows, terms and times, the AR coefficients and lags) and ``ints`` (counters,
-positions, then the ring of row indices). The exact tail of eq. (7) (rare: a sample whose
-skip bound does not rule it out) and all categorisation stay in Python: the kernel returns
-flags and leaves ``y``, ``tr``, ``dm`` in ``fs``.
+One sample (:func:`sample`: acceptance, regressors, noise level growing with speed, AR
+prewhitening, prefix sums, ring, the test of Algorithm 1 lines 9-18 with eq. (5)) on the
+detector's state, held in two preallocated arrays (:func:`allocate`): ``fs`` (floats:
+named scalars ``F_*``, then the rings of prefix rows, terms and times, the AR coefficients
+and lags) and ``ints`` (named scalars ``I_*``: counters, positions, then the ring of row
+indices). Entry points: :func:`step` (one sample from Python, the streaming path),
+:func:`run` (the same over whole arrays, loop compiled, the batch path), :func:`accept_run`
+(the samples waiting for the noise fit). They return flags at the rare samples that need
+Python: the exact tail of eq. (7) (a sample whose skip bound does not rule it out; ``y``,
+``tr``, ``dm`` left in ``fs``), a declaration, a revision point; categorisation and
+declarations are core/llr_changes.py.
 
 Compiled by :mod:`rwa_monitor.core.jit` (numba, no fast-math: the same IEEE operations in
-the same order as the batch path and the golden files; docs/architecture.md "Compiled
-kernels"); plain Python functions when numba is absent or disabled. Also here: the
-calibrated nominal lookup (:func:`nominal_residual`) and both in one call
-(:func:`step_calibrated`).
+the same order whatever the caller; docs/architecture.md "Compiled kernels"), the
+per-sample functions inlined into the entry points; plain Python functions when numba is
+absent or disabled. Also here: the calibrated nominal lookup (:func:`nominal_residual`)
+and both in one call (:func:`step_calibrated`).
 """
 
 from __future__ import annotations
@@ -39,7 +43,10 @@ F_Y = 10
 F_TR = 11
 F_DM = 12
 F_PREF = 13   # six prefix sums (A, B, C, U, V, E) of the reference
-F_SCALARS = 19
+F_SPEED_A = 19   # noise level a + b |w| floored (llr_common.speed_scale; I_SPEED_MODEL)
+F_SPEED_B = 20
+F_SPEED_FLOOR = 21
+F_SCALARS = 22
 
 # Int scalars of ``ints``.
 I_ROWS = 0
@@ -63,10 +70,12 @@ I_O_RTERM = 17
 I_O_RTIME = 18
 I_O_AR = 19
 I_O_LAGS = 20
-I_NONFINITE = 21      # rejected samples by the first check they fail
+I_NON_FINITE = 21      # rejected samples by the first check they fail
 I_OUT_OF_RANGE = 22
 I_NON_INCREASING = 23
-I_SCALARS = 24
+I_SPEED_MODEL = 24    # 1: samples divided by the modelled noise level before the sums
+I_FLAGS = 25          # flags of the sample where :func:`run` stopped
+I_SCALARS = 26
 
 # A candidate goes to the exact tail only if its lower bound of log p_k is within this
 # relative margin above p_min (candidate_log_p2 tests 1e-9; rounding is ~1e-15).
@@ -100,7 +109,7 @@ def allocate(length: int, width: int, term_width: int, ar_max: int
     return fs, ints
 
 
-@njit(cache=True)
+@njit(cache=True, error_model='numpy', inline='always')
 def test(fs, ints, k, at, bt, ct, ut, vt):
     """Algorithm 1 lines 9-18 at candidate ``k`` (p = 2); return EXACT, DECLARE or 0.
 
@@ -114,7 +123,7 @@ def test(fs, ints, k, at, bt, ct, ut, vt):
     (``llr_common.candidate_log_p2``), records a new minimum and decides.
     """
     length = ints[I_L]
-    o = ints[I_O_RPREF] + 6 * (k % length)
+    o = ints[I_O_RPREF] + 6 * (k & (length - 1))
     a = fs[o]
     b = fs[o + 1]
     c = fs[o + 2]
@@ -124,7 +133,7 @@ def test(fs, ints, k, at, bt, ct, ut, vt):
     r = ints[I_R]
     if r >= 0 and k - r > ints[I_C]:
         # Sliding reference: P_k = [k - R, k - 1] (docs/llr.md, "Slow drifts").
-        o = ints[I_O_RPREF] + 6 * ((k - r) % length)
+        o = ints[I_O_RPREF] + 6 * ((k - r) & (length - 1))
         b0 = fs[o]
         b1 = fs[o + 1]
         b2 = fs[o + 2]
@@ -197,23 +206,13 @@ def lower_bound(y, tr, dm, dof):
     return -0.5 * dof * math.log1p(2.0 * b / dof) + big_a + log_lower_bound(big_a)
 
 
-@njit('float64[::1](float64[::1], float64[::1], float64[::1], float64[::1])', cache=True)
-def lower_bounds(y, tr, dm, dof):
-    """Return :func:`lower_bound` of each candidate (``dof < 0``: known noise)."""
-    out = np.empty(y.size)
-    for i in range(y.size):
-        out[i] = lower_bound(y[i], tr[i], dm[i], dof[i])
-    return out
-
-
 @njit('int64(float64[::1], int64[::1], int64, float64[::1])', cache=True)
 def test_row(fs, ints, k, row):
     """:func:`test` with T_k's prefix row given as an array (a restart's catch-up)."""
     return test(fs, ints, k, row[0], row[1], row[2], row[3], row[4])
 
 
-@njit('int64(float64[::1], int64[::1], int64, float64, float64, float64, float64)',
-      cache=True)
+@njit(cache=True, error_model='numpy', inline='always')
 def ingest(fs, ints, row, t, f, h1, h2):
     """Prewhiten an accepted sample, add it to the sums and ring, test; return flags.
 
@@ -262,14 +261,14 @@ def ingest(fs, ints, row, t, f, h1, h2):
     if j == 0:
         ints[I_C_ROW] = row
     length = ints[I_L]
-    s = j % length
+    s = j & (length - 1)
     o = ints[I_O_RTERM] + 3 * s
     fs[o] = h1
     fs[o + 1] = h2
     fs[o + 2] = f
     fs[ints[I_O_RTIME] + s] = t
     ints[I_SCALARS + s] = row
-    o = ints[I_O_RPREF] + 6 * ((j + 1) % length)
+    o = ints[I_O_RPREF] + 6 * ((j + 1) & (length - 1))
     fs[o] = p0
     fs[o + 1] = p1
     fs[o + 2] = p2
@@ -284,7 +283,7 @@ def ingest(fs, ints, row, t, f, h1, h2):
     return flags
 
 
-@njit('int64(float64[::1], int64[::1], float64, float64, float64)', cache=True)
+@njit(cache=True, inline='always')
 def accept(fs, ints, t, w, f):
     """Count the row; return its index if the sample is accepted, else count why and -1.
 
@@ -298,7 +297,7 @@ def accept(fs, ints, t, w, f):
     if -max_w < w < max_w and -max_f < f < max_f and fs[F_LAST_T] < t < math.inf:
         return row
     if (t - t) + (w - w) + (f - f) != 0.0:
-        ints[I_NONFINITE] += 1
+        ints[I_NON_FINITE] += 1
     elif not (-max_w < w < max_w and -max_f < f < max_f):
         ints[I_OUT_OF_RANGE] += 1
     else:
@@ -306,15 +305,72 @@ def accept(fs, ints, t, w, f):
     return -1
 
 
-@njit('int64(float64[::1], int64[::1], float64, float64, float64)', cache=True)
-def step(fs, ints, t, w, f):
-    """Process one sample of model (1): accept, form ``h = (-sign w, -w)``, ingest."""
+@njit(cache=True, error_model='numpy', inline='always')
+def sample(fs, ints, t, w, f):
+    """Process one sample of model (1): accept, form ``h = (-sign w, -w)``, ingest.
+
+    With a noise level growing with speed (``ints[I_SPEED_MODEL]``), ``h`` and ``f`` are
+    first divided by ``max(a + b |w|, floor)`` (:func:`llr_common.speed_scale`).
+    """
     row = accept(fs, ints, t, w, f)
     if row < 0:
         return 0
     fs[F_LAST_T] = t
     h1 = -1.0 if w > 0.0 else (1.0 if w < 0.0 else 0.0)
-    return ingest(fs, ints, row, t, f, h1, -w)
+    h2 = -w
+    if ints[I_SPEED_MODEL]:
+        level = fs[F_SPEED_A] + fs[F_SPEED_B] * abs(w)
+        if not level > fs[F_SPEED_FLOOR]:
+            level = fs[F_SPEED_FLOOR]
+        f = f / level
+        h1 = h1 / level
+        h2 = h2 / level
+    return ingest(fs, ints, row, t, f, h1, h2)
+
+
+@njit('int64(float64[::1], int64[::1], float64, float64, float64)', cache=True)
+def step(fs, ints, t, w, f):
+    """:func:`sample` called from Python: the streaming path, one call per sample."""
+    return sample(fs, ints, t, w, f)
+
+
+@njit('int64(float64[::1], int64[::1], float64[::1], float64[::1], float64[::1], int64)',
+      cache=True)
+def run(fs, ints, t, w, f, start):
+    """:func:`step` over the samples ``start, start + 1, ...`` of whole arrays.
+
+    Returns the index of the first sample whose flags are not 0 (the flags in
+    ``ints[I_FLAGS]``: the caller acts on them, then resumes at the next index), or the
+    array length when all were processed. The batch path: the per-sample loop of the
+    streaming detector, compiled, with Python only at those rare samples.
+    """
+    for i in range(start, t.size):
+        flags = sample(fs, ints, t[i], w[i], f[i])
+        if flags:
+            ints[I_FLAGS] = flags
+            return i
+    return t.size
+
+
+@njit('int64(float64[::1], int64[::1], float64[::1], float64[::1], float64[::1], int64, '
+      'int64[::1])', cache=True)
+def accept_run(fs, ints, t, w, f, start, rows):
+    """:func:`accept` over the samples ``start, start + 1, ...`` until ``rows`` is full.
+
+    Writes the row index of each accepted sample into ``rows`` (the rest stays as it was)
+    and returns the index of the next sample: the samples that wait for the noise fit,
+    taken as the streaming path takes them one by one.
+    """
+    m = 0
+    i = start
+    while i < t.size and m < rows.size:
+        row = accept(fs, ints, t[i], w[i], f[i])
+        if row >= 0:
+            fs[F_LAST_T] = t[i]
+            rows[m] = row
+            m += 1
+        i += 1
+    return i
 
 
 # Calibrated nominal lookup (core/calibrate.py NominalWheel): one table array per wheel.
@@ -388,4 +444,4 @@ def nominal_residual(table, t, w, f):
 @njit('int64(float64[::1], int64[::1], float64[::1], float64, float64, float64)', cache=True)
 def step_calibrated(fs, ints, table, t, w, f):
     """:func:`step` of ``(t, w, nominal_residual(table, t, w, f))``: one call per sample."""
-    return step(fs, ints, t, w, nominal_residual(table, t, w, f))
+    return sample(fs, ints, t, w, nominal_residual(table, t, w, f))

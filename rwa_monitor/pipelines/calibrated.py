@@ -171,7 +171,7 @@ def run_llr(tele: Telemetry, kwargs: Mapping[str, Any], path: str
         found, counters = detect_batch_with_counters(
             tele.time, ch.speed, residual, component=wheel_id, **kwargs)
         counters = dict(counters)
-        counters['nonfinite'] = counters.get('nonfinite', 0) - sum(skipped.values())
+        counters['non_finite'] = counters.get('non_finite', 0) - sum(skipped.values())
         entry = {'events': len(found), 'samples': len(tele), 'rejected': counters,
                  'not_tested': skipped, 'calibration': str(path),
                  'runtime_s': _time.perf_counter() - start}

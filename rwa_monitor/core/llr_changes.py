@@ -1,0 +1,282 @@
+"""The declaration, revision, re-check and continuation rules of the LLR detector.
+
+llr-realtime paper, Algorithm 1 lines 13-21 (declaration and restart) and the kind of each
+change (not in the paper; docs/llr.md "Categorisation", "Kinds on ramps"). Written once:
+:class:`ChangeRules` is a base of :class:`rwa_monitor.core.llr_detector.LLRDetector`,
+whose per-sample loop (core/llr_kernel.py, compiled) stops at the rare samples that need
+them, in the streaming path (``update``) and in the batch path (``process_arrays``) alike.
+The state they act on is the detector's: the kernel arrays ``_fs`` / ``_ints`` (rings of
+the last samples, positions) and :class:`DeclaredChange`, the typed record of the last
+declared change.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import NamedTuple
+
+import numpy as np
+
+from rwa_monitor.core import llr_kernel as kern, llr_stats
+from rwa_monitor.core.events import AnomalyEvent
+from rwa_monitor.core.gchi2 import skip_threshold
+from rwa_monitor.core.llr_common import (candidate_log_p2, checkpoints, declaration,
+                                         make_event, ramp_points, reference_base,
+                                         revision_due)
+
+
+@dataclass
+class DeclaredChange:
+    """The last declared change, whose kind is re-checked as data arrive.
+
+    Positions count accepted samples; the change was found at position ``tau`` (time
+    ``time``, row ``rows[0]``) and declared at ``rows[2]``. ``before``: prefix sums of the
+    before segment (``n_before`` samples), ``gap``: sums of the after samples before the
+    new reference starts (the after segment is ``gap`` + the new reference). ``checks``:
+    positions where the kind is re-checked (:func:`llr_common.checkpoints`), ``points``:
+    the remaining positions where the ramp sums take in samples
+    (:func:`llr_common.ramp_points`), ``ramp``: :func:`llr_stats.ramp_sums` blocks of
+    ``[tau, ramp_end]`` (times since ``time``).
+    """
+
+    before: np.ndarray
+    n_before: int
+    kind: str
+    guess: str
+    confirmed: bool
+    revision: int
+    rows: tuple[int, int, int]
+    time: float
+    log_p: float
+    gap: np.ndarray
+    checks: tuple[int, ...]
+    points: list[int]
+    ramp: list[np.ndarray]
+    ramp_end: int
+
+
+class Rings(NamedTuple):
+    """Views of the kernel's rings of the last ``L`` accepted samples (by position % L)."""
+
+    pref: np.ndarray   # (L, width): prefix-sum row at each position
+    term: np.ndarray   # (L, 3) (h1, h2, f) for p = 2, else (L, width) terms
+    time: np.ndarray   # (L,) sample time
+    row: np.ndarray    # (L,) row index
+
+
+def rings(fs: np.ndarray, ints: np.ndarray, width: int) -> Rings:
+    """Return the ring views of the kernel arrays (core/llr_kernel.py ``allocate``)."""
+    length = int(ints[kern.I_L])
+    pref = fs[ints[kern.I_O_RPREF]:ints[kern.I_O_RTERM]].reshape(length, width)
+    term = fs[ints[kern.I_O_RTERM]:ints[kern.I_O_RTIME]].reshape(length, -1)
+    return Rings(pref, term, fs[ints[kern.I_O_RTIME]:ints[kern.I_O_AR]],
+                 ints[kern.I_SCALARS:kern.I_SCALARS + length])
+
+
+class ChangeRules:
+    """Algorithm 1's declaration and restart, and the kinds of the declared changes."""
+
+    def _rings(self) -> Rings:
+        return rings(self._fs, self._ints, llr_stats.width(self._p))
+
+    def _prefix_now(self) -> np.ndarray:
+        """Return the prefix sums of the reference up to the last accepted sample."""
+        if self._p == 2:
+            return self._fs[kern.F_PREF:kern.F_PREF + 6].copy()
+        return np.asarray(self._pref_general, dtype=float)
+
+    def _base(self, k: int) -> tuple[np.ndarray, int]:
+        """Return the prefix row where P_k starts and the length of P_k."""
+        c = int(self._ints[kern.I_C])
+        if self._R is not None and k - self._R > c:
+            return self._rings().pref[(k - self._R) % self._L].copy(), self._R
+        return np.zeros(llr_stats.width(self._p)), k - c
+
+    def _after(self, flags: int) -> list[AnomalyEvent]:
+        """Act on the flags of a kernel call: revise, finish the test, declare."""
+        j = int(self._ints[kern.I_POS]) - 1
+        events = self._revise(j) if flags & kern.REVISE else []
+        if flags & kern.DECLARE or flags & kern.EXACT and self._exact():
+            events.extend(self._declare(j))
+        return events
+
+    def _exact(self) -> bool:
+        """Finish the test the kernel left at EXACT: eq. (7) tail, new minimum, decision."""
+        fs, ints = self._fs, self._ints
+        k = int(ints[kern.I_K])
+        dof = int(ints[kern.I_DOF])
+        logpmin = float(fs[kern.F_LOGPMIN])
+        logp = candidate_log_p2(float(fs[kern.F_Y]), float(fs[kern.F_TR]),
+                                float(fs[kern.F_DM]), logpmin,
+                                None if dof < 0 else float(dof))
+        if logp is not None and logp < logpmin:
+            self._record(k, logp)
+        return self._declares(k)
+
+    def _declares(self, k: int) -> bool:
+        """Algorithm 1 line 18: p_min at or below r and ``k`` past the verification."""
+        return (float(self._fs[kern.F_LOGPMIN]) <= self._logr
+                and k > int(self._ints[kern.I_KMIN]) + self._kverif)
+
+    def _record(self, k: int, logp: float) -> None:
+        """Algorithm 1 lines 13-15: new smallest p_k."""
+        self._fs[kern.F_LOGPMIN] = logp
+        self._ints[kern.I_KMIN] = k
+        self._fs[kern.F_YSTAR] = skip_threshold(logp)
+
+    def _declare(self, n: int) -> list[AnomalyEvent]:
+        """Algorithm 1 lines 18-21: declare the change and restart the reference.
+
+        The paper restarts at ``k_min``; here at ``max(tau, k_min)`` (``tau`` the refined
+        change position), so that the new reference holds post-change samples only. The
+        kind is re-checked on ``[tau, j]`` (the gap ``[tau, start)`` is kept as one
+        prefix-sum row). Tests of the new reference whose window is already complete run
+        at once (never, since the start is at or after ``k_min``; kept for safety). Not in
+        the paper: a declaration that the previous change's growth explains
+        (:meth:`_continues`, docs/llr.md "Kinds on ramps") is no new change: its kind is
+        re-checked instead and the reference restarts as after any declaration.
+        """
+        L, ring = self._L, self._rings()
+        c, k_min = int(self._ints[kern.I_C]), int(self._ints[kern.I_KMIN])
+        log_p = float(self._fs[kern.F_LOGPMIN])
+        first = max(c, k_min - self._w)
+        base = reference_base(c, first, self._R)
+        prefix = ring.pref[np.arange(first, n + 2) % L]
+        if base != c:
+            prefix = prefix - ring.pref[base % L]
+        ramps: dict[int, np.ndarray] = {}
+
+        def ramp_of(tau: int) -> np.ndarray:
+            ramps[tau] = self._ramp_block(tau, n, float(ring.time[tau % L]))
+            return ramps[tau]
+
+        tau, start, cat = declaration(prefix, first, base, k_min, n, self._cfg, self._z_thr,
+                                      ramp_of)
+        if self._continues(tau, n):
+            prev = self._cat
+            events = self._recheck(n, prev.gap + self._prefix_now())
+            prev.gap = prev.gap + ring.pref[start % L]
+            return events + self._restart_and_test(start, n)
+        rows = (int(ring.row[tau % L]), int(ring.row[k_min % L]), int(ring.row[n % L]))
+        times = (float(ring.time[tau % L]), float(ring.time[n % L]))
+        event = make_event(self._component, cat, rows, times, log_p, 0)
+        self._last_event = event
+        checks = checkpoints(tau, n, self._cfg['category_revisions'], self._w)
+        points = ramp_points(n, checks, self._w)
+        self._ints[kern.I_CHECKPOINT] = points.pop(0) if points else -1
+        self._cat = DeclaredChange(
+            before=prefix[tau - first].copy(), n_before=tau - base, kind=cat.kind,
+            guess=cat.guess, confirmed=cat.confirmed, revision=0, rows=rows, time=times[0],
+            log_p=log_p, gap=prefix[start - first] - prefix[tau - first],
+            checks=tuple(checks), points=points, ramp=[ramps[tau]], ramp_end=n)
+        return [event] + self._restart_and_test(start, n)
+
+    def _restart_and_test(self, start: int, n: int) -> list[AnomalyEvent]:
+        """Restart the reference at ``start``; run the tests whose window is complete."""
+        self._restart(start, n)
+        events: list[AnomalyEvent] = []
+        pref = self._rings().pref
+        for k in range(start + self._w + 1, n - self._w + 2):
+            row = pref[(k + self._w) % self._L].copy()
+            if self._p == 2:
+                flags = kern.test_row(self._fs, self._ints, k, row)
+                declare = bool(flags & kern.DECLARE) or bool(flags & kern.EXACT) and \
+                    self._exact()
+            else:
+                declare = self._test_general(k, row)
+            if declare:
+                events.extend(self._declare(n))
+        return events
+
+    def _restart(self, c: int, n: int) -> None:
+        """Start the new reference at position ``c`` and rebuild its prefix sums."""
+        L, ring = self._L, self._rings()
+        self._ints[kern.I_C] = c
+        self._ints[kern.I_C_ROW] = ring.row[c % L]
+        P = (0.0,) * 6 if self._p == 2 else np.zeros(llr_stats.width(self._p))
+        ring.pref[c % L] = P
+        for j in range(c, n + 1):
+            if self._p == 2:
+                h1, h2, f = ring.term[j % L]
+                P = (P[0] + h1 * h1, P[1] + h1 * h2, P[2] + h2 * h2, P[3] + h1 * f,
+                     P[4] + h2 * f, P[5] + f * f)
+            else:
+                P = P + ring.term[j % L]
+            ring.pref[(j + 1) % L] = P
+        if self._p == 2:
+            self._fs[kern.F_PREF:kern.F_PREF + 6] = P
+        else:
+            self._pref_general = P
+        self._fs[kern.F_LOGPMIN] = 0.0
+        self._ints[kern.I_KMIN] = c
+        self._fs[kern.F_YSTAR] = 0.0
+
+    def _continues(self, tau: int, n: int) -> bool:
+        """Return True if the change declared at ``n`` is the previous one still growing.
+
+        Possible while the previous change's kind is still re-checked (its ramp sums are
+        kept up to date): :func:`llr_stats.continues` on its segments up to ``n`` and on
+        the samples ``[tau, n]``. If so, its ramp sums take in the samples up to ``n``.
+        """
+        prev = self._cat
+        if prev is None or self._ints[kern.I_CHECKPOINT] < 0:
+            return False
+        blocks = list(prev.ramp)
+        if prev.ramp_end < n:
+            blocks.append(self._ramp_block(prev.ramp_end + 1, n, prev.time))
+        after = prev.gap + self._prefix_now()
+        times = self._rings().time[np.arange(tau, n + 1) % self._L]
+        if not llr_stats.continues(prev.before, prev.n_before, after, np.asarray(blocks),
+                                   self._terms(tau, n), times - prev.time, prev.kind,
+                                   self._p, self._noise_var, self._z_thr):
+            return False
+        prev.ramp = blocks
+        prev.ramp_end = n
+        return True
+
+    def _ramp_block(self, first: int, last: int, t0: float) -> np.ndarray:
+        """Return :func:`llr_stats.ramp_sums` of positions ``first..last`` (in the ring)."""
+        times = self._rings().time[np.arange(first, last + 1) % self._L]
+        return llr_stats.ramp_sums(self._terms(first, last), times - t0)
+
+    def _terms(self, first: int, last: int) -> np.ndarray:
+        """Return the per-sample terms of positions ``first..last`` (in the ring), ``(n, w)``.
+
+        For p = 2 the ring holds ``(h1, h2, f)``: the six products are formed here with
+        numpy, in the order of the kernel's prefix sums.
+        """
+        rows = self._rings().term[np.arange(first, last + 1) % self._L]
+        if self._p != 2:
+            return rows
+        h1, h2, f = rows[:, 0], rows[:, 1], rows[:, 2]
+        return np.column_stack((h1 * h1, h1 * h2, h2 * h2, h1 * f, h2 * f, f * f))
+
+    def _revise(self, j: int) -> list[AnomalyEvent]:
+        """Take the new samples into the ramp sums; re-check the kind at a checkpoint.
+
+        ``j`` is a point of :func:`llr_common.ramp_points`; the kind is re-checked only at
+        the points of :func:`llr_common.checkpoints`.
+        """
+        cat = self._cat
+        self._ints[kern.I_CHECKPOINT] = cat.points.pop(0) if cat.points else -1
+        cat.ramp.append(self._ramp_block(cat.ramp_end + 1, j, cat.time))
+        cat.ramp_end = j
+        if j not in cat.checks:
+            return []
+        return self._recheck(j, cat.gap + self._prefix_now())
+
+    def _recheck(self, j: int, after: np.ndarray) -> list[AnomalyEvent]:
+        """Re-check the kind of the last declared change on its after segment up to ``j``."""
+        cat = self._cat
+        new = llr_stats.categorise(cat.before, cat.n_before, after, self._p,
+                                   self._noise_var, self._z_thr, np.asarray(cat.ramp))
+        if not revision_due(cat.kind, cat.guess, cat.confirmed, new):
+            return []
+        cat.kind, cat.guess, cat.confirmed = new.kind, new.guess, new.confirmed
+        cat.revision += 1
+        ring = self._rings()
+        rows = cat.rows[:2] + (int(ring.row[j % self._L]),)
+        times = (cat.time, float(ring.time[j % self._L]))
+        self._last_event = make_event(self._component, new, rows, times, cat.log_p,
+                                      cat.revision)
+        return [self._last_event]

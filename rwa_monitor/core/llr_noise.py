@@ -1,0 +1,268 @@
+"""The noise model of the LLR detector: AR prewhitening and a level growing with speed.
+
+Not in the paper (whose Lemma 1 assumes white noise of known level; docs/llr.md "Noise
+beyond white", "Noise growing with speed"): the model is fitted on the first accepted
+samples (:func:`fit_noise_model`), which wait in a buffer meanwhile; every sample is then
+divided by the modelled level and AR-filtered before it enters the sums (for the paper's
+model in the compiled kernel, core/llr_kernel.py). :class:`NoiseFitting` is the buffering
+and replay, a base of :class:`rwa_monitor.core.llr_detector.LLRDetector`.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+
+from rwa_monitor.core import llr_kernel as kern, llr_stats
+from rwa_monitor.core.events import AnomalyEvent
+
+# Largest autoregressive order of the noise model (docs/llr.md, "Noise beyond white").
+AR_ORDER_LIMIT = 10
+DEFAULT_AR_ORDER = 3
+# Noise growing with speed (docs/llr.md "Noise growing with speed"): the fit segment is
+# extended until |w| spans at least this fraction of its largest value, or this many times
+# noise_fit_samples; the slope of the noise level is used only if its t value exceeds
+# SPEED_SLOPE_Z; the modelled level is floored at its value at the slowest fitted sample
+# and at SPEED_FLOOR x its value at the mean |w|.
+SPEED_SPREAD = 0.5
+SPEED_FIT_CAP = 20
+SPEED_SLOPE_Z = 3.2905267314918945
+SPEED_FLOOR = 0.1
+
+
+class NoiseModel(NamedTuple):
+    """Autoregressive model of the friction residual fitted on the first reference.
+
+    ``e_l = sum_i ar[i] e_(l-1-i) + u_l``; ``innovation_std`` = std of ``u``,
+    ``residual_std`` = std of ``e``, ``long_run_ratio`` = long-run variance of ``e`` over
+    its variance (``sigma_u^2 / (1 - sum ar)^2 / sigma_e^2``; 1 for white noise): the factor
+    by which the plain statistic would be too large for slowly varying regressors.
+    ``speed_std = (a, b, floor)``: the noise level is ``max(a + b |w|, floor)`` (relative
+    units; None: constant), each sample is divided by it before the AR filter.
+    """
+
+    ar: tuple[float, ...]
+    innovation_std: float
+    residual_std: float
+    long_run_ratio: float
+    speed_std: tuple[float, float, float] | None = None
+
+
+def fit_noise_model(h: np.ndarray, f: np.ndarray, max_order: int,
+                    abs_speed: np.ndarray | None = None) -> NoiseModel:
+    """Fit the friction model and an AR model of its residual; order by BIC.
+
+    Not in the paper (whose Lemma 1 assumes white noise). ``h``: regressor rows ``(n,
+    p)``, ``f``: friction ``(n,)``. Least squares ``x`` (eq. (2)), residual ``e = f - h
+    x``, then for each order ``q <= max_order`` the conditional least-squares AR fit of
+    ``e[Q:]`` on its ``q`` lags (common targets, ``Q = max_order``) and
+    ``BIC_q = (n - Q) log(RSS_q / (n - Q)) + q log(n - Q)``; the order with the smallest
+    BIC whose characteristic roots lie inside the unit circle is kept (0: white noise,
+    the paper's case). With ``abs_speed`` (``|w|`` of the rows) the noise level is first
+    modelled against it (:func:`fit_speed_std`) and rows, friction and residual are divided
+    by that level (weighted least squares) before the AR fit. Deterministic for given
+    arrays, so the streaming and the batch path fit the same model.
+    """
+    h = np.asarray(h, dtype=float)
+    f = np.asarray(f, dtype=float)
+    speed_std = None
+    if abs_speed is not None:
+        speed_std = fit_speed_std(h, f, np.asarray(abs_speed, dtype=float))
+        if speed_std is not None:
+            scale = speed_scale(np.asarray(abs_speed, dtype=float), speed_std)
+            h = h / scale[:, None]
+            f = f / scale
+    pi = h.T @ h
+    x = llr_stats.solve_scaled(pi, h.T @ f)
+    e = f - h @ x
+    n = e.size
+    top = int(min(max_order, max((n - 10) // 10, 0)))
+    target = e[top:]
+    m = target.size
+    best: tuple[float, tuple[float, ...], float] = (math.inf, (), 0.0)
+    for q in range(top + 1):
+        if q == 0:
+            coef = np.zeros(0)
+            rss = float(target @ target)
+        else:
+            lags = np.column_stack([e[top - i - 1:n - i - 1] for i in range(q)])
+            coef = np.linalg.lstsq(lags, target, rcond=None)[0]
+            resid = target - lags @ coef
+            rss = float(resid @ resid)
+            roots = np.roots(np.concatenate([[1.0], -coef]))
+            if not np.all(np.abs(roots) < 0.999):
+                continue
+        s2 = max(rss / m, 1e-300)
+        bic = m * math.log(s2) + q * math.log(m)
+        if bic < best[0]:
+            best = (bic, tuple(float(a) for a in coef), s2)
+    _, ar, s2u = best
+    s2e = max(float(e @ e) / max(n - h.shape[1], 1), 1e-300)
+    ratio = s2u / (1.0 - sum(ar)) ** 2 / s2e
+    return NoiseModel(ar, math.sqrt(s2u), math.sqrt(s2e), ratio, speed_std)
+
+
+def fit_speed_std(h: np.ndarray, f: np.ndarray, abs_speed: np.ndarray
+                  ) -> tuple[float, float, float] | None:
+    """Return ``(a, b, floor)`` of a noise level growing with speed, or None if constant.
+
+    Not in the paper. Least-squares residual ``e`` of the model, then ``|e|`` regressed on
+    ``(1, |w|)``: ``E|e| = sqrt(2 / pi) (a' + b' |w|)`` for Gaussian noise whose std is
+    linear in ``|w|``, so ``a + b |w|`` is proportional to the std (the scale is irrelevant:
+    the level itself is estimated by the detector). Kept only if ``b`` is significant
+    (``t > SPEED_SLOPE_Z``, one-sided 5e-4) and positive. ``floor``: the level at the
+    smallest ``|w|`` of the fit (no extrapolation towards rest, where the intercept is
+    least certain: slower samples are weighted as if at that speed, the conservative
+    side), at least ``SPEED_FLOOR (a + b mean|w|)`` (positive).
+    """
+    x = llr_stats.solve_scaled(h.T @ h, h.T @ f)
+    y = np.abs(f - h @ x)
+    design = np.column_stack([np.ones_like(abs_speed), abs_speed])
+    gram = design.T @ design
+    if not np.linalg.det(gram) > 1e-12 * gram[0, 0] * gram[1, 1]:
+        return None
+    coef = np.linalg.solve(gram, design.T @ y)
+    resid = y - design @ coef
+    dof = max(y.size - 2, 1)
+    s2 = float(resid @ resid) / dof
+    se_b = math.sqrt(s2 * float(np.linalg.inv(gram)[1, 1]))
+    a, b = float(coef[0]), float(coef[1])
+    if not (se_b > 0.0 and b / se_b > SPEED_SLOPE_Z):
+        return None
+    floor = max(a + b * float(np.min(abs_speed)),
+                SPEED_FLOOR * (a + b * float(np.mean(abs_speed))))
+    return a, b, floor
+
+
+def speed_scale(abs_speed, speed_std: tuple[float, float, float]):
+    """Return the modelled noise level ``max(a + b |w|, floor)`` (scalar or array)."""
+    a, b, floor = speed_std
+    if isinstance(abs_speed, np.ndarray):
+        return np.maximum(a + b * abs_speed, floor)
+    level = a + b * abs_speed
+    return level if level > floor else floor
+
+
+def speed_fit_ready(count: int, fit_n: int, low: float, high: float) -> bool:
+    """Return True when ``count`` buffered samples may fit a speed-dependent noise model.
+
+    At least ``fit_n`` samples, and ``|w|`` spanning ``[low, high]`` with ``high - low >=
+    SPEED_SPREAD high`` (a slope needs speeds), or ``SPEED_FIT_CAP fit_n`` samples.
+    """
+    return count >= fit_n and (high - low >= SPEED_SPREAD * high
+                               or count >= SPEED_FIT_CAP * fit_n)
+
+
+def speed_fit_done(count: int, fit_n: int, model: NoiseModel) -> bool:
+    """Return True if a fit on ``count`` samples is final (else retry ``fit_n`` later).
+
+    Final when the noise level was found to grow with speed, or at ``SPEED_FIT_CAP
+    fit_n`` samples (a constant level then, as without the speed model).
+    """
+    return model.speed_std is not None or count >= SPEED_FIT_CAP * fit_n
+
+
+def whiten(values: np.ndarray, ar: tuple[float, ...]) -> np.ndarray:
+    """Return ``v_l - sum_i ar[i] v_(l-1-i)`` along axis 0 (missing lags omitted).
+
+    The operations and their order are those of the streaming detector's per-sample
+    filter (subtract lag 1, then lag 2, ...), so both paths whiten to the same floats.
+    """
+    values = np.asarray(values, dtype=float)
+    out = values.copy()
+    for i, a in enumerate(ar):
+        out[i + 1:] -= a * values[:values.shape[0] - i - 1]
+    return out
+
+
+class NoiseFitting:
+    """Buffer the first samples, fit the noise model on them, then prewhiten every sample."""
+
+    def ingest_row(self, row: int, t: float, f: float, h, speed: float) -> list[AnomalyEvent]:
+        """Process an accepted sample whose regressor row ``h`` is already computed.
+
+        For :func:`detect_batch` with a model other than eq. (1): the rows are computed
+        once for the whole file and validated there (finite, increasing time). While the
+        noise model is being fitted the sample is buffered; once fitted the buffer is
+        replayed, and every sample is prewhitened (divided by the modelled noise level at
+        ``|speed|``, then AR-filtered) before it enters the sums.
+        """
+        if self._fitting:
+            self._buffer.append((row, t, f, h, speed))
+            if self._speed_model:
+                aw = abs(speed)
+                self._wlow = min(self._wlow, aw)
+                self._whigh = max(self._whigh, aw)
+                if self._next_fit is None:
+                    if not speed_fit_ready(len(self._buffer), self._fit_n, self._wlow,
+                                           self._whigh):
+                        return []
+                elif len(self._buffer) < self._next_fit:
+                    return []
+            elif len(self._buffer) < self._fit_n:
+                return []
+            return self._fit_and_replay()
+        return self._ingest_fitted(row, t, f, h, speed)
+
+    def _buffer_arrays(self, t: np.ndarray, w: np.ndarray, f: np.ndarray, start: int) -> int:
+        """Buffer the samples from ``start`` on (paper's model) up to the fit; return the next.
+
+        The acceptance loop compiled (core/llr_kernel.py ``accept_run``); the buffer holds
+        what :meth:`update` would have put in it, sample by sample.
+        """
+        rows = np.full(self._fit_n - len(self._buffer), -1, dtype=np.int64)
+        row0 = int(self._ints[kern.I_ROWS])
+        end = kern.accept_run(self._fs, self._ints, t, w, f, start, rows)
+        for row in rows[rows >= 0].tolist():
+            i = start + row - row0
+            speed = float(w[i])
+            h1 = -1.0 if speed > 0.0 else (1.0 if speed < 0.0 else 0.0)
+            self._buffer.append((row, float(t[i]), float(f[i]), (h1, -speed), speed))
+        return end
+
+    def _fit_and_replay(self) -> list[AnomalyEvent]:
+        """Fit the noise model on the buffered samples, then process them."""
+        buffer = self._buffer
+        rows = np.array([np.asarray(item[3], dtype=float) for item in buffer])
+        speeds = (np.abs(np.array([item[4] for item in buffer], dtype=float))
+                  if self._speed_model else None)
+        model = fit_noise_model(rows, np.array([item[2] for item in buffer]), self._ar_max,
+                                speeds)
+        if self._speed_model and not speed_fit_done(len(buffer), self._fit_n, model):
+            self._next_fit = len(buffer) + self._fit_n
+            return []
+        self._buffer = []
+        self._fitting = False
+        self._noise = model
+        self._ar = model.ar
+        self._speed_std = model.speed_std
+        if self._p == 2:
+            fs, ints = self._fs, self._ints
+            ints[kern.I_AR_ORDER] = len(model.ar)
+            fs[ints[kern.I_O_AR]:ints[kern.I_O_AR] + len(model.ar)] = model.ar
+            if model.speed_std is not None:
+                ints[kern.I_SPEED_MODEL] = 1
+                fs[kern.F_SPEED_A:kern.F_SPEED_FLOOR + 1] = model.speed_std
+        self._fast = self._default
+        events: list[AnomalyEvent] = []
+        for row, t, f, h, w in buffer:
+            events.extend(self._ingest_fitted(row, t, f, h, w))
+        return events
+
+    def _ingest_fitted(self, row: int, t: float, f: float, h, speed: float
+                       ) -> list[AnomalyEvent]:
+        if self._speed_std is not None:
+            level = speed_scale(abs(speed), self._speed_std)
+            f = f / level
+            if self._p == 2:
+                h = (float(h[0]) / level, float(h[1]) / level)
+            else:
+                h = np.asarray(h, dtype=float) / level
+        if self._p == 2:
+            flags = kern.ingest(self._fs, self._ints, row, t, f, float(h[0]), float(h[1]))
+            return self._after(flags) if flags else []
+        if self._ar:
+            f, h = self._whiten(f, h)
+        return self._update_general(row, t, f, np.asarray(h, dtype=float))
