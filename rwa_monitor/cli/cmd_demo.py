@@ -229,6 +229,11 @@ def run_demo(path: pathlib.Path, *, domain_id: int = 0, executor: str = 'events'
             screen.draw(render(board, title='rwa_monitor demo',
                                progress=_progress(replay, started), colour=screen.tty))
         events = list(llr.events) if llr is not None else []
+        if llr is not None:
+            # The file has ended: each wheel's open declaration gets its final kind
+            # (LLRDetector.finish, as `rwa-monitor detect` does at the end of the file).
+            for wheel in llr.wheels.values():
+                events.extend(wheel.detector.finish())
     finally:
         if runner is not None:
             runner.shutdown()
