@@ -26,9 +26,8 @@ def test_a_file_that_ends_before_the_first_recheck_gets_its_final_kind():
     # final step evaluation confirms the dry step unless the viscous component lies
     # beyond 1.96 (probability 0.05) or the separability guard fails (at 2,500 samples
     # after the change a +0.5 step passes it, docs/llr.md table): >= 7 of 10 right
-    # (binomial, p = 0.95: P(< 7) < 0.002). Wrong kinds are not bounded here: the growth
-    # tests' refutation is the best of several time shapes at the single-shape level
-    # (seed 2731 ends `both`, docs/llr.md "End of record").
+    # (binomial, p = 0.95: P(< 7) < 0.002). Wrong kinds are not asserted here: seed 2731
+    # ends `both` (a rare growth draw, docs/llr.md "End of record").
     right = 0
     for seed in range(2730, 2740):
         t, w, f = paper_file(seed)

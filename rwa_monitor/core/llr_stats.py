@@ -312,7 +312,10 @@ def categorise(before: np.ndarray, n_before: int, after: np.ndarray, p: int,
         return Category(KINDS[named], dx[named].copy(), (z_d, z_v), s2, True, KINDS[named],
                         detectable, SHAPES[1])
     if named is None:
-        step = refuted(step, ramp_statistics(best, s2), ramp_limits(1, z_threshold)[0], dx)
+        # The statistics are the best of the candidate time shapes: Bonferroni over them,
+        # as the step check (grows) does.
+        level = math.erfc(z_threshold / math.sqrt(2.0)) / shapes.shape[0]
+        step = refuted(step, ramp_statistics(best, s2), _chi2_1(level), dx)
     growing = step.confirmed and step.shape == SHAPES[0] and grows(
         after, shapes, s2, p, z_threshold)
     if growing:
@@ -562,6 +565,12 @@ def continues(before: np.ndarray, n_before: int, after: np.ndarray, blocks: np.n
         v[:, :p] += q_b
         best.append(float(np.max(_explained(joint, v))))
     return (best[1] - best[0]) / noise_var <= ramp_limits(p, z_threshold)[0]
+
+
+def _chi2_1(level: float) -> float:
+    """Return the upper ``level`` quantile of chi2 with one degree of freedom."""
+    from scipy import special
+    return float(special.chdtri(1, level))
 
 
 def ramp_limits(dof: int, z_threshold: float) -> tuple[float, float]:
