@@ -127,3 +127,39 @@ def test_commands_end_to_end(tmp_path, capsys):
     assert main(['fss', 'evaluate', str(legacy), '--model', str(tmp_path / 'm.json')]) == 0
     assert 'absolute features' in capsys.readouterr().err
     assert main(['diagnose', str(tmp_path / 'missing.csv'), '-o', str(out)]) == 2
+
+
+@pytest.mark.parametrize('seed', [2641, 2642])
+def test_a_persistent_step_is_an_onset_not_an_fss_jump(model, seed):
+    # A wheel without FSSs (the friction simulator, model (1)) with one dry or one
+    # viscous step inside an 80,000-sample window: the step's level lasts longer than
+    # any FSS residence (Example 2's longest is 30,000), so it is an onset; the part
+    # after it is diagnosed and names the kind injected; no FSS is flagged. Seeds not
+    # used while the rule was written (demo seed 7; checks on 2611-2615).
+    from rwa_monitor.sim.friction import Anomaly, simulate_friction_with_truth
+    tele, _ = simulate_friction_with_truth(
+        wheels=['a', 'b', 'c'], n_samples=80_000, rate_hz=10.0, seed=seed,
+        anomalies=[Anomaly('a', 'dry', 3000.0, delta_dry=2.0e-4),
+                   Anomaly('b', 'viscous', 6000.0, delta_viscous=1.0e-6)])
+    expected = {'a': {'dry'}, 'b': {'viscous'}, 'c': set()}
+    for wheel_id, kinds in expected.items():
+        wheel = tele.wheels[wheel_id]
+        out = diagnose(wheel.speed, wheel.friction, tele.time, model)
+        assert {k for k, v in out['anomalies'].items() if v} == kinds
+        if kinds:
+            (onset,) = out['onsets']
+            start = 30_000 if 'dry' in kinds else 60_000
+            assert abs(onset['index'] - start) <= 20   # wGLR half-window
+            assert out['estimates']['diagnosed_from_index'] == onset['index']
+        else:
+            assert out['onsets'] == [] and out['estimates']['diagnosed_from_index'] == 0
+
+
+def test_paper_windows_hold_no_onset():
+    # Examples 1-2 jump within their residences: no accepted changepoint is an onset on
+    # windows of every status (seed apart from the other tests').
+    tele = fss.simulate_fss(statuses=fss.STATUSES, seed=2643)
+    for wheel_id in tele.wheels:
+        wheel = tele.wheels[wheel_id]
+        ext = extract(wheel.speed / 400.0, -wheel.friction / 2.0e-4)
+        assert ext.onsets.size == 0 and ext.start == 0

@@ -38,11 +38,12 @@ def friction_signal(n: int, seed: int, changes=(), profile: str = 'fig3', noise:
     return np.arange(n, dtype=float) * 0.5, w, f
 
 
-def stream(det: LLRDetector, t, w, f) -> list:
+def stream(det: LLRDetector, t, w, f, end: bool = True) -> list:
     events = []
     for a, b, c in zip(list(t), list(w), list(f)):
         events.extend(det.update(a, b, c))
-    return events
+    # ``end``: the file ends here: the final kind, as the batch path (docs/llr.md)
+    return events + det.finish() if end else events
 
 
 def guess(event) -> str:
@@ -512,6 +513,7 @@ def test_custom_model_with_auxiliary_channel_batch_equals_streaming():
     streamed = []
     for i in range(t.size):
         streamed.extend(det.update(t[i], w[i], f[i], {'gain': gain[i]}))
+    streamed.extend(det.finish())
     batch, counters = detect_batch_with_counters(t, w, f, aux={'gain': gain}, **params)
     assert streamed == batch and counters == det.counters
     assert counters['non_finite'] == np.count_nonzero(np.isnan(gain))
@@ -646,7 +648,7 @@ def test_state_restored_into_a_fresh_detector_continues_the_stream():
     params = dict(window=150, noise_ar_max_order=2)
     whole = stream(LLRDetector('rw1', **params), t, w, f)
     first = LLRDetector('rw1', **params)
-    events = stream(first, t[:4000], w[:4000], f[:4000])
+    events = stream(first, t[:4000], w[:4000], f[:4000], end=False)
     assert events   # the first change is declared before the cut
     plain = (np.ndarray, int, float, str, bool, type(None), tuple, list, dict)
     for name, value in vars(first).items():

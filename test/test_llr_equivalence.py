@@ -75,6 +75,7 @@ def test_streaming_and_batch_give_identical_events_and_counters(stream):
     streamed = []
     for row in zip(t.tolist(), w.tolist(), f.tolist()):
         streamed.extend(det.update(*row))
+    streamed.extend(det.finish())
     batch, counters = detect_batch_with_counters(t, w, f, component='rw1', **params)
     assert [e.to_json() for e in batch] == [e.to_json() for e in streamed]
     assert counters == det.counters

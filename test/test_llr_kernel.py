@@ -74,7 +74,7 @@ def test_batch_and_streaming_can_take_turns_on_one_detector():
     det = LLRDetector('rw1', window=120)
     got = det.process_arrays(t[:100], w[:100], f[:100])
     got += det.process_arrays(t[100:2600], w[100:2600], f[100:2600])
-    got += stream(det, t[2600:3000], w[2600:3000], f[2600:3000])
+    got += stream(det, t[2600:3000], w[2600:3000], f[2600:3000], end=False)
     got += det.process_arrays(t[3000:], w[3000:], f[3000:])
     assert len(expected) >= 2
     assert [e.to_json() for e in got] == [e.to_json() for e in expected]

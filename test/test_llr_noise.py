@@ -100,6 +100,7 @@ def test_streaming_equals_batch_with_ar_noise_and_sliding_reference():
         streamed = []
         for a, b, c in zip(t.tolist(), w.tolist(), f.tolist()):
             streamed.extend(det.update(a, b, c))
+        streamed.extend(det.finish())
         assert [e.to_json() for e in batch] == [e.to_json() for e in streamed]
         assert any(abs(e.index - 4000) < 300 for e in batch)
 
@@ -182,7 +183,7 @@ def test_streaming_equals_batch_with_the_speed_noise_model():
     t, w, f = speed_noise_signal(16_000, 23, hold=3000, changes=((11_000, 1.0, 0.0),))
     params = dict(window=300, noise_speed_model=True, false_alarm_rate=1e-5)
     det = LLRDetector('rw1', **params)
-    streamed = [e for a, b, c in zip(t, w, f) for e in det.update(a, b, c)]
+    streamed = [e for a, b, c in zip(t, w, f) for e in det.update(a, b, c)] + det.finish()
     assert streamed == detect_batch(t, w, f, **params)
     assert det.noise_model.speed_std is not None
     assert any(abs(e.index - 11_000) <= 300 for e in streamed)

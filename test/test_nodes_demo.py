@@ -36,6 +36,42 @@ def test_demo_finds_both_injected_anomalies(tmp_path):
     report = cmd_demo.summary(result)
     assert 'identical to `rwa-monitor detect` on the file: yes' in report
     assert 'MISSED' not in report
+    # The demo's own count (seed 7, half an hour: rw3's viscous step has 10 minutes after
+    # it, its final kind on those is undecided; rw2 is named dry): no wrong kind.
+    counts = cmd_demo.kind_counts(result)['llr']
+    assert counts['wrong'] == 0 and counts['right'] >= 1
+    assert 'kinds against the truth: llr right' in report
+
+
+def test_summary_counts_right_and_wrong_kinds():
+    # The demo judges its own answer: kinds after the revisions against the truth (LLR)
+    # and the window diagnoser's flags against the injected (wheel, kind) pairs.
+    from rwa_monitor.sim.friction import Change
+    changes = [Change('rw2', 'dry', 100, 10.0, 2e-4, 0.0),
+               Change('rw3', 'viscous', 200, 20.0, 0.0, 1e-6),
+               Change('rw4', 'dry', 300, 30.0, 2e-4, 0.0)]
+
+    def event(wheel, kind, index, revision=0):
+        return AnomalyEvent(detector='llr', component=wheel, kind=kind, time=index / 10,
+                            index=index, declared_time=index / 10 + 5,
+                            declared_index=index + 50, revision=revision)
+    first2, first3 = event('rw2', 'undecided', 100), event('rw3', 'undecided', 200)
+    events = [first2, first3, event('rw2', 'both', 100, 1), event('rw3', 'viscous', 200, 1)]
+    fss = [{'component': w, 'fields': {'detector': 'fss', 'kind': k}}
+           for w, k in (('rw2', 'dry'), ('rw2', 'fss2'), ('rw1', 'fss1'))]
+    result = cmd_demo.DemoResult(
+        rows=10, wall_s=1.0, executor='single', events=events, pipeline_events=events,
+        changes=changes, matches=[(changes[0], first2), (changes[1], first3),
+                                  (changes[2], None)],
+        false_alarms=[], notes=[], other_detectors={'fss': 3}, other_events=fss)
+    counts = cmd_demo.kind_counts(result)
+    assert counts['llr'] == {'right': 1, 'wrong': 1, 'undecided': 0, 'missed': 1}
+    assert counts['fss'] == {'ran': True, 'right': 1,
+                             'wrong': [('rw1', 'fss1'), ('rw2', 'fss2')],
+                             'missed': [('rw3', 'viscous'), ('rw4', 'dry')]}
+    report = cmd_demo.summary(result)
+    assert 'llr right 1/3, wrong 1, undecided 0, missed 1' in report
+    assert 'fss flags against the truth: right 1/3, wrong 2 (rw1 fss1, rw2 fss2)' in report
 
 
 def test_missing_detector_modules_are_skipped_with_a_note():

@@ -227,6 +227,11 @@ def run_demo(path: pathlib.Path, *, domain_id: int = 0, executor: str = 'events'
             screen.draw(render(board, title='rwa_monitor demo',
                                progress=_progress(replay, started), colour=screen.tty))
         events = list(llr.events) if llr is not None else []
+        if llr is not None:
+            # The file has ended: each wheel's open declaration gets its final kind
+            # (LLRDetector.finish, as `rwa-monitor detect` does at the end of the file).
+            for wheel in llr.wheels.values():
+                events.extend(wheel.detector.finish())
     finally:
         if runner is not None:
             runner.shutdown()
@@ -276,6 +281,39 @@ def _evaluate(tele: Any, events: list[Any], wall: float, kind: str, notes: list[
                       false_alarms, notes, repeats, others, len(tele.wheels))
 
 
+def final_kind(result: DemoResult, hit: Any) -> str:
+    """Return the kind of a declaration after its revisions (its last event)."""
+    return [e.kind for e in result.events
+            if e.component == hit.component and e.index == hit.index][-1]
+
+
+def kind_counts(result: DemoResult) -> dict[str, Any]:
+    """Count right and wrong kinds against the injected truth, per detector.
+
+    LLR: each injected change is ``right`` when its declaration's kind after the
+    revisions is the injected one, ``undecided`` when it stays undecided, ``wrong``
+    for any other kind, ``missed`` without a declaration. FSS: each (wheel, kind) flag
+    is ``right`` when that kind was injected on that wheel, else ``wrong`` (listed);
+    an injected change that no window flagged is ``missed``.
+    """
+    llr = {'right': 0, 'wrong': 0, 'undecided': 0, 'missed': 0}
+    for change, hit in result.matches:
+        if hit is None:
+            llr['missed'] += 1
+            continue
+        kind = final_kind(result, hit)
+        llr['right' if kind == change.kind else
+            'undecided' if kind == 'undecided' else 'wrong'] += 1
+    truth = {(c.wheel, c.kind) for c in result.changes}
+    flagged = {(e['component'], e['fields'].get('kind')) for e in result.other_events
+               if e['fields'].get('detector') == 'fss'}
+    fss: dict[str, Any] = {'ran': 'fss' in result.other_detectors,
+                           'right': len(flagged & truth),
+                           'wrong': sorted(flagged - truth, key=str),
+                           'missed': sorted(truth - flagged, key=str)}
+    return {'llr': llr, 'fss': fss}
+
+
 def summary(result: DemoResult) -> str:
     """Return the end-of-demo summary: events against the truth."""
     lines = ['', 'summary: events against the injected truth (detected: first declared '
@@ -287,8 +325,7 @@ def summary(result: DemoResult) -> str:
         if hit is None:
             lines.append(left + 'MISSED')
         else:
-            final = [e.kind for e in result.events
-                     if e.component == hit.component and e.index == hit.index][-1]
+            final = final_kind(result, hit)
             kinds = hit.kind if final == hit.kind else f'{hit.kind}->{final}'
             lines.append(left + f'{kinds:<8} {hit.time:>10.1f} {hit.declared_time:>12.1f} '
                          f'{hit.declared_time - change.time_s:>8.1f}')
@@ -319,6 +356,18 @@ def summary(result: DemoResult) -> str:
                                 else '')
                              + (f' declared t={declared:.1f} s'
                                 if isinstance(declared, float) else ''))
+    counts = kind_counts(result)
+    llr = counts['llr']
+    lines.append(f'kinds against the truth: llr right {llr["right"]}/{len(result.changes)}, '
+                 f'wrong {llr["wrong"]}, undecided {llr["undecided"]}, '
+                 f'missed {llr["missed"]}')
+    fss = counts['fss']
+    if fss['ran']:
+        wrong = ', '.join(f'{w} {k}' for w, k in fss['wrong']) or 'none'
+        missed = ', '.join(f'{w} {k}' for w, k in fss['missed']) or 'none'
+        lines.append(f'fss flags against the truth: right {fss["right"]}/'
+                     f'{len(result.changes)}, wrong {len(fss["wrong"])} ({wrong}), '
+                     f'not flagged: {missed}')
     for note in result.notes:
         lines.append(f'note: {note}')
     return '\n'.join(lines)

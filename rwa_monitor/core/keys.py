@@ -41,6 +41,9 @@ KIND_GUESS = 'kind_guess'           # better single kind when kind is 'undecided
 KIND_SHAPE = 'kind_shape'           # 'step', or 'ramp' when a ramp model named the kind
 DETECTABLE_DRY = 'detectable_dry_nm'          # dry step found with 90 % power after
 DETECTABLE_VISCOUS = 'detectable_viscous_nms'  # the change (inf: not separable)
+KIND_REASON = 'kind_reason'         # why the kind is 'undecided' (only then)
+FINAL = 'final'                     # the end-of-record categorisation (only then, True)
+FINAL_SAMPLES = 'final_samples'     # samples after the change it used (only then)
 
 # Calibration in force (detector nodes' ``calibration_file``): event and health fields.
 CALIBRATION_FILE = 'calibration_file'

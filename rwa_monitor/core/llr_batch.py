@@ -82,7 +82,8 @@ def detect_batch(time, speed, friction, *, component: str = 'rw1',
     Returns
     -------
     list of AnomalyEvent
-        The events :meth:`LLRDetector.update` gives on the same rows.
+        The events :meth:`LLRDetector.update` gives on the same rows, then those of
+        :meth:`LLRDetector.finish` (the file has ended: the open declaration's final kind).
 
     Examples
     --------
@@ -109,7 +110,7 @@ def detect_batch_with_counters(time, speed, friction, *, component: str = 'rw1',
     t, w, f = as_arrays(time, speed, friction)
     if cfg['regressors'].is_coulomb_viscous:
         det = LLRDetector(component, **params)
-        events = det.process_arrays(t, w, f)
+        events = det.process_arrays(t, w, f) + det.finish()
         return events, det.counters
     return _streamed(t, w, f, aux, component, params)
 
@@ -145,6 +146,7 @@ def _streamed(t: np.ndarray, w: np.ndarray, f: np.ndarray,
     events: list[AnomalyEvent] = []
     for i in np.flatnonzero(accepted):
         events.extend(det.ingest_row(int(i), float(t[i]), float(f[i]), h[i], float(w[i])))
+    events.extend(det.finish())
     counters = det.counters
     for name, value in counts.items():
         counters[name] += value
@@ -159,4 +161,4 @@ def _row_by_row(det: LLRDetector, t: np.ndarray, w: np.ndarray, f: np.ndarray,
     for i in range(t.size):
         row_aux = {name: float(aux[name][i]) for name in names} if aux else None
         events.extend(det.update(float(t[i]), float(w[i]), float(f[i]), row_aux))
-    return events, det.counters
+    return events + det.finish(), det.counters

@@ -53,6 +53,7 @@ class DeclaredChange:
     points: list[int]
     ramp: list[np.ndarray]
     ramp_end: int
+    tau: int = -1   # position of the change
 
 
 class Rings(NamedTuple):
@@ -168,7 +169,7 @@ class ChangeRules:
             before=prefix[tau - first].copy(), n_before=tau - base, kind=cat.kind,
             guess=cat.guess, confirmed=cat.confirmed, revision=0, rows=rows, time=times[0],
             log_p=log_p, gap=prefix[start - first] - prefix[tau - first],
-            checks=tuple(checks), points=points, ramp=[ramps[tau]], ramp_end=n)
+            checks=tuple(checks), points=points, ramp=[ramps[tau]], ramp_end=n, tau=tau)
         return [event] + self._restart_and_test(start, n)
 
     def _restart_and_test(self, start: int, n: int) -> list[AnomalyEvent]:
@@ -265,18 +266,43 @@ class ChangeRules:
             return []
         return self._recheck(j, cat.gap + self._prefix_now())
 
-    def _recheck(self, j: int, after: np.ndarray) -> list[AnomalyEvent]:
+    def finish(self) -> list[AnomalyEvent]:
+        """End of record: the final categorisation of the open declaration, if any.
+
+        Not in the paper (docs/llr.md "End of record"). A declared change whose kind still
+        has re-checks to come gets one more categorisation on every sample after it that
+        the record holds (the same tests and levels as a re-check), as an event with
+        ``final`` True and the samples it used, whether the kind changed or not; the
+        change is then closed. The batch path calls it after the last row; a live
+        detector keeps its re-check schedule and calls it only when its input ends.
+        Returns [] when no declaration is open.
+        """
+        cat = self._cat
+        if cat is None or self._ints[kern.I_CHECKPOINT] < 0:
+            return []
+        j = int(self._ints[kern.I_POS]) - 1
+        if j > cat.ramp_end:
+            cat.ramp.append(self._ramp_block(cat.ramp_end + 1, j, cat.time))
+            cat.ramp_end = j
+        self._ints[kern.I_CHECKPOINT] = -1
+        cat.points = []
+        return self._recheck(j, cat.gap + self._prefix_now(), final=True)
+
+    def _recheck(self, j: int, after: np.ndarray, final: bool = False
+                 ) -> list[AnomalyEvent]:
         """Re-check the kind of the last declared change on its after segment up to ``j``."""
         cat = self._cat
         new = llr_stats.categorise(cat.before, cat.n_before, after, self._p,
                                    self._noise_var, self._z_thr, np.asarray(cat.ramp))
-        if not revision_due(cat.kind, cat.guess, cat.confirmed, new):
+        if not final and not revision_due(cat.kind, cat.guess, cat.confirmed, new):
             return []
+        if final and cat.confirmed and not new.confirmed:
+            new = new._replace(kind=cat.kind, guess=cat.guess, confirmed=True)
         cat.kind, cat.guess, cat.confirmed = new.kind, new.guess, new.confirmed
         cat.revision += 1
         ring = self._rings()
         rows = cat.rows[:2] + (int(ring.row[j % self._L]),)
         times = (cat.time, float(ring.time[j % self._L]))
         self._last_event = make_event(self._component, new, rows, times, cat.log_p,
-                                      cat.revision)
+                                      cat.revision, j - cat.tau + 1 if final else None)
         return [self._last_event]

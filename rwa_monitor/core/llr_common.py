@@ -99,11 +99,14 @@ def validate_parameters(component: str = 'rw1', *, window: int = 500,
 
 
 def make_event(component: str, category: llr_stats.Category, rows: tuple[int, int, int],
-               times: tuple[float, float], log_p: float, revision: int) -> AnomalyEvent:
+               times: tuple[float, float], log_p: float, revision: int,
+               final_samples: int | None = None) -> AnomalyEvent:
     """Build the AnomalyEvent of a declaration or revision.
 
     ``rows = (change row, argmin row, declaration row)``, ``times = (change time,
     declaration time)``; ``category.confirmed``: the data tell the kind apart (docs/llr.md).
+    An undecided kind carries its reason; ``final_samples``: the end-of-record
+    categorisation on that many samples after the change (``final`` True).
     """
     dx, z = category.dx, category.z
     details = {keys.DELTA_DRY: float(dx[0]), keys.DELTA_VISCOUS: float(dx[1]),
@@ -114,6 +117,11 @@ def make_event(component: str, category: llr_stats.Category, rows: tuple[int, in
                keys.KIND_SHAPE: category.shape,
                keys.DETECTABLE_DRY: category.detectable[0],
                keys.DETECTABLE_VISCOUS: category.detectable[1]}
+    if category.kind == llr_stats.UNDECIDED:
+        details[keys.KIND_REASON] = llr_stats.REASONS.get(category.reason, category.reason)
+    if final_samples is not None:
+        details[keys.FINAL] = True
+        details[keys.FINAL_SAMPLES] = int(final_samples)
     return AnomalyEvent(detector='llr', component=component, kind=category.kind,
                         time=times[0], index=rows[0], declared_time=times[1],
                         declared_index=rows[2], p_value=math.exp(log_p), revision=revision,

@@ -36,6 +36,18 @@ POWER_Z = 1.2815515655446004   # one-sided normal quantile of 0.9 (detectable st
 # significant even at this level (the growth analogue of Z_ABSENT).
 RAMP_ABSENT_LEVEL = 0.05
 SHAPES = ('step', 'ramp')
+# Collinearity of the alternatives on the after segment (docs/llr.md "Kinds that survive
+# collinearity"): a growth column whose information left after the step offsets and the
+# other growth column is below this fraction of its own cannot be told from them.
+MIN_SEPARATION = 1.0e-3
+# Why a kind stays undecided (the event's ``kind_reason``).
+REASONS = {
+    'small': 'neither single-component change is rejected: the data fit either',
+    'speed': 'speed variation too small to separate dry from viscous for a change of this '
+             'size',
+    'ambiguous': 'the other component lies between the 5 % and the category level',
+    'grows': 'the change grows: the step model is rejected and no growth kind is named',
+}
 
 
 def width(p: int) -> int:
@@ -164,6 +176,7 @@ class Category(NamedTuple):
     guess: str = ''
     detectable: tuple[float, float] = (math.inf, math.inf)
     shape: str = SHAPES[0]
+    reason: str = ''   # why ``undecided`` (a key of REASONS), else ''
 
 
 def component_information(before: np.ndarray, after: np.ndarray, p: int
@@ -263,23 +276,35 @@ def categorise(before: np.ndarray, n_before: int, after: np.ndarray, p: int,
     detectable = detectable_steps(info, s2, z_threshold)
     pi_a = unpack(after, p)[0]
     mean_speed = float(pi_a[0, 1] / pi_a[0, 0]) if pi_a[0, 0] > 0.0 else 0.0
+    reason = ''
     if no_dry_only and no_viscous_only:
         step = Category(KINDS[2], dx[2].copy(), (z_d, z_v), s2, True, KINDS[2], detectable)
     else:
         if no_dry_only or no_viscous_only:
             h = 1 if no_dry_only else 0
             absent = abs((z_d, z_v)[1 - h]) <= Z_ABSENT
-            confirmed = absent and separable(dx, h, detectable, mean_speed)
+            split = separable(dx, h, detectable, mean_speed)
+            confirmed = absent and split
             kind = KINDS[h] if confirmed else UNDECIDED
+            reason = '' if confirmed else ('speed' if not split else 'ambiguous')
         else:
             h = 0 if explained[0] >= explained[1] else 1
             confirmed, kind = False, UNDECIDED
-        step = Category(kind, dx[h].copy(), (z_d, z_v), s2, confirmed, KINDS[h], detectable)
+            reason = 'small' if separable(dx, h, detectable, mean_speed) else 'speed'
+        step = Category(kind, dx[h].copy(), (z_d, z_v), s2, confirmed, KINDS[h], detectable,
+                        reason=reason)
     if ramp is None:
         return step
     shapes = ramp_shapes(ramp, p)
     fits = ramp_fits(before, after, shapes, p)
     best = fits.max(axis=0)
+    gram = _ramp_after(after, shapes, p)[0][int(np.argmax(fits[:, 0]))]
+    if min(growth_separation(gram, p)) < MIN_SEPARATION:
+        # The growth alternatives cannot be told from a step and a speed term here (a
+        # monotone spin-down, a wheel that keeps one speed): the simpler explanation, the
+        # step outcome, stands (undecided: with its own reason); a confirmed step verdict
+        # cannot be checked for growth.
+        return step
     named = ramp_kind(best, s2, z_threshold)
     if named is not None and step.kind == KINDS[named]:
         return step
@@ -287,14 +312,44 @@ def categorise(before: np.ndarray, n_before: int, after: np.ndarray, p: int,
         return Category(KINDS[named], dx[named].copy(), (z_d, z_v), s2, True, KINDS[named],
                         detectable, SHAPES[1])
     if named is None:
-        step = refuted(step, ramp_statistics(best, s2), ramp_limits(1, z_threshold)[0], dx)
+        # The statistics are the best of the candidate time shapes: Bonferroni over them,
+        # as the step check (grows) does.
+        level = math.erfc(z_threshold / math.sqrt(2.0)) / shapes.shape[0]
+        step = refuted(step, ramp_statistics(best, s2), _chi2_1(level), dx)
     growing = step.confirmed and step.shape == SHAPES[0] and grows(
         after, shapes, s2, p, z_threshold)
     if growing:
         h = 0 if explained[0] >= explained[1] else 1
         return step._replace(kind=UNDECIDED, dx=dx[h].copy(), confirmed=False,
-                             guess=KINDS[h])
+                             guess=KINDS[h], reason='grows')
+    if step.kind == UNDECIDED and not step.reason:
+        step = step._replace(reason='grows')
     return step
+
+
+def growth_separation(gram: np.ndarray, p: int) -> tuple[float, float]:
+    """Return, per growth column (dry, viscous), the fraction of its information left.
+
+    Not in the paper (docs/llr.md "Kinds that survive collinearity"). ``gram``: the
+    Gram matrix of the after segment's columns ``(h, r h_dry, r h_viscous)``
+    (:func:`_ramp_after`, one time shape). For growth column ``g`` it is ``(G_gg -
+    G_go G_oo^+ G_og) / G_gg``, ``o`` = the step offsets and the other growth column:
+    ``1 - R^2`` of the column on its alternatives, the inverse of its variance inflation.
+    0 when the speed and the time since the change move together (a coasting wheel) or
+    the speed keeps one value: the growth and step alternatives are then one direction.
+    """
+    out = []
+    for i in (0, 1):
+        g = p + i
+        others = list(range(p)) + [p + 1 - i]
+        own = float(gram[g, g])
+        if own <= 0.0:
+            out.append(0.0)
+            continue
+        cross = gram[others, g]
+        left = own - float(cross @ solve_scaled(_sub(gram, others), cross))
+        out.append(max(left, 0.0) / own)
+    return out[0], out[1]
 
 
 def growth_statistic(after: np.ndarray, shapes: np.ndarray, noise_var: float, p: int
@@ -510,6 +565,12 @@ def continues(before: np.ndarray, n_before: int, after: np.ndarray, blocks: np.n
         v[:, :p] += q_b
         best.append(float(np.max(_explained(joint, v))))
     return (best[1] - best[0]) / noise_var <= ramp_limits(p, z_threshold)[0]
+
+
+def _chi2_1(level: float) -> float:
+    """Return the upper ``level`` quantile of chi2 with one degree of freedom."""
+    from scipy import special
+    return float(special.chdtri(1, level))
 
 
 def ramp_limits(dof: int, z_threshold: float) -> tuple[float, float]:

@@ -100,10 +100,15 @@ def _gyro_calibration(path: str) -> Any:
 
 
 def step(spec: ComponentSpec, chain: Mapping[str, Any], reads: list[tuple[Any, dict]],
-         names: list[str], count_read: bool = False) -> dict[str, Any]:
+         names: list[str], count_read: bool = False, last: bool = False) -> dict[str, Any]:
     """Return the chain after passes ``names`` (``reads``: telemetry or reason, facts).
 
     ``count_read``: add the reads' CPU time to this chain's (one component per pass).
+    ``last``: these are the run's last passes: the archive ends here, so an open
+    declaration gets its end-of-record categorisation (``finish``, as ``detect`` gives at
+    the end of a file; docs/llr.md "End of record"). The state kept is the one before it,
+    so that a later run with new passes continues the open declaration as a full run
+    would, and that run's own final word supersedes this one.
     """
     start = _time.process_time()
     out = dict(chain)
@@ -128,6 +133,12 @@ def step(spec: ComponentSpec, chain: Mapping[str, Any], reads: list[tuple[Any, d
     if detector is not None:
         out['detector'] = codec.encode(detector)
         out['facts'] = _facts(spec, detector, out)
+    if last and out['detector'] is not None:
+        if detector is None:
+            detector, _ = build(spec)
+            codec.restore(detector, *out['detector'])
+        if hasattr(detector, 'finish'):
+            out['events'].extend(detector.finish())
     own = worker_facts(_time.process_time() - start)
     read_work = [work for _, work in reads] if count_read else []
     out['work'] = _account(chain['work'], read_work + [own])

@@ -249,13 +249,14 @@ def _submit(client: Any, plan: list[dict[str, Any]], task_bytes: int
     for entry in plan:
         chains = {s.component: comp.new_chain(entry['prior'].get(s.component))
                   for s in entry['specs']}
-        for first, end in _groups(entry['passes'], task_bytes):
+        groups = _groups(entry['passes'], task_bytes)
+        for first, end in groups:
             passes = entry['passes'][first:end]
             reads = [client.submit(comp.read, p.path, pure=False) for p in passes]
             for n, spec in enumerate(entry['specs']):
                 chains[spec.component] = client.submit(
                     comp.step, spec, chains[spec.component], reads, [p.name for p in passes],
-                    n == 0, pure=False)
+                    n == 0, end == len(entry['passes']), pure=False)
         for spec in entry['specs']:
             finals[(spec.spacecraft, spec.component)] = chains[spec.component]
     return finals

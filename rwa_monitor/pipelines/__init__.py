@@ -67,8 +67,14 @@ def detect(tele: Telemetry, config: dict[str, Any], where: Any = 'parameters'
     >>> noise = np.random.default_rng(0).normal(0.0, 5e-5, t.size)
     >>> friction = -(2e-4 + 4e-4 * (t >= 150.0)) - 5e-7 * speed + noise
     >>> events, summary = detect(Telemetry(t, {'rw1': Wheel(speed, friction)}), {})
-    >>> [(e.component, e.kind, round(e.time, 1)) for e in events], list(summary['pipelines'])
-    ([('rw1', 'dry', 150.0)], ['llr'])
+    >>> [(e.component, e.kind, round(e.time, 1), e.revision) for e in events]
+    [('rw1', 'dry', 150.0, 0), ('rw1', 'dry', 150.0, 1)]
+
+    The file ends before the declaration's last re-check: its final categorisation on every
+    sample after the change is the last revision (docs/llr.md "End of record").
+
+    >>> events[-1].details['final'], list(summary['pipelines'])
+    (True, ['llr'])
     """
     events: list[AnomalyEvent] = []
     summary: dict[str, Any] = {'samples': len(tele), 'source': tele.source, 'pipelines': {}}

@@ -9,7 +9,7 @@ samples of one wheel for the node.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 import time as _time
 from typing import Sequence
 
@@ -72,14 +72,77 @@ class Extraction:
     base_dry_se: float = float('inf')   # least-squares standard error of ``base_dry``
     timings: dict[str, float] = field(default_factory=dict)       # wall time (s)
     cpu_timings: dict[str, float] = field(default_factory=dict)   # this thread's CPU (s)
+    onsets: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    onset_deltas: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    start: int = 0                # first sample of the part of the window diagnosed
 
     def features(self) -> dict:
         """Return the classifier input: base dry, viscous and levels per FSS."""
         return {'base_dry': self.base_dry, 'viscous': self.viscous, 'levels': self.levels}
 
 
+# Least samples after an onset for the part after it to be diagnosed (else the part
+# before it is): stage 2 then holds >= 1000 samples for two coefficients.
+MIN_REGIME_SAMPLES = 1000
+
+
 def extract(speed: np.ndarray, friction: np.ndarray, config: FssConfig = FssConfig()
             ) -> Extraction:
+    """Run stages 1-3 on one window; diagnose the wheel's latest regime when it changed.
+
+    An **onset** is an accepted changepoint that no FSS of the model can have made: it
+    is the only jump of its FSS in the window and the level before or after it lasts
+    longer than that FSS's longest residence (:func:`onsets`). It is a persistent
+    change of the wheel (an anomaly beginning inside the window: a dry or a viscous
+    step), not a switch of a friction source; left to the assignment it was given to
+    the slow FSS at the floor score and judged an FSS-2 anomaly (docs/fss.md, "Onsets").
+    When the window holds onsets, stages 1-3 run again on the samples after the last
+    one (the wheel as it is now; if fewer than MIN_REGIME_SAMPLES, on those before it)
+    and the result keeps the onsets (window indices) and their dry jumps.
+    """
+    speed = np.asarray(speed, dtype=float)
+    friction = np.asarray(friction, dtype=float)
+    ext = _extract_once(speed, friction, config)
+    found = onsets(ext, speed.size, config.systems)
+    if found.size == 0:
+        return ext
+    last = int(found[-1])
+    part = slice(last, None) if speed.size - last >= MIN_REGIME_SAMPLES else slice(0, last)
+    sub = extract(speed[part], friction[part], config)
+    shift = part.start or 0
+    deltas = ext.deltas[np.searchsorted(ext.accepted, found)]
+    timings = {k: v + sub.timings.get(k, 0.0) for k, v in ext.timings.items()}
+    cpu = {k: v + sub.cpu_timings.get(k, 0.0) for k, v in ext.cpu_timings.items()}
+    return replace(sub, detected=sub.detected + shift, accepted=sub.accepted + shift,
+                   onsets=np.concatenate((found, sub.onsets + shift)),
+                   onset_deltas=np.concatenate((deltas, sub.onset_deltas)),
+                   start=sub.start + shift, timings=timings, cpu_timings=cpu)
+
+
+def onsets(ext: Extraction, n: int, systems: Sequence[SwitchingSystem]) -> np.ndarray:
+    """Return the accepted changepoints that no FSS can have made (sorted indices).
+
+    A changepoint is one when it is the only one assigned to its FSS in the window and
+    the sojourn before it (at least its index: it began before the window) or after it
+    (at least to the window's end) is longer than the FSS's longest residence: the FSS
+    would have had to jump again, and every FSS jump of the model is far above the noise
+    (so not missed by stage 1). The assignment's floor score (LOG_FLOOR) lets such a
+    jump through so that a window breaking the model still gets an explanation; here it
+    is named for what it is. A window of at most twice the longest residence can hold
+    no onset of that FSS at its middle (e.g. the bus's 3-hour, 43,200-sample records
+    against Example 2's 30,000).
+    """
+    found = []
+    for s, system in enumerate(systems, start=1):
+        mine = ext.accepted[ext.systems_of == s]
+        longest = max(hi for _, hi in system.residence)
+        if mine.size == 1 and max(int(mine[0]), n - int(mine[0])) > longest:
+            found.append(int(mine[0]))
+    return np.array(sorted(found), dtype=np.int64)
+
+
+def _extract_once(speed: np.ndarray, friction: np.ndarray, config: FssConfig
+                  ) -> Extraction:
     """Run stages 1-3 on one window of normalised, paper-sign signals.
 
     The noise variance is estimated twice: robustly from differences for the stage-1
@@ -87,8 +150,6 @@ def extract(speed: np.ndarray, friction: np.ndarray, config: FssConfig = FssConf
     After the assignment the intervals are refitted without the rejected changepoints,
     so that Algorithm 1 sees the merged intervals' coefficients.
     """
-    speed = np.asarray(speed, dtype=float)
-    friction = np.asarray(friction, dtype=float)
     if speed.shape != friction.shape or speed.ndim != 1:
         raise ValueError('speed and friction must be 1-D arrays of the same length')
     n = speed.size
@@ -175,11 +236,13 @@ def diagnose(speed_rad_s: np.ndarray, friction_nm: np.ndarray, time_s: np.ndarra
         ``anomalies``: one boolean per anomaly; ``estimates``: base dry (N m), viscous
         (N m s/rad) and its standard error, noise std (N m), levels per FSS (N m);
         ``changepoints``: time, index, FSS and dry jump (N m) of each accepted
-        changepoint; ``timings_s``: seconds per stage. A window most of whose samples
-        are not tested (non-finite, or left out by a calibration) is ``status: unknown``
-        with every flag False, ``unknown_reason`` and ``coverage`` (core/coverage.py):
-        never a nominal answer; with fewer tested samples than :func:`samples_needed` the
-        stages do not run (estimates None).
+        changepoint; ``onsets``: index, time and dry jump (N m) of each persistent change
+        inside the window (:func:`extract`), the rest describing the part diagnosed, from
+        sample ``estimates['diagnosed_from_index']``; ``timings_s``: seconds per stage.
+        A window most of whose samples are not tested (non-finite, or left out by a
+        calibration) is ``status: unknown`` with every flag False, ``unknown_reason`` and
+        ``coverage`` (core/coverage.py): never a nominal answer; with fewer tested samples
+        than :func:`samples_needed` the stages do not run (estimates None).
 
     Examples
     --------
@@ -198,7 +261,8 @@ def diagnose(speed_rad_s: np.ndarray, friction_nm: np.ndarray, time_s: np.ndarra
     if coverage.verdict == NOT_EXAMINED:
         estimates = dict.fromkeys(('base_dry_nm', 'viscous_nms', 'noise_std_nm'))
         return _unknown({'anomalies': dict.fromkeys(classifier_flags(classifier), False),
-                         'estimates': estimates, 'changepoints': [], 'timings_s': {}},
+                         'estimates': estimates, 'changepoints': [], 'onsets': [],
+                         'timings_s': {}},
                         coverage)
     ext = extract(speed, friction, config)
     t0 = _time.perf_counter()
@@ -217,6 +281,7 @@ def diagnose(speed_rad_s: np.ndarray, friction_nm: np.ndarray, time_s: np.ndarra
         'changepoints_detected': int(ext.detected.size),
         'changepoints_rejected': ext.rejected,
         'assignment_exact': ext.exact,
+        'diagnosed_from_index': ext.start,
     }
     for s, system in enumerate(config.systems):
         estimates[f'{system.name}_levels_nm'] = [v * tq for v in ext.levels[s]]
@@ -224,8 +289,10 @@ def diagnose(speed_rad_s: np.ndarray, friction_nm: np.ndarray, time_s: np.ndarra
     changepoints = [{'index': int(k), 'time': float(time_s[k]),
                      'fss': config.systems[int(u) - 1].name, 'delta_dry_nm': float(d) * tq}
                     for k, u, d in zip(ext.accepted, ext.systems_of, ext.deltas)]
+    onset_list = [{'index': int(k), 'time': float(time_s[k]), 'delta_dry_nm': float(d) * tq}
+                  for k, d in zip(ext.onsets, ext.onset_deltas)]
     result = {'anomalies': {k: bool(v) for k, v in flags.items()},
-              'estimates': estimates, 'changepoints': changepoints,
+              'estimates': estimates, 'changepoints': changepoints, 'onsets': onset_list,
               'timings_s': dict(ext.timings)}
     return result if coverage.examined else _unknown(result, coverage)
 

@@ -20,7 +20,8 @@ together, the way one would argue from several specimens of one part:
    counted once). Among significant effects the largest summed held-out LR wins, with
    select.py's precedence between alternative explanations of one structure (cosine
    and Vuong's test on the wheels' pooled, variance-weighted rows). The fallback is
-   scored the same way (each wheel its own knots).
+   scored the same way (each wheel its own knots) and added only when no named effect
+   is significant (physics first, select.py).
 3. The loop stops when every wheel's residual passes the structure and whiteness tests,
    when nothing pooled is significant, or after ``max_effects``.
 4. Each wheel is then refitted with the common set: the continuous parameter of each
@@ -47,7 +48,7 @@ from rwa_monitor.core.identify.consistency import sibling_name as canonical_name
 from rwa_monitor.core.identify.data import IdentData
 from rwa_monitor.core.identify.fitting import Design, Fit, held_out_mask
 from rwa_monitor.core.identify.residuals import diagnose
-from rwa_monitor.core.identify.select import AddedEffect, FALLBACK_FACTOR, free_parameters
+from rwa_monitor.core.identify.select import AddedEffect, free_parameters
 from rwa_monitor.core.identify.select import likelihood_ratio, PRECEDENCE, SAME_STRUCTURE
 from rwa_monitor.core.identify.select import Selection, selection_step, significant
 from rwa_monitor.core.params import check_int, check_real
@@ -77,6 +78,7 @@ class JointSelection:
     steps: list[dict] = field(default_factory=list)
     stop_reason: str = ''
     consistency: dict = field(default_factory=dict)
+    alternatives: list[dict] = field(default_factory=list)
 
 
 def wheel_name(name: str, wheel: str) -> str:
@@ -304,10 +306,6 @@ def _step(wheels: _Wheels, residuals: list[np.ndarray], tried: set[str], alpha: 
             if not generic['significant']:
                 generic = None
     chosen = _preferred(wheels, winners, level, record) if winners else generic
-    if (chosen is not None and generic is not None and chosen is not generic
-            and generic['evidence']['lr_held_out']
-            > FALLBACK_FACTOR * chosen['evidence']['lr_held_out']):
-        chosen = generic
     record['added'] = None if chosen is None else chosen['candidate'].name
     return chosen, record
 
@@ -333,9 +331,10 @@ def identify_joint(datas: list[IdentData], alpha: float = 1e-3, alpha_held: floa
     for data in datas:
         check_identifiable(data.speed)
     if not jumps:
-        return _joint(datas, [Segments() for _ in datas], alpha, alpha_held, max_effects)
+        return _named_first(datas, [Segments() for _ in datas], alpha, alpha_held,
+                            max_effects)
     segments = [find_jumps(d, jump_window, alpha) for d in datas]
-    joint = _joint(datas, segments, alpha, alpha_held, max_effects)
+    joint = _named_first(datas, segments, alpha, alpha_held, max_effects)
     if not joint.effects or all(len(s.starts) == 1 for s in segments):
         return joint   # effects in the background only weaken the evidence for a jump
     again = []
@@ -348,23 +347,72 @@ def identify_joint(datas: list[IdentData], alpha: float = 1e-3, alpha_held: floa
         again.append(find_jumps(data, jump_window, alpha, extra=extra))
     if all(a.starts == s.starts for a, s in zip(again, segments)):
         return joint
-    joint2 = _joint(datas, again, alpha, alpha_held, max_effects)
+    joint2 = _named_first(datas, again, alpha, alpha_held, max_effects)
     for data, seg, new in zip(datas, segments, again):
         if seg.starts != new.starts:
             joint2.selections[data.wheel].first_pass_jumps = [int(k) for k in seg.starts[1:]]
     return joint2
 
 
+def _named_first(datas: list[IdentData], segments: list[Segments], alpha: float,
+                 alpha_held: float, max_effects: int) -> JointSelection:
+    """Run the joint selection; when it ends on the catch-all, look for named physics.
+
+    As select.py ``_named_first`` for one wheel: the selection is run again with each
+    named effect of the set left out in turn, and the run with the smallest held-out
+    RSS (summed over the wheels, each relative to its noise floor squared) among those
+    without the catch-all is kept when its named effects reach the floor on every
+    wheel: each wheel's residual passes, or on each wheel the catch-all's held-out gain
+    over it is below the chi^2 critical value at ``alpha_held`` for its columns there.
+    """
+    joint = _joint(datas, segments, alpha, alpha_held, max_effects)
+    if fx.FALLBACK not in joint.effects:
+        return joint
+    runs = [joint] + [_joint(datas, segments, alpha, alpha_held, max_effects,
+                             banned=frozenset({name}))
+                      for name in joint.effects if name != fx.FALLBACK]
+
+    def score(run: JointSelection) -> float:
+        return sum(sel.final_fit.rss_held_out / sel.data.noise_floor ** 2
+                   for sel in run.selections.values())
+    named = [r for r in runs[1:] if fx.FALLBACK not in r.effects
+             and _reaches_floor(r, joint, alpha_held)]
+    best = min(named, key=score) if named else joint
+    best.alternatives = [{'left_out': r.steps[0].get('banned', []) if r.steps else [],
+                          'effects': list(r.effects), 'held_out_over_floor2': score(r)}
+                         for r in runs]
+    return best
+
+
+def _reaches_floor(run: JointSelection, catch: JointSelection, alpha_held: float) -> bool:
+    """Return whether a named-only run reaches the floor as well as the catch-all did."""
+    if all(sel.diagnostics_after['passes'] for sel in run.selections.values()):
+        return True
+    for wheel, sel in run.selections.items():
+        other = catch.selections[wheel]
+        width = sum(e.columns.stop - e.columns.start for e in other.effects
+                    if e.name == fx.FALLBACK)
+        fit = other.final_fit
+        gain = likelihood_ratio(fit.n_held_out, sel.final_fit.rss_held_out, fit.rss_held_out)
+        if width and gain >= float(stats.chi2.isf(alpha_held, width)):
+            return False
+    return True
+
+
 def _joint(datas: list[IdentData], segments: list[Segments], alpha: float,
-           alpha_held: float, max_effects: int) -> JointSelection:
-    """Run the joint forward selection, refit every wheel, test the wheels' agreement."""
+           alpha_held: float, max_effects: int, banned: frozenset[str] = frozenset()
+           ) -> JointSelection:
+    """Run the joint forward selection, refit every wheel, test the wheels' agreement.
+
+    ``banned``: named effects not tried (canonical names; :func:`_named_first`).
+    """
     wheels = _Wheels(datas, segments)
     residuals = [dz.residual(c) for dz, c in zip(wheels.designs, wheels.current)]
     before = [diagnose(d, r, alpha) for d, r in zip(datas, residuals)]
     diags = list(before)
     added: list[dict] = []
     steps: list[dict] = []
-    tried: set[str] = set()
+    tried: set[str] = set(banned)
     while True:
         if all(dg['passes'] for dg in diags):
             stop = "every wheel's residual passes the structure and whiteness tests"
@@ -373,6 +421,7 @@ def _joint(datas: list[IdentData], segments: list[Segments], alpha: float,
             stop = f'max_effects = {max_effects} reached'
             break
         chosen, record = _step(wheels, residuals, tried, alpha, alpha_held)
+        record['banned'] = sorted(banned)
         steps.append(record)
         if chosen is None:
             stop = 'no candidate effect is significant on the pooled evidence'

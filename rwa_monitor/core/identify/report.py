@@ -20,11 +20,12 @@ from typing import Any
 
 import numpy as np
 
-from rwa_monitor.core.identify.effects import canonical_order
+from rwa_monitor.core.identify.effects import canonical_order, FALLBACK
 from rwa_monitor.core.identify.model import column_names, plain
 
 # Input rows left out, reported in report.json when there are any (docs/contracts.md).
 DROPPED = ('non_finite', 'time_not_increasing')
+UNEXPLAINED = 'unexplained speed dependence'
 
 
 def _finite(value: Any) -> Any:
@@ -72,9 +73,11 @@ def report(selection) -> dict:
     for eff in sorted(selection.effects, key=lambda e: order.index(e.name)):
         evidence = {k: _finite(v) for k, v in plain(eff.evidence).items()}
         evidence['added_at_step'] = added[eff.name]
-        effects.append({'name': eff.name,
-                        'parameters': effect_parameters(eff, final.coef),
-                        'evidence': evidence})
+        params = effect_parameters(eff, final.coef)
+        if eff.name == FALLBACK:
+            params['meaning'] = UNEXPLAINED
+            params['size_rms_nm'] = catch_all_size(selection, eff)
+        effects.append({'name': eff.name, 'parameters': params, 'evidence': evidence})
     out = {'baseline': {'model': 'coulomb+viscous', 'parameters': parameters},
            'noise_floor': float(selection.data.noise_floor),
            'rmse_before': {'in_sample': base.rmse_train, 'held_out': base.rmse_held_out},
@@ -85,6 +88,19 @@ def report(selection) -> dict:
     if any(dropped.values()):
         out['dropped_rows'] = dropped
     return out
+
+
+def catch_all_size(selection, eff) -> float:
+    """Return the RMS (N m) over every row of what a catch-all adds beyond the model.
+
+    Its fitted part less what the model's other columns can hold of it (least squares):
+    the hats of `smooth_speed` also span the Coulomb and viscous columns.
+    """
+    x = selection.design.X
+    part = x[:, eff.columns] @ selection.final_fit.coef[eff.columns]
+    others = np.delete(x, np.arange(x.shape[1])[eff.columns], axis=1)
+    beyond = part - others @ np.linalg.lstsq(others, part, rcond=None)[0]
+    return float(np.sqrt(np.mean(beyond ** 2)))
 
 
 def _tests(diag: dict) -> dict:
@@ -154,9 +170,13 @@ def markdown(selection, rep: dict, title: str) -> str:
         lines += ['', f'`{name}` {reason}.']
     if ident['not_identifiable']:
         lines += ['', f'Identifiable from this run: {", ".join(ident["testable"])}.']
-    if any(e['name'] == 'smooth_speed' for e in rep['effects']):
-        lines += ['', 'The smooth_speed fallback was used: no named effect explains the '
-                  'structure it captures (not physics: a shape to look at).']
+    for e in rep['effects']:
+        if e['name'] == FALLBACK:
+            size = e['parameters']['size_rms_nm']
+            lines += ['', f'{UNEXPLAINED.capitalize()}: {size:.3g} N m rms '
+                      f'({size / rep["noise_floor"]:.2g} x the noise floor), held by '
+                      f'`{FALLBACK}` after no named effect was significant any more '
+                      '(not physics: a shape to look at).']
     lines += ['', f'Stopped: {selection.stop_reason}.',
               f'Residual tests failing before: {selection.diagnostics_before["failing"]}; '
               f'after: {selection.diagnostics_after["failing"]}.', '',

@@ -17,10 +17,10 @@ LR = n_train log(RSS_0 / RSS_1), chi^2 with k degrees of freedom (k = rank added
    weights of the fallback need a large gain).
 
 Among the significant named candidates the one with the smallest held-out RSS is added.
-The smooth-speed fallback is scored with the same test at every step; it is added when
-no named effect is significant, or when its held-out gain is more than FALLBACK_FACTOR
-(2) times the best named effect's (the named effect then explains less than half of what
-friction does as a function of speed: its shape is wrong). The loop
+Physics first: the smooth-speed catch-all is scored with the same tests at every step
+(recorded), but it is added only when no named effect is significant, i.e. once the
+named effects can bring the model no closer to the noise floor; it is then reported as
+"unexplained speed dependence" with its size (report.py). The loop
 stops when the residual passes the structure and whiteness tests (residuals.py), when
 nothing significant is left, or after ``max_effects`` effects. Every step is recorded.
 """
@@ -39,7 +39,6 @@ from rwa_monitor.core.identify.fitting import Design, Fit, held_out_mask
 from rwa_monitor.core.identify.residuals import diagnose
 from rwa_monitor.core.params import check_int, check_real
 
-FALLBACK_FACTOR = 2.0
 SAME_STRUCTURE = 0.9
 # When two named effects are alternative explanations of one structure (their fitted
 # contributions have a cosine above SAME_STRUCTURE) and the data cannot tell them apart
@@ -77,6 +76,8 @@ class Selection:
     diagnostics_before: dict = field(default_factory=dict)
     diagnostics_after: dict = field(default_factory=dict)
     first_pass_jumps: list[int] | None = None
+    banned: list[str] = field(default_factory=list)
+    alternatives: list[dict] = field(default_factory=list)
 
     def residual_before(self) -> np.ndarray:
         """Return the baseline model's residual on every row."""
@@ -205,21 +206,60 @@ def identify(data: IdentData, alpha: float = 1e-3, alpha_held: float = 1e-2,
     if not jumps:
         return _select(data, Segments(), alpha, alpha_held, max_effects)
     segments = find_jumps(data, jump_window, alpha)
-    sel = _select(data, segments, alpha, alpha_held, max_effects)
+    sel = _named_first(data, segments, alpha, alpha_held, max_effects)
     if not sel.effects or len(segments.starts) == 1:
         return sel   # effects in the background only weaken the evidence for a jump
     extra = np.hstack([sel.design.X[:, e.columns] for e in sel.effects])
     again = find_jumps(data, jump_window, alpha, extra=extra)
     if again.starts == segments.starts:
         return sel
-    sel2 = _select(data, again, alpha, alpha_held, max_effects)
+    sel2 = _named_first(data, again, alpha, alpha_held, max_effects)
     sel2.first_pass_jumps = [int(k) for k in segments.starts[1:]]
     return sel2
 
 
+def _named_first(data: IdentData, segments: Segments, alpha: float, alpha_held: float,
+                 max_effects: int) -> Selection:
+    """Run the selection; when it ends on the catch-all, look for named physics first.
+
+    Forward selection is greedy: an early step can give a structure to the wrong named
+    effect (a pre-sliding band taking a Stribeck curve while drag and temperature still
+    dominate the residual; the Stribeck term then spent on the drag at a speed scale of
+    the whole range), and the catch-all then holds what is left. When the catch-all
+    entered, the selection is run again with each named effect of that set left out in
+    turn; the run with the smallest held-out RSS among those that need no catch-all is
+    kept if its named effects reach the noise floor: its residual passes the structure
+    and whiteness tests (residuals.py), or the catch-all's held-out gain over it, n_held
+    log(RSS_named / RSS_catch-all), is below the chi^2 critical value at ``alpha_held``
+    for the catch-all's columns (the test an effect must pass to enter).
+    ``Selection.alternatives`` records every run; none kept: the first stands.
+    """
+    sel = _select(data, segments, alpha, alpha_held, max_effects)
+    if not any(e.name == fx.FALLBACK for e in sel.effects):
+        return sel
+    runs = [sel]
+    for eff in [e for e in sel.effects if e.name != fx.FALLBACK]:
+        runs.append(_select(data, segments, alpha, alpha_held, max_effects,
+                            banned=frozenset({eff.name})))
+    catch = next(e for e in sel.effects if e.name == fx.FALLBACK)
+    bound = float(stats.chi2.isf(alpha_held, catch.evidence['dof']))
+    fit = sel.final_fit
+    named = [r for r in runs if not any(e.name == fx.FALLBACK for e in r.effects)
+             and (r.diagnostics_after['passes']
+                  or likelihood_ratio(fit.n_held_out, r.final_fit.rss_held_out,
+                                      fit.rss_held_out) < bound)]
+    best = min(named, key=lambda r: r.final_fit.rss_held_out) if named else sel
+    best.alternatives = [{'left_out': r.banned, 'effects': [e.name for e in r.effects],
+                          'rmse_held_out': r.final_fit.rmse_held_out} for r in runs]
+    return best
+
+
 def _select(data: IdentData, segments: Segments, alpha: float, alpha_held: float,
-            max_effects: int) -> Selection:
-    """Run the forward selection on top of a baseline with the given segments."""
+            max_effects: int, banned: frozenset[str] = frozenset()) -> Selection:
+    """Run the forward selection on top of a baseline with the given segments.
+
+    ``banned``: named effects not tried at all (see :func:`_named_first`).
+    """
     held = held_out_mask(len(data))
     design = Design(data.friction, segments.columns(data.speed), held)
     base_fit = design.fit()
@@ -229,7 +269,8 @@ def _select(data: IdentData, segments: Segments, alpha: float, alpha_held: float
     residual = design.residual(current)
     sel.diagnostics_before = diagnose(data, residual, alpha)
     diag = sel.diagnostics_before
-    tried: set[str] = set()
+    sel.banned = sorted(banned)
+    tried: set[str] = set(banned)
     while True:
         if diag['passes']:
             sel.stop_reason = 'the residual passes the structure and whiteness tests'
@@ -296,10 +337,6 @@ def selection_step(design: Design, current: Fit, data: IdentData, residual: np.n
             if not generic['significant']:
                 generic = None
     chosen = _preferred(design, data, winners, level, record) if winners else generic
-    if (chosen is not None and generic is not None and chosen is not generic
-            and generic['evidence']['lr_held_out']
-            > FALLBACK_FACTOR * chosen['evidence']['lr_held_out']):
-        chosen = generic
     if chosen is None:
         record['added'] = None
         return None, record
