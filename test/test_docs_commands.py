@@ -136,7 +136,7 @@ def test_documented_commands_run_as_written(scratch):
             continue
         _run(command, scratch, env)
         ran.append(command)
-    assert len(ran) == 13, ran
+    assert len(ran) == 15, ran
     assert (scratch / 'run_bag' / 'metadata.yaml').is_file()
     assert (scratch / 'id' / 'report.json').is_file()
     assert (scratch / 'events_bag.json').is_file()
