@@ -471,8 +471,32 @@ def _interrupt_handler(flag: threading.Event) -> Callable[[int, Any], None]:
     return handler
 
 
+def spin(node: Node, executor: str = 'events') -> None:
+    """Spin ``node`` until its context shuts down.
+
+    ``'events'`` (the default): rclpy.experimental.EventsExecutor, turned by
+    ``spin_once`` with a bounded timeout. Its ``spin()`` is not used: in the Jazzy wheels
+    it never returns to Python, so neither SIGINT nor a shutdown from a callback ends it,
+    and this package saw its timers stay silent under it. ``spin_once`` releases the GIL
+    while waiting (the FSS worker thread keeps running) and raises
+    ExternalShutdownException once the context is shut down. ``'single'``: the
+    SingleThreadedExecutor (it rebuilds its wait set on every turn: about 4x the CPU per
+    message, docs/nodes.md "Where the time goes").
+    """
+    if executor == 'events':
+        from rclpy.experimental import EventsExecutor
+        runner = EventsExecutor(context=node.context)
+        runner.add_node(node)
+        while node.context.ok():
+            runner.spin_once(timeout_sec=0.1)
+        return
+    runner = rclpy.executors.SingleThreadedExecutor(context=node.context)
+    runner.add_node(node)
+    runner.spin()
+
+
 def run_node(factory: Callable[[], Node], args: Sequence[str] | None = None,
-             executor: str = 'single', *, help_text: str | Callable[[], str] | None = None
+             executor: str = 'events', *, help_text: str | Callable[[], str] | None = None
              ) -> int:
     """Initialise rclpy with ``args``, create the node, spin it; return an exit code.
 
@@ -504,13 +528,7 @@ def run_node(factory: Callable[[], Node], args: Sequence[str] | None = None,
     node = None
     try:
         node = factory()
-        if executor == 'events':
-            from rclpy.experimental import EventsExecutor
-            runner = EventsExecutor()
-        else:
-            runner = rclpy.executors.SingleThreadedExecutor()
-        runner.add_node(node)
-        runner.spin()
+        spin(node, executor)
     except ConfigError as err:
         print(f'error: {err}', file=sys.stderr)
         return 2
