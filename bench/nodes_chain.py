@@ -217,13 +217,21 @@ def run_chain(rows: int, composed: bool = False, pythonpath: str | None = None,
              '-p', 'rate:=0.0', *replay_args],
             env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, cwd=workdir)
         profilers = _profile(procs, profile_dir)
-        done = listener.spin_until(lambda: all(listener.last(n) >= rows for n in COUNTERS)
-                                   or _settled(listener, procs['replay']), timeout_s)
+        replay_cpu = [0.0]
+
+        def finished() -> bool:
+            if procs['replay'].poll() is None:   # its CPU time, while /proc still has it
+                replay_cpu[0] = max(replay_cpu[0], _cpu_s(procs['replay'].pid))
+            return (all(listener.last(n) >= rows for n in COUNTERS)
+                    or _settled(listener, procs['replay']))
+        done = listener.spin_until(finished, timeout_s)
         listener.spin_until(lambda: False, 3 * DIAGNOSTIC_PERIOD)  # the last counts
         done = all(listener.last(n) >= rows for n in COUNTERS)
         for profiler in profilers:
             profiler.wait(timeout=120)
         cpu = {name: _cpu_s(p.pid) - cpu0.get(name, 0.0) for name, p in procs.items()}
+        if procs['replay'].poll() is not None:
+            cpu['replay'] = replay_cpu[0]   # up to the last poll before it exited
         result.update({
             'complete': done, 'wall_s': time.monotonic() - start,
             'published': listener.published,

@@ -475,7 +475,8 @@ def spin(node: Node, executor: str = 'events') -> None:
     """Spin ``node`` until its context shuts down.
 
     ``'events'`` (the default): rclpy.experimental.EventsExecutor, turned by
-    ``spin_once`` with a bounded timeout. Its ``spin()`` is not used: in the Jazzy wheels
+    ``spin_once`` with a bounded timeout until it raises ExternalShutdownException. Its
+    ``spin()`` is not used: in the Jazzy wheels
     it never returns to Python, so neither SIGINT nor a shutdown from a callback ends it,
     and this package saw its timers stay silent under it. ``spin_once`` releases the GIL
     while waiting (the FSS worker thread keeps running) and raises
@@ -487,9 +488,8 @@ def spin(node: Node, executor: str = 'events') -> None:
         from rclpy.experimental import EventsExecutor
         runner = EventsExecutor(context=node.context)
         runner.add_node(node)
-        while node.context.ok():
+        while True:   # ends with ExternalShutdownException (checking ok() per turn costs)
             runner.spin_once(timeout_sec=0.1)
-        return
     runner = rclpy.executors.SingleThreadedExecutor(context=node.context)
     runner.add_node(node)
     runner.spin()
