@@ -38,13 +38,15 @@ from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallba
 from rclpy.exceptions import (InvalidParameterTypeException, InvalidParameterValueException,
                               ParameterException)
 from rclpy.executors import ExternalShutdownException
+from rclpy.impl.implementation_singleton import rclpy_implementation
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+import yaml
 
 from rwa_monitor.core.params import AUTO
 from rwa_monitor.core.schema import Param, Schema, SCHEMAS, SHARED_NAMES
-from rwa_monitor.exceptions import ConfigError
+from rwa_monitor.exceptions import ConfigError, RwaMonitorError
 from rwa_monitor.telemetry.codecs import format_value, key_values  # noqa: F401
 
 # --------------------------------------------------------------------------------- QoS
@@ -495,6 +497,78 @@ def spin(node: Node, executor: str = 'events') -> None:
     runner.spin()
 
 
+RCLError = rclpy_implementation.RCLError
+
+
+def _ros_args(argv: Sequence[str]) -> list[str]:
+    """Return the arguments inside ``--ros-args`` sections of ``argv``."""
+    out, inside = [], False
+    for arg in argv[1:]:
+        if arg == '--ros-args':
+            inside = True
+        elif arg == '--':
+            inside = False
+        elif inside:
+            out.append(arg)
+    return out
+
+
+def _same(given: Any, value: Any) -> bool:
+    if given == value or str(given) == str(value):
+        return True
+    try:
+        return float(given) == float(value)
+    except (TypeError, ValueError):
+        return False
+
+
+def beaten_overrides(node: Node, argv: Sequence[str]) -> list[str]:
+    """Return a warning for each ``-p`` of ``argv`` whose value ``node`` does not hold.
+
+    rcl applies ``-p`` and ``--params-file`` in the order given, the later winning: a
+    ``-p`` (with or without a ``NODE:`` prefix) placed before a ``--params-file`` whose
+    block for the node sets the same name is silently beaten (measured with rclpy on
+    Jazzy; docs/nodes.md "Parameters files and -p").
+    """
+    args = _ros_args(argv)
+    if '--params-file' not in args:
+        return []
+    out = []
+    for flag, item in zip(args, args[1:]):
+        if flag not in ('-p', '--param') or ':=' not in item:
+            continue
+        target, text = item.split(':=', 1)
+        prefix, _, name = target.rpartition(':')
+        if prefix and prefix.lstrip('/') not in (node.get_name(),
+                                                 node.get_fully_qualified_name().lstrip('/')):
+            continue
+        if not node.has_parameter(name):
+            continue
+        try:
+            given = yaml.safe_load(text)
+        except yaml.YAMLError:
+            given = text
+        value = node.get_parameter(name).value
+        if not _same(given, value):
+            out.append(f'-p {item} was beaten by a later --params-file block (value in force: '
+                       f'{value!r}): put -p {node.get_name()}:{name}:={text} after '
+                       '--params-file')
+    return out
+
+
+def warn_beaten_overrides(node: Node, argv: Sequence[str]) -> None:
+    """Log a warning for each ``-p`` of ``argv`` that a parameters file beat."""
+    for text in beaten_overrides(node, argv):
+        node.get_logger().warning(text)
+
+
+def rcl_error_line(err: Exception) -> str:
+    """Return rcl's refusal of the arguments in one line, without its source locations."""
+    text = ' '.join(str(err).split())
+    text = text.removeprefix('failed to initialize rcl: ')
+    return text.split(', at /')[0]
+
+
 def run_node(factory: Callable[[], Node], args: Sequence[str] | None = None,
              executor: str = 'events', *, help_text: str | Callable[[], str] | None = None
              ) -> int:
@@ -505,7 +579,10 @@ def run_node(factory: Callable[[], Node], args: Sequence[str] | None = None,
     (default: :func:`node_help` of the docstring and ``PARAMETERS`` of the module that
     defines ``factory``) and returns 0 without starting ROS.
 
-    A :class:`ConfigError` at start-up (a bad parameter) is printed and gives 2; Ctrl-C,
+    Arguments rcl refuses (a parameters file it cannot parse), a :class:`ConfigError` (a
+    bad parameter) or any other package error at start-up is printed as one line and
+    gives 2; a ``-p`` value that a parameters-file block beat is warned about
+    (:func:`warn_beaten_overrides`). Ctrl-C,
     SIGTERM and an external shutdown end cleanly with 0 (an error raised by a call into a
     context that the signal already shut down is part of that shutdown, not a failure).
     The node may end itself by calling ``rclpy.try_shutdown(context=node.context)`` (the
@@ -524,12 +601,17 @@ def run_node(factory: Callable[[], Node], args: Sequence[str] | None = None,
     interrupted = threading.Event()
     if threading.current_thread() is threading.main_thread():
         signal.signal(signal.SIGINT, _interrupt_handler(interrupted))
-    rclpy.init(args=with_sim_time(argv))
+    try:
+        rclpy.init(args=with_sim_time(argv))
+    except RCLError as err:   # rcl refused the arguments (a parameters file it cannot parse)
+        print(f'error: {rcl_error_line(err)}', file=sys.stderr)
+        return 2
     node = None
     try:
         node = factory()
+        warn_beaten_overrides(node, argv)
         spin(node, executor)
-    except ConfigError as err:
+    except RwaMonitorError as err:   # ConfigError and every error of the package at start
         print(f'error: {err}', file=sys.stderr)
         return 2
     except (KeyboardInterrupt, ExternalShutdownException):
