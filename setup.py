@@ -34,6 +34,7 @@ setup(
             'rwa-monitor-bus = rwa_monitor.nodes.basilisk_bus:main',
             'rwa-monitor-record = rwa_monitor.nodes.recorder:main',
             'rwa-monitor-foxglove = rwa_monitor.nodes.foxglove_bridge:main',
+            'rwa-monitor-monitor = rwa_monitor.nodes.monitor:main',
         ],
     },
 )

@@ -191,7 +191,7 @@ def run_chain(rows: int, composed: bool = False, pythonpath: str | None = None,
     path = workdir / 'bus.csv'
     write_telemetry(path, recording(rows))
     if composed:
-        commands = {'monitor': [_script('rwa-monitor-monitor')]}
+        commands = {'monitor': [sys.executable, '-m', 'rwa_monitor.nodes.monitor']}
     else:
         commands = {name: [_script(script)] for name, script in SEPARATE.items()}
     procs: dict[str, subprocess.Popen] = {}

@@ -56,8 +56,8 @@ def test_a_bad_parameters_file_exits_2_with_one_line(tmp_path, run_main, text, f
     assert 'Traceback' not in err
 
 
-def test_a_package_error_of_the_journal_opener_refuses_the_node(tmp_path, monkeypatch,
-                                                                 run_main):
+def test_a_package_error_of_the_journal_opener_refuses_the_node(
+        tmp_path, monkeypatch, run_main):
     journal = tmp_path / 'notes.txt'
     journal.write_text('my notes, not a journal\n')
 

@@ -26,8 +26,8 @@ from rclpy.node import Node
 from std_srvs.srv import Trigger
 
 from rwa_monitor.core.events import AnomalyEvent
-from rwa_monitor.nodes import messages
 from rwa_monitor.exceptions import ConfigError, RwaMonitorError
+from rwa_monitor.nodes import messages
 from rwa_monitor.nodes.common import DiagnosticsPublisher, ERROR, LEVEL_NAMES, OK
 from rwa_monitor.telemetry.alarms import AlarmStore, event_key
 

@@ -8,7 +8,7 @@ so a node gives the same samples, and the same events, either way.
 
 from __future__ import annotations
 
-from typing import Sequence
+from typing import NamedTuple, Sequence
 
 from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import JointState
@@ -55,3 +55,26 @@ class WheelsDecoder:
 def fields_of(msg: JointState) -> WheelFields:
     """Return the fields of a JointState message (the in-process, non-raw path)."""
     return messages.to_seconds(msg.header.stamp), msg.name, msg.velocity, msg.effort
+
+
+def wheel_names(text: str) -> set[str] | None:
+    """Return the wheel ids of a comma-separated ``wheels`` parameter (None = any wheel)."""
+    names = {n.strip() for n in text.split(',') if n.strip()}
+    return names or None
+
+
+class Refusal(NamedTuple):
+    """Why a wheel is ignored: the input counter to increment and the log message."""
+
+    counter: str
+    message: str
+
+
+def wheel_refusal(wheel_id: str, allowed: set[str] | None, known: int,
+                  max_wheels: int) -> Refusal | None:
+    """Return the refusal if a new wheel must be ignored, else None."""
+    if allowed is not None and wheel_id not in allowed:
+        return Refusal('unknown_wheel', f'ignoring wheel {wheel_id!r}: not in parameter wheels')
+    if known >= max_wheels:
+        return Refusal('too_many_wheels', f'ignoring wheel {wheel_id!r}: max_wheels reached')
+    return None
