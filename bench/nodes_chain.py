@@ -250,6 +250,72 @@ def run_chain(rows: int, composed: bool = False, pythonpath: str | None = None,
     return result
 
 
+GOAL_ROWS_PER_S = 3000
+
+
+def section(quick: bool, base: str | None) -> dict[str, Any]:
+    """Run the chain before (``base`` checkout, if given) and after, interleaved; composed.
+
+    Before and after alternate so that both see the same load of the shared machine; the
+    ratio of each pair is reported beside the medians. The code before has no subscriber
+    wait at rate > 0 and counts only ``telemetry/wheels`` subscribers, so its replay gets
+    ``min_subscribers`` 2 (llr and fss), as close to "started after the detectors" as it
+    can be told.
+    """
+    rows = 10_000 if quick else 36_000
+    repeats = 1 if quick else 3
+    out: dict[str, Any] = {'rows': rows, 'base': base, 'before': [], 'after': [],
+                           'composed': []}
+    for _ in range(repeats):
+        if base:
+            out['before'].append(run_chain(rows, pythonpath=base,
+                                           replay_args=('-p', 'min_subscribers:=2')))
+            print(f'  chain before: {out["before"][-1]["rows_per_s"]:.0f}', flush=True)
+        out['after'].append(run_chain(rows))
+        print(f'  chain after: {out["after"][-1]["rows_per_s"]:.0f}', flush=True)
+    for _ in range(max(1, repeats - 1)):
+        out['composed'].append(run_chain(rows, composed=True))
+        print(f'  chain composed: {out["composed"][-1]["rows_per_s"]:.0f}', flush=True)
+    return out
+
+
+def _median(runs: list[dict[str, Any]], key: str = 'rows_per_s') -> float:
+    values = sorted(r[key] for r in runs)
+    return values[len(values) // 2] if values else float('nan')
+
+
+def markdown(chain: dict[str, Any]) -> list[str]:
+    """Return the lines of the process-chain table of docs/results.md."""
+    from bench import report
+    rows = []
+    labels = {'before': 'separate processes, code before (SingleThreadedExecutor)',
+              'after': 'separate processes (docs/usage.md commands)',
+              'composed': 'rwa-monitor-monitor (3 detectors in 1 process) + replay'}
+    for key, label in labels.items():
+        runs = chain[key]
+        if not runs:
+            continue
+        lost = {n: chain['rows'] - c for r in runs for n, c in r['counted'].items()
+                if c < chain['rows']}
+        cpu = {n: sum(r['cpu_ms_per_row'][n] for r in runs) / len(runs)
+               for n in runs[0]['cpu_ms_per_row']}
+        loads = ', '.join(f'{r["load_before"]:.1f}' for r in runs)
+        rows.append([label, f'>= {GOAL_ROWS_PER_S}' if key != 'before' else '-',
+                     f'{_median(runs):.0f}',
+                     ', '.join(f'{r["rows_per_s"]:.0f}' for r in runs),
+                     ' / '.join(f'{n} {v:.3f}' for n, v in cpu.items()),
+                     f'{sum(r["complete"] for r in runs)}/{len(runs)}'
+                     + (f'; short: {lost}' if lost else ''), loads])
+    lines = [report.table(['chain', 'goal', 'rows/s (median)', 'runs', 'CPU ms per row',
+                           'every row counted by every node', 'load at start'], rows)]
+    pairs = list(zip(chain['before'], chain['after']))
+    if pairs:
+        ratios = [a['rows_per_s'] / b['rows_per_s'] for b, a in pairs]
+        lines += ['', 'After / before, run by run (interleaved, same load): '
+                  + ', '.join(f'x{r:.2f}' for r in ratios) + '.']
+    return lines
+
+
 if __name__ == '__main__':
     import json
     print(json.dumps(run_chain(
