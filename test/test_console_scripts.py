@@ -19,7 +19,8 @@ from rwa_monitor.sim.friction import Anomaly, simulate_friction_with_truth
 from rwa_monitor.telemetry import write_telemetry
 
 NODES = ('rwa-monitor-llr', 'rwa-monitor-vsadc', 'rwa-monitor-fss', 'rwa-monitor-replay',
-         'rwa-monitor-bus', 'rwa-monitor-record', 'rwa-monitor-foxglove')
+         'rwa-monitor-bus', 'rwa-monitor-record', 'rwa-monitor-foxglove',
+         'rwa-monitor-monitor')
 
 
 def _script(name):

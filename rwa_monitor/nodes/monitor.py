@@ -15,7 +15,7 @@ from typing import Sequence
 
 from rwa_monitor.nodes.fss_diagnoser import FssDiagnoserNode
 from rwa_monitor.nodes.llr_detector import LLRDetectorNode
-from rwa_monitor.nodes.process import run_nodes
+from rwa_monitor.nodes.process import node_help, run_nodes
 from rwa_monitor.nodes.vsadc_detector import VsadcDetectorNode
 
 NODE_CLASSES = (LLRDetectorNode, VsadcDetectorNode, FssDiagnoserNode)
@@ -23,7 +23,9 @@ NODE_CLASSES = (LLRDetectorNode, VsadcDetectorNode, FssDiagnoserNode)
 
 def main(args: Sequence[str] | None = None) -> int:
     """Run the three detector nodes in one process (console script ``rwa-monitor-monitor``)."""
-    return run_nodes(list(NODE_CLASSES), args, help_text=__doc__)
+    return run_nodes(list(NODE_CLASSES), args, help_text=lambda: node_help(
+        'rwa-monitor-monitor', __doc__) + '\nThe parameters of each node: rwa-monitor-llr '
+        '--help, rwa-monitor-vsadc --help, rwa-monitor-fss --help.')
 
 
 if __name__ == '__main__':

@@ -7,11 +7,14 @@ time; a recording's streams keep their own stamps and rates (parameter ``topics`
 the recording's topics); ``/clock`` (the telemetry time) for the sim-time detectors; progress on
 ``/diagnostics``. Pacing uses the steady clock, never the sim time it publishes.
 
-``rate`` is the time factor (1.0 real time). ``rate`` 0 publishes as fast as the
-subscribers take it, without loss: it first waits for ``min_subscribers`` (at least 1)
-matched subscriptions on ``telemetry/wheels``, then publishes ``burst`` rows per executor
-turn; see docs/nodes.md for why no message is lost. A loop restarts at ``start_offset``
-with the file's own stamps, so subscribers see the time jump backwards.
+``rate`` is the time factor (1.0 real time). At every rate the replay first waits for
+its subscribers (:mod:`rwa_monitor.nodes.subscriber_wait`: ``min_subscribers`` on
+``telemetry/wheels``, every subscriber the graph knows matched, or ``subscriber_timeout``).
+``rate`` 0 publishes as fast as the subscribers take it, without loss (at least one
+wheels subscriber), ``burst`` rows per executor turn; see docs/nodes.md for why no
+message is lost. ``/clock`` goes out at most every ``CLOCK_PERIOD`` s of steady time. A
+loop restarts at ``start_offset`` with the file's own stamps, so subscribers see the time
+jump backwards.
 """
 
 from __future__ import annotations
