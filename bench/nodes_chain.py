@@ -245,8 +245,8 @@ def run_chain(rows: int, composed: bool = False, pythonpath: str | None = None,
         shutil.rmtree(workdir, ignore_errors=True)
     result['load_after'] = os.getloadavg()[0]
     result['tracebacks'] = [n for n, log in logs.items() if 'Traceback' in log]
-    if result['tracebacks']:
-        result['logs'] = {n: logs[n][-2000:] for n in result['tracebacks']}
+    if result['tracebacks'] or not result.get('complete'):
+        result['logs'] = {n: log[-3000:] for n, log in logs.items()}
     return result
 
 

@@ -24,7 +24,7 @@ from typing import Any, Sequence
 
 from rclpy.node import Node
 
-SETTLE_S = 0.5   # s of steady time without a change in the matched counts
+SETTLE_S = 2.0   # s of steady time without a change in the matched counts
 
 
 class SubscriberWait:
