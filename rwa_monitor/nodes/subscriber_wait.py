@@ -13,7 +13,9 @@ waits, at every rate, until
   :data:`SETTLE_S` (several detectors started together are discovered one after the
   other);
 
-or until ``subscriber_timeout`` seconds of steady time have passed (0: do not wait). At
+or until ``subscriber_timeout`` seconds of steady time have passed (0: do not wait). The
+counts are the publisher's side of the matching: a reader that has not matched the
+writer yet can still miss the first samples (measured in docs/nodes.md). At
 rate 0 it never starts without a subscriber on the first topic (it would publish the
 file into nothing). The counts it started with are logged and shown on /diagnostics.
 """
