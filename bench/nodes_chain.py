@@ -314,8 +314,8 @@ def markdown(chain: dict[str, Any]) -> list[str]:
         lines += ['', 'After / before, run by run (interleaved, same load): '
                   + ', '.join(f'x{r:.2f}' for r in ratios) + '.']
     lines += ['', 'Load: the 1-minute load average of the 2-core machine when each run started '
-              '(other sessions share it, and it includes this bench\'s previous run). The '
-              'replay\'s CPU includes its start (imports, reading the file). The composed '
+              '(other sessions share it, and it includes the previous run of this bench). The '
+              'CPU of the replay includes its start (imports, reading the file). The composed '
               'monitor needs about half the CPU per row of the three processes but runs its '
               'three nodes on one core, so its rate depends more on what else runs.']
     return lines
