@@ -55,7 +55,8 @@ EXTRAS_REQUIRE = {
             'import-linter>=2.16,<3', 'flake8>=7.5,<8', 'flake8-quotes>=3.4,<4',
             'flake8-docstrings>=1.7,<2', 'flake8-import-order>=0.19.2,<0.20',
             'pydocstyle>=6.3,<7', 'mpmath>=1.3,<2', 'ruptures>=1.1,<2',
-            'river>=0.26.1,<0.27', 'colcon-common-extensions>=0.3.0,<0.4'],
+            'river>=0.26.1,<0.27', 'colcon-common-extensions>=0.3.0,<0.4',
+            'py-spy>=0.4.3,<0.5'],
 }
 
 ROS_BUILD = bool({'install', 'develop'} & set(sys.argv[1:]))
@@ -69,6 +70,7 @@ NODES = {
     'basilisk_bus': ('rwa-monitor-bus', 'basilisk_bus'),
     'recorder': ('rwa-monitor-record', 'recorder'),
     'foxglove_bridge': ('rwa-monitor-foxglove', 'foxglove_bridge'),
+    'monitor': ('rwa-monitor-monitor', 'monitor'),
 }
 CONSOLE_SCRIPTS = ['rwa-monitor = rwa_monitor.cli.main:main'] + [
     f'{name} = rwa_monitor.nodes.{module}:main'

@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from bench import report
+from bench import nodes_chain, report
 
 GOALS = {'throughput_per_s': 10_000}
 WHEELS = ('rw1', 'rw2', 'rw3', 'rw4')
@@ -270,6 +270,7 @@ def run(out_dir: pathlib.Path, quick: bool) -> dict[str, Any]:
     print('  latency:', results['latency'], flush=True)
     results['memory'] = memory(settings['memory_hours'], settings['memory_samples'])
     print('  memory:', results['memory']['trace'][-1], flush=True)
+    results['chain'] = nodes_chain.section(quick, os.environ.get('RWA_BENCH_NODES_BASE'))
     results['load_average'] = {'before': load_before, 'after': os.getloadavg()[0]}
     report.write_json(out_dir, 'nodes', results)
     _plot(out_dir, results['memory'])
@@ -325,4 +326,16 @@ def markdown(results: dict[str, Any]) -> str:
               'held by the replay.']
     verdict = results['throughput'][0]['wheel_messages_per_s'] >= GOALS['throughput_per_s']
     lines.append(f'Throughput goal {"met" if verdict else "NOT met"} on this run.')
+    if results.get('chain'):
+        lines += ['', '### Process chain over DDS (issue 27, item 3)', '',
+                  'The documented commands (docs/usage.md): replay at rate 0 into '
+                  'llr_detector, vsadc_detector and fss_diagnoser, each its own process, with '
+                  'the shipped parameters file; a 4-wheel bus-like recording (four wheels at '
+                  '10 Hz with gyro, star tracker and reference rate on every row, '
+                  f'{results["chain"]["rows"]} rows). Rows/s: the slope of each node\'s own '
+                  'counter of rows received on /diagnostics (every 0.2 s), the slowest node; '
+                  'CPU per row: each process over the run (bench/nodes_chain.py). "Before" is '
+                  'the code of `RWA_BENCH_NODES_BASE` (main 09648a8), run alternately with '
+                  'the new code on the same shared machine.', '']
+        lines += nodes_chain.markdown(results['chain'])
     return '\n'.join(lines)

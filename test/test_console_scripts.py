@@ -19,10 +19,11 @@ from rwa_monitor.sim.friction import Anomaly, simulate_friction_with_truth
 from rwa_monitor.telemetry import write_telemetry
 
 NODES = ('rwa-monitor-llr', 'rwa-monitor-vsadc', 'rwa-monitor-fss', 'rwa-monitor-replay',
-         'rwa-monitor-bus', 'rwa-monitor-record', 'rwa-monitor-foxglove')
+         'rwa-monitor-bus', 'rwa-monitor-record', 'rwa-monitor-foxglove',
+         'rwa-monitor-monitor')
 # The same nodes under their node names, as `ros2 run rwa_monitor NAME` runs them.
 NODE_NAMES = ('llr_detector', 'vsadc_detector', 'fss_diagnoser', 'telemetry_replay',
-              'basilisk_bus', 'recorder', 'foxglove_bridge')
+              'basilisk_bus', 'recorder', 'foxglove_bridge', 'monitor')
 
 
 def _script(name):

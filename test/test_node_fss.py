@@ -140,3 +140,27 @@ def test_memory_is_bounded_by_the_window():
                                                 [float(rng.normal())]))
         window = node.wheels['rw1'].window
         assert window.size == 500 and window.snapshot()[0][0] == pytest.approx(250.0)
+
+
+def test_raw_bytes_fill_the_windows_as_the_messages_do(tele):
+    from rclpy.serialization import serialize_message
+    names = list(tele.wheels)
+    rows = range(300)
+    with RosWorld() as world:
+        by_message, by_bytes = _node(world), _node(world)
+        by_bytes.on_raw_wheels(b'\x00\x01\x00\x00not a joint state')
+        for k in rows:
+            msg = messages.joint_state(
+                float(tele.time[k]), names, [float(tele.wheels[w].speed[k]) for w in names],
+                [float(tele.wheels[w].friction[k]) for w in names])
+            by_message.on_wheels(msg)
+            raw = serialize_message(msg) if k % 2 else messages.encode_joint_state(
+                msg.header.stamp.sec + msg.header.stamp.nanosec / 1e9, names,
+                msg.velocity, msg.effort)
+            by_bytes.on_raw_wheels(raw)
+        assert by_bytes.input_counters['undecodable'] == 1
+        assert by_bytes.input_counters['messages'] == len(rows) + 1
+        for wheel_id in names:
+            for a, b in zip(by_message.wheels[wheel_id].window.snapshot(),
+                            by_bytes.wheels[wheel_id].window.snapshot()):
+                np.testing.assert_array_equal(a, b)

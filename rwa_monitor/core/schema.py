@@ -492,6 +492,9 @@ REPLAY = Schema('telemetry_replay', (
     Param('min_subscribers', 0, 'Matched subscriptions on telemetry/wheels to wait for '
           'before the first sample (rate 0 waits for at least 1).', low=0, high=1000,
           scope='node'),
+    Param('subscriber_timeout', 10.0, 'Seconds to wait, at any rate, for the subscribers '
+          'the ROS graph knows to be matched before the first sample; 0 = do not wait '
+          '(docs/nodes.md).', low=0.0, high=3600.0, unit='s', scope='node'),
     Param('burst', 1, 'Rows published per executor turn at rate 0 (keep at most the '
           'telemetry depth divided by the number of subscriber turns per row).', low=1,
           high=500, scope='node'),

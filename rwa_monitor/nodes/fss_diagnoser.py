@@ -46,7 +46,7 @@ from rwa_monitor.core.events import AnomalyEvent
 from rwa_monitor.core.fss.pipeline import diagnose, FssConfig, SlidingWindow
 from rwa_monitor.core.schema import FSS, fss_config
 from rwa_monitor.exceptions import ConfigError
-from rwa_monitor.nodes import calibration, common, messages
+from rwa_monitor.nodes import calibration, common, messages, wheels_input
 from rwa_monitor.nodes.common import (declare_parameters, DiagnosticsPublisher, ERROR,
                                       EVENTS_QOS, node_help, OK, qos_event_callbacks,
                                       run_node, STALE, telemetry_qos, WARN)
@@ -101,7 +101,7 @@ class FssDiagnoserNode(Node):
         self.events: collections.deque[AnomalyEvent] = collections.deque(maxlen=MAX_KEPT)
         self.input_counters = {'messages': 0, 'length_mismatch': 0, 'empty_name': 0,
                                'duplicate_name': 0, 'unknown_wheel': 0, 'too_many_wheels': 0,
-                               'non_increasing_time': 0, 'diagnosis_failed': 0,
+                               'non_increasing_time': 0, 'diagnosis_failed': 0, 'undecodable': 0,
                                'wheel_failures': 0, 'wheels_freed': 0}
         self._logged: set[tuple[str, str]] = set()
         self._allowed = common.wheel_names(self.params['wheels'])
@@ -120,8 +120,9 @@ class FssDiagnoserNode(Node):
         self._silence = streams.SilenceTracker(self.params['wheel_timeout'])
         self._sweeper = self.create_timer(1.0, self._free_silent_wheels,
                                           clock=self.diagnostics.steady_clock)
+        self._decoder = wheels_input.WheelsDecoder()
         self.create_subscription(
-            JointState, 'telemetry/wheels', self.on_wheels, telemetry_qos(),
+            JointState, 'telemetry/wheels', self.on_raw_wheels, telemetry_qos(), raw=True,
             event_callbacks=qos_event_callbacks(self, 'telemetry/wheels'))
         self._result_timer = self.create_timer(
             0.05, self.publish_results, clock=Clock(clock_type=ClockType.STEADY_TIME))
@@ -155,18 +156,31 @@ class FssDiagnoserNode(Node):
             self._logged.add((reason, subject))
             self.get_logger().warning(f'{text} (further cases are only counted)')
 
+    def on_raw_wheels(self, buffer: bytes) -> None:
+        """Append one serialised ``telemetry/wheels`` message (the subscription is raw)."""
+        fields = self._decoder.decode(buffer)
+        if fields is None:
+            self.input_counters['messages'] += 1
+            self._count('undecodable', '', 'dropped an undecodable telemetry/wheels message')
+            return
+        self._process(*fields)
+
     def on_wheels(self, msg: JointState) -> None:
         """Append one ``telemetry/wheels`` message to the wheels' windows."""
+        self._process(*wheels_input.fields_of(msg))
+
+    def _process(self, seconds: float, names: Sequence[str], speeds: Sequence[float],
+                 efforts: Sequence[float]) -> None:
         self.input_counters['messages'] += 1
         now = self.diagnostics.now()
         self.diagnostics.mark_input(INPUT_ID, 'input', now)
         try:
-            seconds, samples = messages.wheel_samples(msg)
+            seconds, samples = messages.samples_of(seconds, names, speeds, efforts)
         except messages.BadMessage as err:
             self._count(err.reason, '', f'dropped a telemetry/wheels message: {err}')
             return
-        if len(samples) != len(msg.name):
-            for reason, count in messages.wheel_name_problems(msg).items():
+        if len(samples) != len(names):
+            for reason, count in messages.wheel_name_problems(names).items():
                 if count:
                     self._count(reason, '', f'dropped {count} entries: {reason}', count)
         for wheel_id, speed, friction in samples:

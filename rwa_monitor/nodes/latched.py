@@ -9,6 +9,9 @@ for one node (docs/nodes.md "Alarms"):
   that joins later gets them) and shown on /diagnostics;
 - service ``~/acknowledge`` (std_srvs/Trigger): acknowledges every active record of the
   node; the response names how many and which;
+- an ``events_file`` the journal opener refuses (a package error, e.g. a file that is not
+  a journal) stops the node at start (ConfigError, exit 2, the file untouched); a journal
+  that cannot be written makes the status below ERROR, naming the error;
 - a status ``"<node>: latched alarms"`` (hardware_id ``alarms``) on /diagnostics, never
   STALE: OK with none, else the highest level of the latched kinds; and
   :meth:`LatchedAlarms.merge`, which raises a component's own status to its latched level.
@@ -23,8 +26,9 @@ from rclpy.node import Node
 from std_srvs.srv import Trigger
 
 from rwa_monitor.core.events import AnomalyEvent
+from rwa_monitor.exceptions import ConfigError, RwaMonitorError
 from rwa_monitor.nodes import messages
-from rwa_monitor.nodes.common import DiagnosticsPublisher, LEVEL_NAMES, OK
+from rwa_monitor.nodes.common import DiagnosticsPublisher, ERROR, LEVEL_NAMES, OK
 from rwa_monitor.telemetry.alarms import AlarmStore, event_key
 
 ALARMS_ID = 'alarms'
@@ -40,8 +44,11 @@ class LatchedAlarms:
         self._pub = publisher
         self._diagnostics = diagnostics
         self._level_of = level_of
-        self.store = AlarmStore(str(path) if path else None, key=key)
-        reloaded = self.store.load()
+        try:
+            self.store = AlarmStore(str(path) if path else None, key=key)
+            reloaded = self.store.load()
+        except RwaMonitorError as err:   # e.g. a file that is not a journal: refused, untouched
+            raise ConfigError(f'parameter events_file: {err}') from None
         diagnostics.provide(ALARMS_ID, 'latched alarms', self._health)
         diagnostics.component(ALARMS_ID, 'latched alarms').stale_timeout = float('inf')
         self._service = node.create_service(Trigger, '~/acknowledge', self._on_acknowledge)
@@ -84,16 +91,21 @@ class LatchedAlarms:
         active = self.store.active()
         values: dict[str, Any] = {f'alarms_{k}': v for k, v in self.store.counters.items()}
         values['active'] = len(active)
+        journal = ''
         if self.store.last_error:
             values['journal_last_error'] = self.store.last_error
+            journal = (f'journal not written ({self.store.last_error}): anomalies latched in '
+                       'memory only; ')
         if not active:
-            return OK, 'no latched anomaly', values
+            return (ERROR if journal else OK), f'{journal}no latched anomaly', values
         level = max(self._level_of(a.event.kind) for a in active)
+        if journal:
+            level = ERROR
         for i, alarm in enumerate(active[-20:]):
             e = alarm.event
             values[f'alarm_{i}'] = (f'{e.detector} {e.component} {e.kind} t={e.time:.3f} s'
                                     + (' (cleared)' if alarm.cleared else ''))
-        return level, (f'{len(active)} latched anomalies ({LEVEL_NAMES[level]}), '
+        return level, (f'{journal}{len(active)} latched anomalies ({LEVEL_NAMES[level]}), '
                        f'unacknowledged'), values
 
     def _on_acknowledge(self, request: Trigger.Request, response: Trigger.Response

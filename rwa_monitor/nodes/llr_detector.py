@@ -38,13 +38,12 @@ from typing import Any, Sequence
 
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
-from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import JointState
 
 from rwa_monitor.core import keys, streams
 from rwa_monitor.core.events import AnomalyEvent
 from rwa_monitor.core.schema import LLR, llr_kwargs
-from rwa_monitor.nodes import calibration, common, messages
+from rwa_monitor.nodes import calibration, common, messages, wheels_input
 from rwa_monitor.nodes.common import (declare_parameters, DiagnosticsPublisher, ERROR,
                                       EVENTS_QOS, node_help, OK, qos_event_callbacks,
                                       run_node, telemetry_qos)
@@ -115,7 +114,7 @@ class LLRDetectorNode(Node):
                                'uncalibrated_wheel': 0, 'detector_failures': 0,
                                'wheels_freed': 0}
         self.events: collections.deque[AnomalyEvent] = collections.deque(maxlen=MAX_KEPT)
-        self._codec: messages.JointStateCodec | None = None
+        self._decoder = wheels_input.WheelsDecoder()
         self._logged: set[tuple[str, str]] = set()
         self._allowed = common.wheel_names(self.params['wheels'])
         self.diagnostics = DiagnosticsPublisher(
@@ -182,32 +181,16 @@ class LLRDetectorNode(Node):
 
     def on_raw_wheels(self, buffer: bytes) -> None:
         """Feed one serialised ``telemetry/wheels`` message (the subscription is raw)."""
-        fields = self._codec.decode(buffer) if self._codec is not None else None
-        if fields is not None:
-            self._process(*fields)
-            return
-        try:
-            fields = messages.decode_joint_state(buffer)
-            names = fields[1]
-            if (len(fields[2]) == len(fields[3]) == len(names) and all(names)
-                    and len(set(names)) == len(names)):
-                self._codec = messages.JointStateCodec(names)
-        except ValueError:
-            try:
-                msg = deserialize_message(buffer, JointState)
-            except Exception:  # noqa: BLE001 - anything undecodable is counted, not fatal
-                self.input_counters['messages'] += 1
-                self._reject('undecodable', '', 'dropped an undecodable telemetry/wheels '
-                             'message')
-                return
-            self.on_wheels(msg)
+        fields = self._decoder.decode(buffer)
+        if fields is None:
+            self.input_counters['messages'] += 1
+            self._reject('undecodable', '', 'dropped an undecodable telemetry/wheels message')
             return
         self._process(*fields)
 
     def on_wheels(self, msg: JointState) -> None:
         """Feed one ``telemetry/wheels`` message to the wheels' detectors."""
-        self._process(messages.to_seconds(msg.header.stamp), msg.name, msg.velocity,
-                      msg.effort)
+        self._process(*wheels_input.fields_of(msg))
 
     def _process(self, seconds: float, names: Sequence[str], speeds: Sequence[float],
                  efforts: Sequence[float]) -> None:

@@ -7,11 +7,14 @@ time; a recording's streams keep their own stamps and rates (parameter ``topics`
 the recording's topics); ``/clock`` (the telemetry time) for the sim-time detectors; progress on
 ``/diagnostics``. Pacing uses the steady clock, never the sim time it publishes.
 
-``rate`` is the time factor (1.0 real time). ``rate`` 0 publishes as fast as the
-subscribers take it, without loss: it first waits for ``min_subscribers`` (at least 1)
-matched subscriptions on ``telemetry/wheels``, then publishes ``burst`` rows per executor
-turn; see docs/nodes.md for why no message is lost. A loop restarts at ``start_offset``
-with the file's own stamps, so subscribers see the time jump backwards.
+``rate`` is the time factor (1.0 real time). At every rate the replay first waits for
+its subscribers (:mod:`rwa_monitor.nodes.subscriber_wait`: ``min_subscribers`` on
+``telemetry/wheels``, every subscriber the graph knows matched, or ``subscriber_timeout``).
+``rate`` 0 publishes as fast as the subscribers take it, without loss (at least one
+wheels subscriber), ``burst`` rows per executor turn; see docs/nodes.md for why no
+message is lost. ``/clock`` goes out at most every ``CLOCK_PERIOD`` s of steady time. A
+loop restarts at ``start_offset`` with the file's own stamps, so subscribers see the time
+jump backwards.
 """
 
 from __future__ import annotations
@@ -35,6 +38,7 @@ from rwa_monitor.nodes import common, messages
 from rwa_monitor.nodes.common import (CLOCK_QOS, declare_parameters, DiagnosticsPublisher,
                                       OK, qos_event_callbacks, run_node,
                                       telemetry_qos)
+from rwa_monitor.nodes.subscriber_wait import SubscriberWait
 from rwa_monitor.telemetry import read_telemetry, Telemetry
 
 NODE_NAME = 'telemetry_replay'
@@ -46,6 +50,9 @@ RCLError = rclpy_implementation.RCLError
 _TICK = 0.005  # s of steady time between publishing turns at rate > 0
 _MAX_ROWS_PER_TICK = 2000
 _BACK_OFF = 0.05  # s of steady time without publishing after a subscriber refused a sample
+# /clock at most this often (s of steady time), and with the last row: each /clock message
+# costs every sim-time node a callback (docs/nodes.md "Where the time goes").
+CLOCK_PERIOD = 0.01
 
 
 class TelemetryReplay(Node):
@@ -100,11 +107,15 @@ class TelemetryReplay(Node):
         self._ref_pub = self._publisher(Vector3Stamped, 'telemetry/reference_rate', qos,
                                         telemetry.reference_rate)
         self._clock_pub = self.create_publisher(ClockMsg, '/clock', CLOCK_QOS)
-        data_pubs = [p for p in (self._wheels_pub, self._gyro_pub, self._star_pub,
-                                 self._ref_pub) if p is not None]
-        self._main_pub = data_pubs[0] if data_pubs else self._clock_pub
+        self._last_clock = -1.0
+        self._data_pubs = [p for p in (self._wheels_pub, self._gyro_pub, self._star_pub,
+                                       self._ref_pub) if p is not None]
+        self._main_pub = self._data_pubs[0] if self._data_pubs else self._clock_pub
+        self.subscribers = SubscriberWait(self, self._data_pubs or [self._clock_pub],
+                                          self._main_pub)
         self.diagnostics = DiagnosticsPublisher(self)
-        self._update_health()
+        self.diagnostics.mark_input('replay', 'replay')
+        self.diagnostics.provide('replay', 'replay', self._health)
         self._timer = self.create_timer(self._period(), self._tick, clock=self._steady)
         self.get_logger().info(
             f'replaying {telemetry.source or "telemetry"}: {len(self._time) - self._first} '
@@ -143,10 +154,9 @@ class TelemetryReplay(Node):
         return (self.next_row - self._first) / total
 
     def _ready_to_start(self) -> bool:
-        needed = self.params['min_subscribers']
-        if self.params['rate'] == 0.0:
-            needed = max(needed, 1)
-        return self._main_pub.get_subscription_count() >= needed
+        return self.subscribers.ready(self._steady_s(), self.params['min_subscribers'],
+                                      self.params['subscriber_timeout'],
+                                      self.params['rate'] == 0.0)
 
     def _tick(self) -> None:
         if self.done:
@@ -244,12 +254,15 @@ class TelemetryReplay(Node):
             if not self._flush_pending():
                 break
         last = self.next_row - 1
-        self._clock_pub.publish(messages.clock(float(self._time[last])))
+        now = self._steady_s()
+        if now - self._last_clock >= CLOCK_PERIOD or self.next_row >= len(self._time):
+            self._clock_pub.publish(messages.clock(float(self._time[last])))
+            self._last_clock = now
         if self.progress >= self._next_progress:
             self.get_logger().info(f'replay {100 * self.progress:.0f}% '
                                    f'(t={self._time[last]:.1f} s, loop {self.loops})')
             self._next_progress = np.floor(self.progress * 10 + 1) / 10
-        self._update_health()
+        self.diagnostics.mark_input('replay', 'replay', now)
 
     def _end_of_file(self) -> None:
         if self.params['loop']:
@@ -262,7 +275,6 @@ class TelemetryReplay(Node):
             return
         self.done = True
         self.destroy_timer(self._timer)
-        self._update_health()
         self.get_logger().info(f'replay done: {self.published} rows published')
         if self.params['exit_when_done']:
             for pub in (self._wheels_pub, self._gyro_pub, self._star_pub, self._ref_pub):
@@ -270,12 +282,14 @@ class TelemetryReplay(Node):
                     pub.wait_for_all_acked(rclpy.duration.Duration(seconds=5.0))
             rclpy.try_shutdown(context=self.context)
 
-    def _update_health(self) -> None:
+    def _health(self) -> tuple[bytes, str, dict[str, Any]]:
         state = 'done' if self.done else ('replaying' if self._started else 'waiting')
-        self.diagnostics.mark_input('replay', 'replay')
-        self.diagnostics.set('replay', 'replay', OK, state, progress_percent=round(
-            100 * self.progress, 2), rows_published=self.published, loops=self.loops,
-            back_pressure_waits=self.back_pressure)
+        if self.done:   # not an input that stopped: never STALE
+            self.diagnostics.mark_input('replay', 'replay')
+        return OK, state, {'progress_percent': round(100 * self.progress, 2),
+                           'rows_published': self.published, 'loops': self.loops,
+                           'back_pressure_waits': self.back_pressure,
+                           **self.subscribers.values()}
 
 
 class _Rows:

@@ -240,10 +240,8 @@ class VsadcDetectorNode(Node):
 
     def _reference_for(self, t: float, lagging: bool) -> Sequence[float] | None:
         tol, timeout = self.params['pair_tolerance'], self.params['reference_timeout']
-        best = None
-        for stamp, ref in self._refs:
-            if stamp <= t + tol:
-                best = (stamp, ref)
+        best = next(((stamp, ref) for stamp, ref in reversed(self._refs)
+                     if stamp <= t + tol), None)   # the last one in arrival order
         if not self._refs:
             if not lagging and self._reference_sub.get_publisher_count() > 0:
                 return None                              # a publisher exists: wait for it
