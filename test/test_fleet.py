@@ -214,3 +214,66 @@ def test_calibrated_gyro_equals_detect(client, tmp_path):
     assert any(e['component'] == 'gyro_z' for e in reference)
     result = run_archive(tmp_path / 'archive', client=client, task_bytes=1)
     assert events_of(result.events, 'sat-g') == reference
+
+
+def test_limits_from_the_config_reach_summary_and_leave_the_state(archive, client, tmp_path):
+    """The fleet block's limits: each wheel's trend in summary.json; detectors unchanged."""
+    from rwa_monitor.fleet.report import wheel_trends
+    folder, reference, _ = archive
+    kept = tmp_path / 'state'
+    run_archive(folder, client=client, state_dir=kept, commit=False)
+    config = tmp_path / 'limits.yaml'
+    config.write_text('fleet:\n  ros__parameters:\n    dry_limit: 2.0e-4\n'
+                      '    viscous_limit: 3.0e-6\n')
+    result = run_archive(folder, client=client, state_dir=kept, config=config)
+    limits = {'dry': 2.0e-4, 'viscous': 3.0e-6}
+    assert result.summary['trend_limits'] == limits
+    for craft, events in reference.items():
+        assert events_of(result.events, craft) == events
+    expected = wheel_trends(result.trend, limits)
+    assert len(expected) == 4
+    for entry in expected:
+        shown = result.summary['spacecraft'][entry['spacecraft']]['components'][
+            entry['wheel']]['trend']
+        assert shown['passes'] == entry['passes'] > 0
+        assert shown['dry_limit'] == 2.0e-4 and shown['viscous_limit'] == 3.0e-6
+        for key, value in shown.items():
+            want = entry[key]
+            assert value == (None if isinstance(want, float) and want != want else want) \
+                or abs(want) == float('inf') and value is None
+    json.dumps(result.summary, allow_nan=False, default=str)      # valid JSON: no NaN
+    bad = tmp_path / 'bad.yaml'
+    bad.write_text('fleet:\n  ros__parameters:\n    dry_limit: -1.0\n')
+    with pytest.raises(ConfigError, match='dry_limit'):
+        run_archive(folder, client=client, config=bad)
+
+
+def test_calibrated_levels_use_only_the_samples_the_detector_tests(archive):
+    """Speeds outside the calibrated range: NaN for the trend fit too, dropped and counted."""
+    import numpy as np
+    from rwa_monitor.core.trend import pass_levels
+    from rwa_monitor.fleet import components as comp
+    from rwa_monitor.telemetry import Telemetry
+    folder, _, _ = archive
+    cal = str(folder / 'sat-b' / 'calibration.yaml')
+    spec = comp.ComponentSpec('sat-b', 'rw1', {'calibration_file': cal})
+    detector, nominal = comp.build(spec)
+    rng = np.random.default_rng(3)
+    lo, hi = nominal.speed_range
+    inside = rng.uniform(max(nominal.band_rad_s, 2.0), 0.9 * min(hi, -lo), 3000)
+    inside *= rng.choice([-1.0, 1.0], inside.size)
+    outside = hi + rng.uniform(5.0, 50.0, 1000)
+    w = np.concatenate([inside, outside])
+    t = 0.1 * np.arange(w.size)
+    f = np.concatenate([nominal.nominal(inside) + rng.normal(0, 5e-5, inside.size),
+                        np.full(outside.size, 0.5)])   # far off: would wreck a fit
+    chain = comp.new_chain()
+    tele = Telemetry.from_columns({'time': t, 'rw1_speed': w, 'rw1_friction': f})
+    comp._feed_wheel(spec, detector, nominal, tele, chain, 'p1')
+    row = chain['trend'][0]
+    alone = pass_levels(t[:inside.size], inside, f[:inside.size] - nominal.nominal(inside))
+    assert row['samples'] == alone.samples == inside.size
+    assert row['dry'] == pytest.approx(alone.dry, rel=1e-9, abs=1e-15)
+    assert row['viscous'] == pytest.approx(alone.viscous, rel=1e-9, abs=1e-18)
+    assert abs(row['dry']) < 5 * row['dry_se'] + 1e-9 and row['relative_to'] == 'nominal'
+    assert chain['not_tested']['outside_calibrated_range'] == outside.size

@@ -149,20 +149,26 @@ def _feed_wheel(spec: ComponentSpec, det: Any, nominal: Any, kept: Telemetry,
             out['not_tested'][reason] += int(skipped[reason])
     out['events'].extend(det.process_arrays(t, w, residual))
     if len(t):
-        out['trend'].append(_trend_row(spec, name, t, w, f, nominal))
+        out['trend'].append(_trend_row(spec, name, t, w, residual, nominal is not None))
     return {'samples': len(t)}
 
 
 def _trend_row(spec: ComponentSpec, name: str, t: np.ndarray, w: np.ndarray,
-               f: np.ndarray, nominal: Any) -> dict[str, Any]:
-    """Return the pass's friction levels of the wheel (core/trend.py pass_levels)."""
+               residual: np.ndarray, calibrated: bool) -> dict[str, Any]:
+    """Return the pass's friction levels of the wheel (core/trend.py pass_levels).
+
+    ``residual``: what the detector was fed, friction minus the nominal with a calibration
+    (NaN where the detector does not test: the low-speed band and speeds outside the
+    calibrated range, NominalWheel.residual), so the levels use the detector's samples
+    only; pass_levels drops and counts the NaN (``nonfinite``).
+    """
     from rwa_monitor.core.trend import pass_levels
-    levels = pass_levels(t, w, f, None if nominal is None else nominal.nominal(w))
+    levels = pass_levels(t, w, residual)
     return {'spacecraft': spec.spacecraft, 'wheel': spec.component, 'pass': name,
             't_start': levels.t_start, 't_end': levels.t_end, 'samples': levels.samples,
             'dry': levels.dry, 'dry_se': levels.dry_se, 'viscous': levels.viscous,
             'viscous_se': levels.viscous_se,
-            'relative_to': 'zero' if nominal is None else 'nominal'}
+            'relative_to': 'nominal' if calibrated else 'zero'}
 
 
 def _feed_gyro(spec: ComponentSpec, det: Any, nominal: Any, kept: Telemetry,

@@ -26,7 +26,7 @@ import sys
 import time as _time
 from typing import Any, Callable, Iterator, Mapping
 
-from rwa_monitor.core.schema import LLR, VSADC
+from rwa_monitor.core.schema import FLEET, LLR, VSADC
 from rwa_monitor.exceptions import ConfigError
 from rwa_monitor.fleet import archive as arc, components as comp, state
 from rwa_monitor.telemetry.parameters_file import block_values, read_parameters_file
@@ -79,11 +79,12 @@ def dask_client(workers: int = 2, scheduler: str | None = None) -> Iterator[Any]
 
 
 def node_blocks(config_path: pathlib.Path | None) -> dict[str, dict[str, Any]]:
-    """Return the checked llr and vsadc parameter blocks of a parameters file."""
+    """Return the checked llr, vsadc and fleet parameter blocks of a parameters file."""
     config = read_parameters_file(config_path)
     where = config_path or 'installed parameters'
     blocks = {'llr': dict(block_values(config, LLR, where)),
-              'vsadc': dict(block_values(config, VSADC, where))}
+              'vsadc': dict(block_values(config, VSADC, where)),
+              'fleet': dict(block_values(config, FLEET, where))}
     LLR.validate(blocks['llr'])
     VSADC.validate(blocks['vsadc'])
     if blocks['llr'].get('friction_model_file'):
@@ -121,6 +122,7 @@ def run_archive(archive: str | pathlib.Path, *, client: Any = None, workers: int
                   'workers': len(client.scheduler_info()['workers'])}
     wall = _time.perf_counter() - start_wall
     result = _assemble(plan, chains, engine)
+    add_trends(result.summary, result.trend, trend_limits(blocks['fleet']))
     result.timings = _timings(chains, wall, _time.process_time() - start_cpu)
     result.summary['engine'].update(result.timings)
     result.summary['config'] = str(config or 'installed parameters')
@@ -294,6 +296,37 @@ def _assemble(plan: list[dict[str, Any]], chains: Mapping[tuple[str, str], Any],
         incomplete |= bool(crafts[craft.id]['not_examined'])
     summary = {'spacecraft': crafts, 'events': len(events), 'engine': engine}
     return FleetResult(events, summary, trend, {}, anomaly, incomplete)
+
+
+def trend_limits(fleet_block: Mapping[str, Any]) -> dict[str, float]:
+    """Return the limits of the fleet block that are set (``dry``/``viscous``; 0 = none)."""
+    return {level: float(fleet_block[f'{level}_limit']) for level in ('dry', 'viscous')
+            if fleet_block[f'{level}_limit'] > 0.0}
+
+
+def add_trends(summary: dict[str, Any], trend_rows: list[dict[str, Any]],
+               limits: Mapping[str, float]) -> None:
+    """Write each wheel's trend (fleet/report.py wheel_trends) into its summary entry.
+
+    ``summary['trend_limits']``: the limits; per spacecraft and wheel ``trend``: passes,
+    reference and per level the slope per day, its standard error, p-value, the limit and
+    the projected crossing with its interval (telemetry time in s; null where a number is
+    not defined, and for an end of the interval the data cannot bound).
+    """
+    from rwa_monitor.fleet.report import wheel_trends
+    summary['trend_limits'] = dict(limits)
+    for entry in wheel_trends(trend_rows, limits):
+        craft = summary['spacecraft'].get(entry['spacecraft'])
+        wheel = craft and craft['components'].get(entry['wheel'])
+        if wheel is None:
+            continue
+        wheel['trend'] = {k: _json_number(v) for k, v in entry.items()
+                          if k not in ('spacecraft', 'wheel')}
+
+
+def _json_number(value: Any) -> Any:
+    """Return ``value`` with a non-finite float as None (JSON has no NaN or infinity)."""
+    return None if isinstance(value, float) and not math.isfinite(value) else value
 
 
 def _timings(chains: Mapping[Any, Any], wall: float, client_cpu: float) -> dict[str, Any]:
