@@ -108,8 +108,7 @@ def pass_levels(time: np.ndarray, speed: np.ndarray, friction: np.ndarray,
     with ``sigma_LR^2`` the long-run variance of the residual (its variance times
     ``long_run_ratio``), which is the sandwich covariance of least squares under serially
     correlated noise when the regressors vary slowly against the noise's correlation time
-    (a wheel's speed does;
-    white noise gives the textbook ``s^2 (H^T H)^-1``).
+    (a wheel's speed does; white noise gives the textbook ``s^2 (H^T H)^-1``).
     """
     t = np.asarray(time, dtype=float).reshape(-1)
     w = np.asarray(speed, dtype=float).reshape(-1)

@@ -129,7 +129,7 @@ def step(spec: ComponentSpec, chain: Mapping[str, Any], reads: list[tuple[Any, d
         out['detector'] = codec.encode(detector)
         out['facts'] = _facts(spec, detector, out)
     own = worker_facts(_time.process_time() - start)
-    read_work = [work for _, work in reads] if count_read else []
+    read_work = [work for _, work in reads if work is not None] if count_read else []
     out['work'] = _account(chain['work'], read_work + [own])
     return out
 
@@ -253,9 +253,14 @@ def worker_facts(cpu_s: float) -> dict[str, Any]:
     return {'worker': worker, 'cpu_s': cpu_s, 'peak_rss_mb': peak_kb / 1024.0}
 
 
-def read(path: str) -> tuple[Any, dict[str, Any]]:
-    """Read a pass on a worker: (telemetry or reason, worker facts)."""
+def read(paths: list[str]) -> list[tuple[Any, dict[str, Any] | None]]:
+    """Read consecutive passes on a worker: per pass (telemetry or reason, facts).
+
+    One task per group of passes (a task costs about a millisecond of the engine's own);
+    the worker facts (the group's CPU time) ride on the first pass, None on the others.
+    """
     from rwa_monitor.fleet.archive import read_pass
     start = _time.process_time()
-    tele = read_pass(path)
-    return tele, worker_facts(_time.process_time() - start)
+    teles = [read_pass(path) for path in paths]
+    facts = worker_facts(_time.process_time() - start)
+    return [(tele, facts if i == 0 else None) for i, tele in enumerate(teles)]

@@ -1,8 +1,9 @@
 """The fleet engine on Dask distributed: every spacecraft's passes through its detectors.
 
-Graph (docs/usage.md "Fleet"): one ``scan`` task per candidate pass (first stamp and
-columns), then per spacecraft its passes in time order by first stamp, one ``read`` task
-per pass and, per component (each wheel with a friction column, the gyro), a chain of
+Graph (docs/usage.md "Fleet"): one ``scan`` task per spacecraft (first stamp and columns
+of its candidate passes), then per spacecraft its passes in time order by first stamp,
+in groups of consecutive passes (``task_bytes``): one ``read`` task per group and, per
+component (each wheel with a friction column, the gyro), a chain of
 ``step`` tasks (:mod:`rwa_monitor.fleet.components`) that carries the detector state as
 data from pass to pass. Chains of different components and spacecraft run in parallel;
 a chain runs in pass order. Every task is pure: a worker that dies mid-run has its tasks
@@ -139,8 +140,11 @@ def _plan(client: Any, fleet: list[arc.Spacecraft], blocks: Mapping[str, Any],
           state_dir: pathlib.Path | None) -> list[dict[str, Any]]:
     """Return per spacecraft: specs, passes to run in time order, prior chains, issues."""
     plan = [_prior(craft, blocks, state_dir) for craft in fleet]
-    paths = [p for entry in plan for p in entry['to_scan']]
-    scans = dict(zip(paths, client.gather(client.map(arc.scan_pass, paths, pure=False))))
+    batches = [entry['to_scan'] for entry in plan if entry['to_scan']]
+    scans = {}
+    found = client.gather(client.map(arc.scan_passes, batches, pure=False))
+    for paths, passes in zip(batches, found):
+        scans.update(zip(paths, passes))
     for entry in plan:
         readable = []
         for path in entry.pop('to_scan'):
@@ -253,7 +257,7 @@ def _submit(client: Any, plan: list[dict[str, Any]], task_bytes: int
                   for s in entry['specs']}
         for first, end in _groups(entry['passes'], task_bytes):
             passes = entry['passes'][first:end]
-            reads = [client.submit(comp.read, p.path, pure=False) for p in passes]
+            reads = client.submit(comp.read, [p.path for p in passes], pure=False)
             for n, spec in enumerate(entry['specs']):
                 chains[spec.component] = client.submit(
                     comp.step, spec, chains[spec.component], reads, [p.name for p in passes],
