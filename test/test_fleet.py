@@ -60,7 +60,12 @@ def test_events_equal_detect_on_joined_passes(archive, client):
     assert summary['sat-a']['components']['rw1']['samples'] == 42000
     assert set(summary['sat-a']['components']) == {'rw1', 'rw2', 'gyro'}
     assert summary['sat-b']['components']['rw1']['not_tested']['outside_calibrated_range'] > 0
-    assert result.anomaly and not result.incomplete
+    # sat-b rw1 runs mostly outside its calibrated range: unknown, as detect judges the
+    # joined file (core/coverage.py; test_not_examined_follows_detect_coverage_rule).
+    assert summary['sat-b']['components']['rw1']['verdict'] == 'unknown'
+    assert list(summary['sat-b']['not_examined']) == ['rw1'] and not summary['sat-a'][
+        'not_examined']
+    assert result.anomaly and result.incomplete
     workers = result.timings['per_worker']
     assert workers and all(w['peak_rss_mb'] > 0 for w in workers.values())
     trend = [r for r in result.trend if r['spacecraft'] == 'sat-b' and r['wheel'] == 'rw2']
@@ -277,3 +282,31 @@ def test_calibrated_levels_use_only_the_samples_the_detector_tests(archive):
     assert row['viscous'] == pytest.approx(alone.viscous, rel=1e-9, abs=1e-18)
     assert abs(row['dry']) < 5 * row['dry_se'] + 1e-9 and row['relative_to'] == 'nominal'
     assert chain['not_tested']['outside_calibrated_range'] == outside.size
+
+
+def test_not_examined_follows_detect_coverage_rule(client, tmp_path):
+    """A wheel whose friction is mostly missing is ``unknown`` as in detect, with its counts."""
+    import numpy as np
+    from rwa_monitor.pipelines import detect
+    from rwa_monitor.telemetry import read_telemetry, Telemetry
+    tele = simulate_friction(duration_s=1200, rate_hz=10, wheels=('rw1', 'rw2'), seed=7)
+    cols = tele.columns()
+    cols['rw2_friction'] = np.where(np.arange(len(tele)) % 10 < 7, np.nan,
+                                    cols['rw2_friction'])     # 70 % missing: > 50 %
+    whole = tmp_path / 'whole.csv'
+    write_telemetry(whole, Telemetry.from_columns(cols))
+    tele = read_telemetry(whole)
+    cuts = [(6000, 12000, 'a.csv'), (0, 6000, 'b.csv')]
+    write_passes(tmp_path / 'archive' / 'sat-u', tele, cuts)
+    result = run_archive(tmp_path / 'archive', client=client)
+    reference = detect(tele, {}).summary['pipelines']['llr']['components']
+    wheels = result.summary['spacecraft']['sat-u']['components']
+    for wheel in ('rw1', 'rw2'):
+        expected = reference[wheel]
+        for key in ('verdict', 'samples', 'usable_samples', 'needed_samples'):
+            assert wheels[wheel][key] == expected[key], (wheel, key)
+    assert wheels['rw1']['verdict'] == 'examined' and wheels['rw1']['not_examined'] is None
+    assert wheels['rw2']['verdict'] == 'unknown'
+    assert wheels['rw2']['not_examined'] == (
+        f'llr: rw2 unknown: {reference["rw2"]["verdict_reason"]}')
+    assert result.incomplete

@@ -26,6 +26,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
+from rwa_monitor.core.coverage import EXAMINED
 from rwa_monitor.core.schema import VSADC
 from rwa_monitor.core.vsadc import STATE_NAMES
 from rwa_monitor.fleet import codec
@@ -198,14 +199,23 @@ def _feed_gyro(spec: ComponentSpec, det: Any, nominal: Any, kept: Telemetry,
 
 
 def _facts(spec: ComponentSpec, det: Any, chain: Mapping[str, Any]) -> dict[str, Any]:
-    """Return the detector's facts after the pass (detect's per-component summary)."""
+    """Return the detector's facts after the pass (detect's per-component summary).
+
+    With each wheel's and axis's verdict of detect (core/coverage.py ``judge`` through
+    pipelines/llr.py ``judge_wheels`` and pipelines/vsadc.py ``axis_coverage``) on the
+    samples so far.
+    """
     if spec.detector == 'vsadc':
+        from rwa_monitor.pipelines.vsadc import axis_coverage, rows_offered
         axes = {}
         for axis, ch in zip(det.axes, det.channels):
+            verdict = axis_coverage(rows_offered(det.counters), ch)
             axes[f'gyro_{axis}'] = {'final_state': STATE_NAMES[ch.state] if ch.ready
-                                    else 'unknown', 'ready': ch.ready,
-                                    'samples_used': ch.samples}
+                                    and verdict.examined else 'unknown', 'ready': ch.ready,
+                                    'samples_used': ch.samples, **verdict.fields()}
         return {'axes': axes, 'counters': det.counters}
+    from rwa_monitor.core.coverage import llr_samples_needed
+    from rwa_monitor.pipelines.llr import judge_wheels
     counters = det.counters
     facts: dict[str, Any] = {'rows_seen': det.n_samples, 'rejected': counters}
     if spec.params.get('calibration_file'):
@@ -213,21 +223,26 @@ def _facts(spec: ComponentSpec, det: Any, chain: Mapping[str, Any]) -> dict[str,
         key = 'non_finite' if 'non_finite' in counters else 'nonfinite'
         counters[key] -= sum(chain['not_tested'].values())
         facts['not_tested'] = dict(chain['not_tested'])
+    entry = {'samples': det.n_samples, 'rejected': counters,
+             'not_tested': facts.get('not_tested', {})}
+    judge_wheels({spec.component: entry}, llr_samples_needed(spec.params))
+    facts.update({k: v for k, v in entry.items()
+                  if k not in ('samples', 'rejected', 'not_tested')})
     return facts
 
 
 def not_examined(spec: ComponentSpec, facts: Mapping[str, Any]) -> str | None:
-    """Return why a component was not examined (detect's coverage rules), or None."""
+    """Return why a component was not examined (detect's coverage rule), or None.
+
+    A wheel or gyro axis whose verdict is ``not_examined`` or ``unknown`` (too few usable
+    samples, or most rejected or not tested) is named with the verdict and its reason.
+    """
     if not facts:
         return 'no pass could be processed'
-    if spec.detector == 'vsadc':
-        idle = [a for a, entry in facts['axes'].items() if not entry['ready']]
-        return f'vsadc: {", ".join(idle)} never ready' if idle else None
-    rejected, rows = facts['rejected'], facts['rows_seen']
-    unusable = sum(v for k, v in rejected.items() if k != 'ill_conditioned')
-    if spec.params.get('calibration_file'):
-        unusable += sum(facts['not_tested'].values())
-    return 'llr: no usable sample' if rows and unusable >= rows else None
+    verdicts = facts['axes'] if spec.detector == 'vsadc' else {spec.component: facts}
+    missing = [f'{name} {entry["verdict"]}: {entry["verdict_reason"]}'
+               for name, entry in verdicts.items() if entry['verdict'] != EXAMINED]
+    return f'{spec.detector}: {"; ".join(missing)}' if missing else None
 
 
 def _account(work: Mapping[str, Any], tasks: list[Mapping[str, Any]]) -> dict[str, Any]:
