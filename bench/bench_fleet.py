@@ -150,23 +150,26 @@ def run(out_dir: pathlib.Path, quick: bool) -> dict[str, Any]:
         shutil.rmtree(scratch, ignore_errors=True)
     results['load_average_after'] = list(os.getloadavg())
     results['summary'] = summarise(results)
-    results['previous'] = previous_run(out_dir)
+    results['previous'] = previous_runs(out_dir)
     report.write_json(out_dir, 'fleet', results)
     _plot(out_dir, results)
     report.update_section('fleet', markdown(results))
     return results
 
 
-def previous_run(out_dir: pathlib.Path) -> dict[str, Any] | None:
-    """Return the commit, loads and summary of the last full run in ``out_dir``, if any."""
+def previous_runs(out_dir: pathlib.Path, keep: int = 3) -> list[dict[str, Any]]:
+    """Return the last full runs in ``out_dir`` (newest first): commit, loads, summary."""
     try:
         last = json.loads((out_dir / 'fleet.json').read_text())
     except (OSError, ValueError):
-        return None
+        return []
     if last.get('quick') or 'summary' not in last:
-        return None
-    return {k: last.get(k) for k in ('commit', 'load_average_before', 'load_average_after',
+        return []
+    earlier = last.get('previous') or []
+    earlier = [earlier] if isinstance(earlier, dict) else earlier
+    mine = {k: last.get(k) for k in ('commit', 'load_average_before', 'load_average_after',
                                      'summary')}
+    return ([mine] + earlier)[:keep]
 
 
 def _commit() -> str:
@@ -249,6 +252,11 @@ def markdown(results: dict[str, Any]) -> str:
                   f"plus the client's (which runs the local scheduler): {whole['1']:.1f} s "
                   f'(1 worker), {whole["2"]:.1f} s (2 workers); against `detect`: '
                   f'{100 * (whole["1"] / det["cpu_s"] - 1):+.0f} % (1 worker).']
+    share = {k: (best[k]['cpu_s'] + best[k]['client_cpu_s']) / (best[k]['wall_s'] * int(k))
+             for k in best}
+    lines += [f'- Share of a core each worker got (CPU / (wall x workers)): {share["1"]:.2f} '
+              f'(1 worker), {share["2"]:.2f} (2 workers): the scaling measures the engine '
+              'only as far as the shared machine gave the second worker a core.']
     lines += [f'- Samples per CPU second per worker: {s["per_worker_cpu_rate"]["1"]:.3g} '
               f'(1 worker), {s["per_worker_cpu_rate"]["2"]:.3g} (2 workers).',
               f'- Overhead of `fleet` (1 worker) against `detect` on the joined files: '
@@ -268,10 +276,9 @@ def markdown(results: dict[str, Any]) -> str:
                  if abs(mem[-1]['peak_rss_mb'] - mem[0]['peak_rss_mb']) < 1.0 else '.'),
               f'- Events: detect {s["events"]["detect"]}, fleet {s["events"]["fleet_1"]} '
               f'(1 worker), {s["events"]["fleet_2"]} (2 workers).']
-    before = results.get('previous')
-    if before:
+    for before in results.get('previous') or []:
         was = before['summary']
-        lines += [f'- Previous full run (commit {before["commit"]}, load '
+        lines += [f'- Earlier full run (commit {before["commit"]}, load '
                   f'{before["load_average_before"][0]:.1f} before, '
                   f'{before["load_average_after"][0]:.1f} after): overhead '
                   f'{100 * was["overhead_wall"]:+.0f} % wall, {100 * was["overhead_cpu"]:+.0f} '
