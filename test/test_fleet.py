@@ -60,7 +60,12 @@ def test_events_equal_detect_on_joined_passes(archive, client):
     assert summary['sat-a']['components']['rw1']['samples'] == 42000
     assert set(summary['sat-a']['components']) == {'rw1', 'rw2', 'gyro'}
     assert summary['sat-b']['components']['rw1']['not_tested']['outside_calibrated_range'] > 0
-    assert result.anomaly and not result.incomplete
+    # sat-b rw1 runs mostly outside its calibrated range: unknown, as detect judges the
+    # joined file (core/coverage.py; test_not_examined_follows_detect_coverage_rule).
+    assert summary['sat-b']['components']['rw1']['verdict'] == 'unknown'
+    assert list(summary['sat-b']['not_examined']) == ['rw1'] and not summary['sat-a'][
+        'not_examined']
+    assert result.anomaly and result.incomplete
     workers = result.timings['per_worker']
     assert workers and all(w['peak_rss_mb'] > 0 for w in workers.values())
     trend = [r for r in result.trend if r['spacecraft'] == 'sat-b' and r['wheel'] == 'rw2']
@@ -217,3 +222,94 @@ def test_calibrated_gyro_equals_detect(client, tmp_path):
     assert any(e['component'] == 'gyro_z' for e in reference)
     result = run_archive(tmp_path / 'archive', client=client, task_bytes=1)
     assert events_of(result.events, 'sat-g') == reference
+
+
+def test_limits_from_the_config_reach_summary_and_leave_the_state(archive, client, tmp_path):
+    """The fleet block's limits: each wheel's trend in summary.json; detectors unchanged."""
+    from rwa_monitor.fleet.report import wheel_trends
+    folder, reference, _ = archive
+    kept = tmp_path / 'state'
+    run_archive(folder, client=client, state_dir=kept, commit=False)
+    config = tmp_path / 'limits.yaml'
+    config.write_text('fleet:\n  ros__parameters:\n    dry_limit: 2.0e-4\n'
+                      '    viscous_limit: 3.0e-6\n')
+    result = run_archive(folder, client=client, state_dir=kept, config=config)
+    limits = {'dry': 2.0e-4, 'viscous': 3.0e-6}
+    assert result.summary['trend_limits'] == limits
+    for craft, events in reference.items():
+        assert events_of(result.events, craft) == events
+    expected = wheel_trends(result.trend, limits)
+    assert len(expected) == 4
+    for entry in expected:
+        shown = result.summary['spacecraft'][entry['spacecraft']]['components'][
+            entry['wheel']]['trend']
+        assert shown['passes'] == entry['passes'] > 0
+        assert shown['dry_limit'] == 2.0e-4 and shown['viscous_limit'] == 3.0e-6
+        for key, value in shown.items():
+            want = entry[key]
+            assert value == (None if isinstance(want, float) and want != want else want) \
+                or abs(want) == float('inf') and value is None
+    json.dumps(result.summary, allow_nan=False, default=str)      # valid JSON: no NaN
+    bad = tmp_path / 'bad.yaml'
+    bad.write_text('fleet:\n  ros__parameters:\n    dry_limit: -1.0\n')
+    with pytest.raises(ConfigError, match='dry_limit'):
+        run_archive(folder, client=client, config=bad)
+
+
+def test_calibrated_levels_use_only_the_samples_the_detector_tests(archive):
+    """Speeds outside the calibrated range: NaN for the trend fit too, dropped and counted."""
+    import numpy as np
+    from rwa_monitor.core.trend import pass_levels
+    from rwa_monitor.fleet import components as comp
+    from rwa_monitor.telemetry import Telemetry
+    folder, _, _ = archive
+    cal = str(folder / 'sat-b' / 'calibration.yaml')
+    spec = comp.ComponentSpec('sat-b', 'rw1', {'calibration_file': cal})
+    detector, nominal = comp.build(spec)
+    rng = np.random.default_rng(3)
+    lo, hi = nominal.speed_range
+    inside = rng.uniform(max(nominal.band_rad_s, 2.0), 0.9 * min(hi, -lo), 3000)
+    inside *= rng.choice([-1.0, 1.0], inside.size)
+    outside = hi + rng.uniform(5.0, 50.0, 1000)
+    w = np.concatenate([inside, outside])
+    t = 0.1 * np.arange(w.size)
+    f = np.concatenate([nominal.nominal(inside) + rng.normal(0, 5e-5, inside.size),
+                        np.full(outside.size, 0.5)])   # far off: would wreck a fit
+    chain = comp.new_chain()
+    tele = Telemetry.from_columns({'time': t, 'rw1_speed': w, 'rw1_friction': f})
+    comp._feed_wheel(spec, detector, nominal, tele, chain, 'p1')
+    row = chain['trend'][0]
+    alone = pass_levels(t[:inside.size], inside, f[:inside.size] - nominal.nominal(inside))
+    assert row['samples'] == alone.samples == inside.size
+    assert row['dry'] == pytest.approx(alone.dry, rel=1e-9, abs=1e-15)
+    assert row['viscous'] == pytest.approx(alone.viscous, rel=1e-9, abs=1e-18)
+    assert abs(row['dry']) < 5 * row['dry_se'] + 1e-9 and row['relative_to'] == 'nominal'
+    assert chain['not_tested']['outside_calibrated_range'] == outside.size
+
+
+def test_not_examined_follows_detect_coverage_rule(client, tmp_path):
+    """A wheel whose friction is mostly missing is ``unknown`` as in detect, with its counts."""
+    import numpy as np
+    from rwa_monitor.pipelines import detect
+    from rwa_monitor.telemetry import read_telemetry, Telemetry
+    tele = simulate_friction(duration_s=1200, rate_hz=10, wheels=('rw1', 'rw2'), seed=7)
+    cols = tele.columns()
+    cols['rw2_friction'] = np.where(np.arange(len(tele)) % 10 < 7, np.nan,
+                                    cols['rw2_friction'])     # 70 % missing: > 50 %
+    whole = tmp_path / 'whole.csv'
+    write_telemetry(whole, Telemetry.from_columns(cols))
+    tele = read_telemetry(whole)
+    cuts = [(6000, 12000, 'a.csv'), (0, 6000, 'b.csv')]
+    write_passes(tmp_path / 'archive' / 'sat-u', tele, cuts)
+    result = run_archive(tmp_path / 'archive', client=client)
+    reference = detect(tele, {}).summary['pipelines']['llr']['components']
+    wheels = result.summary['spacecraft']['sat-u']['components']
+    for wheel in ('rw1', 'rw2'):
+        expected = reference[wheel]
+        for key in ('verdict', 'samples', 'usable_samples', 'needed_samples'):
+            assert wheels[wheel][key] == expected[key], (wheel, key)
+    assert wheels['rw1']['verdict'] == 'examined' and wheels['rw1']['not_examined'] is None
+    assert wheels['rw2']['verdict'] == 'unknown'
+    assert wheels['rw2']['not_examined'] == (
+        f'llr: rw2 unknown: {reference["rw2"]["verdict_reason"]}')
+    assert result.incomplete

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from rwa_monitor.core.trend import SECONDS_PER_DAY
+from rwa_monitor.fleet.engine import add_trends, trend_limits
 from rwa_monitor.fleet.report import wheel_trends, write_report
 
 
@@ -81,3 +82,26 @@ def test_report_of_an_empty_fleet_and_of_unusable_passes(tmp_path):
                  'dry_se': float('nan'), 'viscous': None, 'viscous_se': None}]
     write_report(tmp_path / 'nan.html', [], {}, nan_rows)
     assert 'rw1' in (tmp_path / 'nan.html').read_text()
+
+
+def test_summary_trends_are_the_report_numbers(tmp_path):
+    """summary.json's per-wheel trend and report.html show the same slope, p and crossing."""
+    events, summary, rows = fleet_inputs()
+    summary['spacecraft']['sc1']['components'] = {'rw1': {}, 'rw2': {}}
+    limits = trend_limits({'dry_limit': 2.3e-4, 'viscous_limit': 0.0})
+    assert limits == {'dry': 2.3e-4}
+    add_trends(summary, rows, limits)
+    assert summary['trend_limits'] == {'dry': 2.3e-4}
+    wear = summary['spacecraft']['sc1']['components']['rw2']['trend']
+    table = {(t['spacecraft'], t['wheel']): t for t in wheel_trends(rows, limits)}
+    assert wear['dry_slope_per_day'] == table[('sc1', 'rw2')]['dry_slope_per_day']
+    assert wear['dry_crossing_s'] == table[('sc1', 'rw2')]['dry_crossing_s']
+    assert wear['viscous_crossing_s'] is None and wear['viscous_limit'] is None
+    assert summary['spacecraft']['sc<2>']['components']['rw2']['trend']['passes'] == 30
+    path = tmp_path / 'report.html'
+    write_report(path, events, summary, rows)
+    text = path.read_text()
+    days = [wear[f'dry_crossing{s}_s'] / SECONDS_PER_DAY for s in ('', '_low', '_high')]
+    assert f'{days[0]:.1f} ({days[1]:.1f} .. {days[2]:.1f})' in text
+    assert f'{wear["dry_slope_per_day"]:.3g} &plusmn; {wear["dry_slope_se"]:.3g}' in text
+    assert f'{wear["dry_p_value"]:.3g}' in text

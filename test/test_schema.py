@@ -8,7 +8,7 @@ import yaml
 from rwa_monitor.core.fss.pipeline import FssConfig
 from rwa_monitor.core.gyro_diagnosis import make_gyro_detector
 from rwa_monitor.core.llr import LLRDetector
-from rwa_monitor.core.schema import (AUTO, FSS, LLR, parameters_document, REPLAY, SCHEMAS,
+from rwa_monitor.core.schema import (AUTO, FLEET, FSS, LLR, parameters_document, REPLAY, SCHEMAS,
                                      VSADC)
 from rwa_monitor.core.vsadc import VsadcDetector
 from rwa_monitor.exceptions import ConfigError
@@ -16,13 +16,15 @@ from rwa_monitor.telemetry.parameters_file import (block_values, load_block,
                                                    read_parameters_file)
 
 NODE_SCHEMAS = [REPLAY, LLR, FSS, VSADC]
+# File-command blocks of the shipped parameters file (no node reads them).
+FILE_SCHEMAS = [FLEET]
 
 
 def _shipped(repo_root):
     return yaml.safe_load((repo_root / 'config' / 'rwa_monitor.yaml').read_text())
 
 
-@pytest.mark.parametrize('schema', NODE_SCHEMAS, ids=lambda s: s.name)
+@pytest.mark.parametrize('schema', NODE_SCHEMAS + FILE_SCHEMAS, ids=lambda s: s.name)
 def test_shipped_yaml_equals_schema_defaults(repo_root, schema):
     block = _shipped(repo_root)[schema.name]['ros__parameters']
     assert block == schema.defaults()
@@ -30,7 +32,7 @@ def test_shipped_yaml_equals_schema_defaults(repo_root, schema):
 
 def test_shipped_yaml_has_no_other_block_and_no_required_value(repo_root):
     shipped = _shipped(repo_root)
-    assert set(shipped) == {'/**', 'basilisk_bus'} | {s.name for s in NODE_SCHEMAS}
+    assert set(shipped) == {'/**', 'basilisk_bus'} | {s.name for s in NODE_SCHEMAS + FILE_SCHEMAS}
     assert shipped['/**']['ros__parameters'] == {'use_sim_time': True}
     # A `file: ""` here would beat `-p file:=PATH` on the replay's command line.
     assert 'file' not in shipped[REPLAY.name]['ros__parameters']

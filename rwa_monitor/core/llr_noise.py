@@ -76,32 +76,55 @@ def fit_noise_model(h: np.ndarray, f: np.ndarray, max_order: int,
             f = f / scale
     pi = h.T @ h
     x = llr_stats.solve_scaled(pi, h.T @ f)
-    e = f - h @ x
+    return residual_noise_model(f - h @ x, h.shape[1], max_order, speed_std)
+
+
+def residual_noise_model(e: np.ndarray, fitted: int, max_order: int,
+                         speed_std: tuple[float, float, float] | None = None) -> NoiseModel:
+    """Return the AR model of a least-squares residual ``e`` (``fitted`` parameters).
+
+    The order selection of :func:`fit_noise_model`: conditional least squares of
+    ``e[Q:]`` on its ``q`` lags for each ``q <= max_order`` (common targets), solved by
+    the normal equations of one lag Gram matrix (the lags of a residual are far from
+    collinear, so this equals the orthogonal solution to rounding, at a fraction of its
+    cost); ``BIC_q`` as there; an order is kept only if its characteristic roots lie inside
+    the unit circle (checked only for an order whose BIC would win).
+    """
+    e = np.asarray(e, dtype=float)
     n = e.size
     top = int(min(max_order, max((n - 10) // 10, 0)))
-    target = e[top:]
-    m = target.size
+    m = n - top
+    # gram[i, j] = sum over the common targets of e lagged i times e lagged j (i, j <= top).
+    lagged = np.column_stack([e[top - i:n - i] for i in range(top + 1)])
+    gram = lagged.T @ lagged
     best: tuple[float, tuple[float, ...], float] = (math.inf, (), 0.0)
     for q in range(top + 1):
         if q == 0:
             coef = np.zeros(0)
-            rss = float(target @ target)
+            rss = float(gram[0, 0])
         else:
-            lags = np.column_stack([e[top - i - 1:n - i - 1] for i in range(q)])
-            coef = np.linalg.lstsq(lags, target, rcond=None)[0]
-            resid = target - lags @ coef
-            rss = float(resid @ resid)
-            roots = np.roots(np.concatenate([[1.0], -coef]))
-            if not np.all(np.abs(roots) < 0.999):
+            coef = _solve_lags(gram[1:q + 1, 1:q + 1], gram[1:q + 1, 0])
+            if coef is None:
                 continue
+            rss = float(gram[0, 0] - 2.0 * coef @ gram[1:q + 1, 0]
+                        + coef @ gram[1:q + 1, 1:q + 1] @ coef)
         s2 = max(rss / m, 1e-300)
         bic = m * math.log(s2) + q * math.log(m)
-        if bic < best[0]:
+        if bic < best[0] and (q == 0 or np.all(np.abs(np.roots(
+                np.concatenate([[1.0], -coef]))) < 0.999)):
             best = (bic, tuple(float(a) for a in coef), s2)
     _, ar, s2u = best
-    s2e = max(float(e @ e) / max(n - h.shape[1], 1), 1e-300)
+    s2e = max(float(e @ e) / max(n - fitted, 1), 1e-300)
     ratio = s2u / (1.0 - sum(ar)) ** 2 / s2e
     return NoiseModel(ar, math.sqrt(s2u), math.sqrt(s2e), ratio, speed_std)
+
+
+def _solve_lags(gram: np.ndarray, right: np.ndarray) -> np.ndarray | None:
+    """Return the AR coefficients of the lag normal equations, None if they are singular."""
+    try:
+        return np.linalg.solve(gram, right)
+    except np.linalg.LinAlgError:
+        return None
 
 
 def fit_speed_std(h: np.ndarray, f: np.ndarray, abs_speed: np.ndarray

@@ -27,8 +27,8 @@ from rwa_monitor.core import gyro_calibration as gc
 from rwa_monitor.core.params import AUTO, check_choice, check_int, check_real
 from rwa_monitor.exceptions import ConfigError
 
-__all__ = ['AUTO', 'FSS', 'IDENTIFY', 'LLR', 'Param', 'REPLAY', 'SCHEMAS', 'Schema', 'VSADC',
-           'help_text', 'markdown_table', 'parameters_document', 'yaml_block']
+__all__ = ['AUTO', 'FLEET', 'FSS', 'IDENTIFY', 'LLR', 'Param', 'REPLAY', 'SCHEMAS', 'Schema',
+           'VSADC', 'help_text', 'markdown_table', 'parameters_document', 'yaml_block']
 
 SCOPES = ('all', 'node', 'file')
 
@@ -473,6 +473,20 @@ IDENTIFY = Schema('identify', (
 ), 'Identification of what the friction model misses (`rwa-monitor identify`); '
    'docs/identify.md.')
 
+# -------------------------------------------------------------------------------- fleet
+
+
+def _limit(level: str, unit: str) -> Param:
+    return Param(f'{level}_limit', 0.0, f"Limit of a wheel's {level} friction level whose "
+                 'projected crossing (date and 95 % interval) `rwa-monitor fleet` reports: '
+                 'the absolute level without a calibration, the rise against the nominal '
+                 'with one (docs/fleet.md "Trend of a wheel"); 0.0 = none.', low=0.0,
+                 unit=unit, scope='file')
+
+
+FLEET = Schema('fleet', (_limit('dry', 'N m'), _limit('viscous', 'N m s/rad')),
+               'Friction trend of `rwa-monitor fleet` (`--config`); docs/fleet.md.')
+
 # ------------------------------------------------------------------------------- replay
 
 REPLAY = Schema('telemetry_replay', (
@@ -504,7 +518,8 @@ REPLAY = Schema('telemetry_replay', (
           'messages.', read_only=True, scope='node'),
 ), 'Replay of a telemetry file as ROS topics and /clock; docs/nodes.md.')
 
-SCHEMAS: dict[str, Schema] = {s.name: s for s in (REPLAY, LLR, FSS, VSADC, IDENTIFY)}
+SCHEMAS: dict[str, Schema] = {
+    s.name: s for s in (REPLAY, LLR, FSS, VSADC, IDENTIFY, FLEET)}
 
 
 # ------------------------------------------------- checked values -> algorithm keywords

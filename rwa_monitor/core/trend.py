@@ -17,8 +17,8 @@ import numpy as np
 import scipy.linalg
 import scipy.stats
 
-from rwa_monitor.core.friction import coulomb_viscous, least_squares
-from rwa_monitor.core.llr_noise import DEFAULT_AR_ORDER, fit_noise_model
+from rwa_monitor.core.friction import coulomb_viscous
+from rwa_monitor.core.llr_noise import DEFAULT_AR_ORDER, residual_noise_model
 from rwa_monitor.core.params import check_int, check_real
 
 SECONDS_PER_DAY = 86400.0
@@ -103,12 +103,12 @@ def pass_levels(time: np.ndarray, speed: np.ndarray, friction: np.ndarray,
     Rows ``h = -[sign(w), w]`` (eq. (1), core/friction.py), target ``friction -
     nominal_friction`` (or ``friction``). Samples with any non-finite value, or ``|w| <
     min_speed``, are dropped and counted. Standard errors: the residual of the fit gets
-    the project's AR noise model (llr_noise.fit_noise_model, order by BIC up to
-    ``max_ar_order``); the covariance is ``sigma_LR^2 (H^T H)^-1`` with ``sigma_LR^2`` the
-    long-run variance of the residual (its variance times ``long_run_ratio``), which is
-    the sandwich covariance of least squares under serially correlated noise when the
-    regressors vary slowly against the noise's correlation time (a wheel's speed does;
-    white noise gives the textbook ``s^2 (H^T H)^-1``).
+    the project's AR noise model (llr_noise.residual_noise_model, fit_noise_model's order
+    selection by BIC up to ``max_ar_order``); the covariance is ``sigma_LR^2 (H^T H)^-1``
+    with ``sigma_LR^2`` the long-run variance of the residual (its variance times
+    ``long_run_ratio``), which is the sandwich covariance of least squares under serially
+    correlated noise when the regressors vary slowly against the noise's correlation time
+    (a wheel's speed does; white noise gives the textbook ``s^2 (H^T H)^-1``).
     """
     t = np.asarray(time, dtype=float).reshape(-1)
     w = np.asarray(speed, dtype=float).reshape(-1)
@@ -136,10 +136,14 @@ def pass_levels(time: np.ndarray, speed: np.ndarray, friction: np.ndarray,
     y = f[used]
     gram = h.T @ h
     d = np.sqrt(np.diag(gram))
-    if not (d > 0).all() or np.linalg.det(gram / np.outer(d, d)) < MIN_EXCITATION:
+    if not (d > 0).all():
         return PassLevels(*span, n, nan, nan, nan, nan, **counts, reason='not_excited')
-    x = least_squares(h, y)
-    noise = fit_noise_model(h, y, max_ar_order)
+    correlation = gram / np.outer(d, d)
+    if np.linalg.det(correlation) < MIN_EXCITATION:
+        return PassLevels(*span, n, nan, nan, nan, nan, **counts, reason='not_excited')
+    # Normal equations on the unit-diagonal Gram (condition below 4 / MIN_EXCITATION).
+    x = np.linalg.solve(correlation, (h.T @ y) / d) / d
+    noise = residual_noise_model(y - h @ x, 2, max_ar_order)
     variance = noise.residual_std ** 2 * noise.long_run_ratio
     cov = variance * np.linalg.inv(gram)
     return PassLevels(*span, n, float(x[0]), math.sqrt(cov[0, 0]), float(x[1]),

@@ -102,6 +102,11 @@ def scan_pass(path: str) -> PassFile | str:
         return f'{type(err).__name__}: {err}'
 
 
+def scan_passes(paths: list[str]) -> list[PassFile | str]:
+    """Return :func:`scan_pass` of each path (one task per spacecraft)."""
+    return [scan_pass(path) for path in paths]
+
+
 def _csv_first(path: str) -> tuple[float, list[str]]:
     """Return the first time and the header of a CSV file (its first two lines only)."""
     import csv

@@ -26,6 +26,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
+from rwa_monitor.core.coverage import EXAMINED
 from rwa_monitor.core.schema import VSADC
 from rwa_monitor.core.vsadc import STATE_NAMES
 from rwa_monitor.fleet import codec
@@ -140,7 +141,7 @@ def step(spec: ComponentSpec, chain: Mapping[str, Any], reads: list[tuple[Any, d
         if hasattr(detector, 'finish'):
             out['events'].extend(detector.finish())
     own = worker_facts(_time.process_time() - start)
-    read_work = [work for _, work in reads] if count_read else []
+    read_work = [work for _, work in reads if work is not None] if count_read else []
     out['work'] = _account(chain['work'], read_work + [own])
     return out
 
@@ -160,20 +161,26 @@ def _feed_wheel(spec: ComponentSpec, det: Any, nominal: Any, kept: Telemetry,
             out['not_tested'][reason] += int(skipped[reason])
     out['events'].extend(det.process_arrays(t, w, residual))
     if len(t):
-        out['trend'].append(_trend_row(spec, name, t, w, f, nominal))
+        out['trend'].append(_trend_row(spec, name, t, w, residual, nominal is not None))
     return {'samples': len(t)}
 
 
 def _trend_row(spec: ComponentSpec, name: str, t: np.ndarray, w: np.ndarray,
-               f: np.ndarray, nominal: Any) -> dict[str, Any]:
-    """Return the pass's friction levels of the wheel (core/trend.py pass_levels)."""
+               residual: np.ndarray, calibrated: bool) -> dict[str, Any]:
+    """Return the pass's friction levels of the wheel (core/trend.py pass_levels).
+
+    ``residual``: what the detector was fed, friction minus the nominal with a calibration
+    (NaN where the detector does not test: the low-speed band and speeds outside the
+    calibrated range, NominalWheel.residual), so the levels use the detector's samples
+    only; pass_levels drops and counts the NaN (``nonfinite``).
+    """
     from rwa_monitor.core.trend import pass_levels
-    levels = pass_levels(t, w, f, None if nominal is None else nominal.nominal(w))
+    levels = pass_levels(t, w, residual)
     return {'spacecraft': spec.spacecraft, 'wheel': spec.component, 'pass': name,
             't_start': levels.t_start, 't_end': levels.t_end, 'samples': levels.samples,
             'dry': levels.dry, 'dry_se': levels.dry_se, 'viscous': levels.viscous,
             'viscous_se': levels.viscous_se,
-            'relative_to': 'zero' if nominal is None else 'nominal'}
+            'relative_to': 'nominal' if calibrated else 'zero'}
 
 
 def _feed_gyro(spec: ComponentSpec, det: Any, nominal: Any, kept: Telemetry,
@@ -203,14 +210,23 @@ def _feed_gyro(spec: ComponentSpec, det: Any, nominal: Any, kept: Telemetry,
 
 
 def _facts(spec: ComponentSpec, det: Any, chain: Mapping[str, Any]) -> dict[str, Any]:
-    """Return the detector's facts after the pass (detect's per-component summary)."""
+    """Return the detector's facts after the pass (detect's per-component summary).
+
+    With each wheel's and axis's verdict of detect (core/coverage.py ``judge`` through
+    pipelines/llr.py ``judge_wheels`` and pipelines/vsadc.py ``axis_coverage``) on the
+    samples so far.
+    """
     if spec.detector == 'vsadc':
+        from rwa_monitor.pipelines.vsadc import axis_coverage, rows_offered
         axes = {}
         for axis, ch in zip(det.axes, det.channels):
+            verdict = axis_coverage(rows_offered(det.counters), ch)
             axes[f'gyro_{axis}'] = {'final_state': STATE_NAMES[ch.state] if ch.ready
-                                    else 'unknown', 'ready': ch.ready,
-                                    'samples_used': ch.samples}
+                                    and verdict.examined else 'unknown', 'ready': ch.ready,
+                                    'samples_used': ch.samples, **verdict.fields()}
         return {'axes': axes, 'counters': det.counters}
+    from rwa_monitor.core.coverage import llr_samples_needed
+    from rwa_monitor.pipelines.llr import judge_wheels
     counters = det.counters
     facts: dict[str, Any] = {'rows_seen': det.n_samples, 'rejected': counters}
     if spec.params.get('calibration_file'):
@@ -218,21 +234,26 @@ def _facts(spec: ComponentSpec, det: Any, chain: Mapping[str, Any]) -> dict[str,
         key = 'non_finite' if 'non_finite' in counters else 'nonfinite'
         counters[key] -= sum(chain['not_tested'].values())
         facts['not_tested'] = dict(chain['not_tested'])
+    entry = {'samples': det.n_samples, 'rejected': counters,
+             'not_tested': facts.get('not_tested', {})}
+    judge_wheels({spec.component: entry}, llr_samples_needed(spec.params))
+    facts.update({k: v for k, v in entry.items()
+                  if k not in ('samples', 'rejected', 'not_tested')})
     return facts
 
 
 def not_examined(spec: ComponentSpec, facts: Mapping[str, Any]) -> str | None:
-    """Return why a component was not examined (detect's coverage rules), or None."""
+    """Return why a component was not examined (detect's coverage rule), or None.
+
+    A wheel or gyro axis whose verdict is ``not_examined`` or ``unknown`` (too few usable
+    samples, or most rejected or not tested) is named with the verdict and its reason.
+    """
     if not facts:
         return 'no pass could be processed'
-    if spec.detector == 'vsadc':
-        idle = [a for a, entry in facts['axes'].items() if not entry['ready']]
-        return f'vsadc: {", ".join(idle)} never ready' if idle else None
-    rejected, rows = facts['rejected'], facts['rows_seen']
-    unusable = sum(v for k, v in rejected.items() if k != 'ill_conditioned')
-    if spec.params.get('calibration_file'):
-        unusable += sum(facts['not_tested'].values())
-    return 'llr: no usable sample' if rows and unusable >= rows else None
+    verdicts = facts['axes'] if spec.detector == 'vsadc' else {spec.component: facts}
+    missing = [f'{name} {entry["verdict"]}: {entry["verdict_reason"]}'
+               for name, entry in verdicts.items() if entry['verdict'] != EXAMINED]
+    return f'{spec.detector}: {"; ".join(missing)}' if missing else None
 
 
 def _account(work: Mapping[str, Any], tasks: list[Mapping[str, Any]]) -> dict[str, Any]:
@@ -258,9 +279,14 @@ def worker_facts(cpu_s: float) -> dict[str, Any]:
     return {'worker': worker, 'cpu_s': cpu_s, 'peak_rss_mb': peak_kb / 1024.0}
 
 
-def read(path: str) -> tuple[Any, dict[str, Any]]:
-    """Read a pass on a worker: (telemetry or reason, worker facts)."""
+def read(paths: list[str]) -> list[tuple[Any, dict[str, Any] | None]]:
+    """Read consecutive passes on a worker: per pass (telemetry or reason, facts).
+
+    One task per group of passes (a task costs about a millisecond of the engine's own);
+    the worker facts (the group's CPU time) ride on the first pass, None on the others.
+    """
     from rwa_monitor.fleet.archive import read_pass
     start = _time.process_time()
-    tele = read_pass(path)
-    return tele, worker_facts(_time.process_time() - start)
+    teles = [read_pass(path) for path in paths]
+    facts = worker_facts(_time.process_time() - start)
+    return [(tele, facts if i == 0 else None) for i, tele in enumerate(teles)]

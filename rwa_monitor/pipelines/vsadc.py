@@ -110,9 +110,7 @@ def run_with_summary(tele: Telemetry, config: Mapping[str, Any],
     runtime = _time.perf_counter() - start
     for i, axis in enumerate(det.axes):
         channel = det.channels[i]
-        counters = det.counters
-        offered = counters['rows'] - counters['held'] + counters['invalid_quaternions']
-        verdict = axis_coverage(offered, channel)
+        verdict = axis_coverage(rows_offered(det.counters), channel)
         # An axis that never became ready, or whose samples were mostly rejected, was not
         # examined: its state is unknown, never "healthy" (issues 17, 24).
         state = STATE_NAMES[int(labels[-1, i])] if verdict.examined else UNKNOWN
@@ -135,6 +133,11 @@ def samples_needed(channel: Any) -> int:
     if hasattr(channel, 'nominal_blocks'):
         return int(channel.block * channel.nominal_blocks)
     return int(2 * channel.window + channel.sigma_window + channel.reference_window - 1)
+
+
+def rows_offered(counters: Mapping[str, int]) -> int:
+    """Return the gyro rows offered to each axis (see :func:`axis_coverage`)."""
+    return counters['rows'] - counters['held'] + counters['invalid_quaternions']
 
 
 def axis_coverage(rows: int, channel: Any) -> Coverage:
