@@ -139,7 +139,9 @@ def test_every_node_is_installed_under_its_node_name_and_its_command(declared):
         assert scripts.get(found.group(1)) == target, found.group(1)
         commands = [s for s, t in scripts.items() if t == target and s.startswith('rwa-monitor-')]
         assert len(commands) == 1, (module.stem, commands)
-    assert len(scripts) == 1 + 2 * 7
+    # rwa-monitor, and each node and the one-process monitor under two names
+    assert len(scripts) == 1 + 2 * 8
+    assert scripts['monitor'] == scripts['rwa-monitor-monitor'] == 'rwa_monitor.nodes.monitor:main'
 
 
 @pytest.mark.parametrize('argv', [

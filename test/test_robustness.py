@@ -124,6 +124,7 @@ def test_llr_batch_never_raises_and_matches_streaming(stream):
     streamed = []
     for a, b, c in zip(t, w, f):
         streamed.extend(det.update(a, b, c))
+    streamed.extend(det.finish())   # the batch has the file's end: the final categorisation
     assert [(e.kind, e.index, e.revision) for e in events] == \
         [(e.kind, e.index, e.revision) for e in streamed]
     for name in ('non_finite', 'out_of_range', 'non_increasing_time'):

@@ -57,15 +57,20 @@ def node_help(prog: str, description: str | None, specs: Sequence[Any] = ()) -> 
 
 
 def _interrupt_handler(flag: threading.Event) -> Callable[[int, Any], None]:
-    """Return a SIGINT handler that records the signal, then interrupts as Python does."""
+    """Return a SIGINT handler that records the signal; the spin loop ends on it.
+
+    It does not raise: a KeyboardInterrupt raised inside a callback (the replay's timer
+    in the middle of a publish) is caught and logged by the executor after rclpy's own
+    handler has shut the context down, and the node then logs into a dead context.
+    """
     def handler(signum: int, frame: Any) -> None:
         flag.set()
-        raise KeyboardInterrupt
     return handler
 
 
-def spin(nodes: Node | Sequence[Node], executor: str = 'events') -> None:
-    """Spin ``nodes`` (one executor, one thread) until their context shuts down.
+def spin(nodes: Node | Sequence[Node], executor: str = 'events',
+         stop: threading.Event | None = None) -> None:
+    """Spin ``nodes`` (one executor, one thread) until their context shuts down or ``stop``.
 
     ``'events'`` (the default): rclpy.experimental.EventsExecutor, turned by
     ``spin_once`` with a bounded timeout until it raises ExternalShutdownException. Its
@@ -82,8 +87,9 @@ def spin(nodes: Node | Sequence[Node], executor: str = 'events') -> None:
         runner = EventsExecutor(context=context)
         for node in nodes:
             runner.add_node(node)
-        while True:   # ends with ExternalShutdownException (checking ok() per turn costs)
+        while stop is None or not stop.is_set():   # or ExternalShutdownException
             runner.spin_once(timeout_sec=0.1)
+        return
     runner = rclpy.executors.SingleThreadedExecutor(context=context)
     for node in nodes:
         runner.add_node(node)
@@ -152,7 +158,8 @@ def run_nodes(factories: Sequence[Callable[[], Node]], args: Sequence[str] | Non
         for factory in factories:
             nodes.append(factory())
             warn_beaten_overrides(nodes[-1], argv)
-        spin(nodes, executor)
+        if not interrupted.is_set():   # Ctrl-C during start-up: stop before spinning
+            spin(nodes, executor, interrupted)
     except RwaMonitorError as err:   # ConfigError and every error of the package at start
         print(f'error: {err}', file=sys.stderr)
         return 2
