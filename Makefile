@@ -22,8 +22,12 @@ demo: $(STAMP)
 # without npm.
 INTEROP := test/interop/node_modules/.installed
 
+# Test files run in parallel, each file whole on one worker (its module fixtures built
+# once); ROS tests lease their own domain id (test/ros_harness.py).
+TEST_WORKERS ?= 2
+
 test: $(STAMP) interop
-	$(PY) -m pytest test
+	$(PY) -m pytest test -n $(TEST_WORKERS) --dist loadfile
 
 interop:
 	@if command -v npm >/dev/null 2>&1; then $(MAKE) --no-print-directory $(INTEROP); \

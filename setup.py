@@ -51,7 +51,8 @@ EXTRAS_REQUIRE = {
     # the fleet engine
     'fleet': ['dask>=2026.8,<2027', 'distributed>=2026.8,<2027', 'pyarrow>=26.0,<27'],
     # tests, lint and benchmarks
-    'dev': ['pytest>=9.2,<10', 'pytest-timeout>=2.4,<3', 'hypothesis>=6.170,<7',
+    'dev': ['pytest>=9.2,<10', 'pytest-timeout>=2.4,<3', 'pytest-xdist>=3.8,<4',
+            'hypothesis>=6.170,<7',
             'import-linter>=2.16,<3', 'flake8>=7.5,<8', 'flake8-quotes>=3.4,<4',
             'flake8-docstrings>=1.7,<2', 'flake8-import-order>=0.19.2,<0.20',
             'pydocstyle>=6.3,<7', 'mpmath>=1.3,<2', 'ruptures>=1.1,<2',

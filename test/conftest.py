@@ -12,6 +12,17 @@ SHARED = REPO.parent / 'shared'
 os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
 
 
+def pytest_configure(config):
+    """Under ``-n N`` compile the kernels once, here, before the workers start.
+
+    Importing the kernel module compiles its kernels or loads them from numba's cache
+    (``cache=True``: rwa_monitor/core/__pycache__, writes atomic per file). On a fresh
+    clone the workers would otherwise each compile the same kernels at the same time.
+    """
+    if getattr(config.option, 'numprocesses', None) and not hasattr(config, 'workerinput'):
+        import rwa_monitor.core.llr_kernel  # noqa: F401
+
+
 @pytest.fixture
 def repo_root() -> pathlib.Path:
     return REPO
