@@ -1,5 +1,6 @@
 """The fss_diagnoser node in process: windows, worker thread, events, health, bad input."""
 
+import json
 import threading
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
@@ -10,12 +11,15 @@ from rclpy.parameter import Parameter
 from ros_harness import Collector, RosWorld
 from sensor_msgs.msg import JointState
 
+from rwa_monitor.cli.main import main
 from rwa_monitor.core.fss.pipeline import diagnose, FssConfig
 from rwa_monitor.exceptions import ConfigError
 from rwa_monitor.nodes import fss_diagnoser, messages
 from rwa_monitor.nodes.common import DIAGNOSTICS_QOS, EVENTS_QOS
 from rwa_monitor.nodes.fss_diagnoser import FssDiagnoserNode
+from rwa_monitor.sim.friction import Anomaly, simulate_friction_with_truth
 from rwa_monitor.sim.fss import simulate_fss
+from rwa_monitor.telemetry import read_telemetry, write_telemetry
 from rwa_monitor.telemetry.fss_model import load_model
 
 pytestmark = pytest.mark.ros
@@ -74,6 +78,57 @@ def test_events_equal_the_pipeline_on_the_same_window(tele):
         assert event.time == pytest.approx(tele.time[0])
         assert event.declared_time == pytest.approx(tele.time[LENGTH - 1])
         assert event.index == 0 and event.declared_index == LENGTH - 1
+
+
+# A window long enough to hold an onset (docs/fss.md "Onsets": the level after the step
+# outlasts Example 2's longest residence, 30,000 samples), the demo's step sizes.
+ONSET_WINDOW = 40_000
+STEPS = {'rw2': ('dry', 5_000), 'rw3': ('viscous', 8_000)}   # wheel: kind, first sample
+
+
+@pytest.fixture(scope='module')
+def stepped_file(tmp_path_factory):
+    tele, _ = simulate_friction_with_truth(
+        wheels=['rw1', 'rw2', 'rw3'], n_samples=ONSET_WINDOW, rate_hz=10.0, seed=3420,
+        anomalies=[Anomaly('rw2', 'dry', 500.0, delta_dry=2.0e-4),
+                   Anomaly('rw3', 'viscous', 800.0, delta_viscous=1.0e-6)])
+    path = tmp_path_factory.mktemp('steps') / 'steps.csv'
+    write_telemetry(path, tele)
+    return path
+
+
+def test_events_equal_diagnose_with_the_onset_as_change_time(stepped_file, tmp_path,
+                                                             repo_root):
+    # The same file through `rwa-monitor diagnose` and through the node (its one window):
+    # the events are equal field for field; the change is dated at the step's onset,
+    # not at the window's first sample.
+    params = repo_root / 'config' / 'rwa_monitor.yaml'
+    out = tmp_path / 'diagnosis.json'
+    assert main(['diagnose', str(stepped_file), '--params-file', str(params),
+                 '-o', str(out)]) == 0
+    expected = sorted(json.loads(out.read_text())['events'],
+                      key=lambda e: (e['component'], e['kind']))
+    tele = read_telemetry(stepped_file)
+    assert {e['component']: e['kind'] for e in expected} == \
+        {w: kind for w, (kind, _) in STEPS.items()}
+    for event in expected:
+        start = STEPS[event['component']][1]
+        assert abs(event['index'] - start) <= 20   # the wGLR half-window
+        assert event['time'] == tele.time[event['index']] > tele.time[0]
+    with RosWorld() as world:
+        node = world.node(FssDiagnoserNode, cli_args=['--ros-args', '--params-file',
+                                                      str(params)],
+                          parameter_overrides=[Parameter('window_length', value=ONSET_WINDOW)])
+        sink = world.node(Node, 'sink')
+        anomalies = Collector(sink, DiagnosticArray, 'anomalies', EVENTS_QOS)
+        _feed(node, tele, range(ONSET_WINDOW))
+        world.wait_until(lambda: all(w.diagnoses == 1 for w in node.wheels.values()), 60.0,
+                         'one diagnosis per wheel')
+        world.wait_until(lambda: sum(len(m.status) for m in anomalies.messages)
+                         >= len(expected), 10.0, 'the events')
+    got = sorted((messages.status_event(s).to_json() for m in anomalies.messages
+                  for s in m.status), key=lambda e: (e['component'], e['kind']))
+    assert got == expected
 
 
 def test_callbacks_never_wait_for_the_worker(tele, monkeypatch):

@@ -56,6 +56,7 @@ def load_params(path: str | None) -> dict:
 
 def run(args: argparse.Namespace) -> int:
     """Diagnose each wheel and write the JSON."""
+    from rwa_monitor.core.fss.events import window_events
     from rwa_monitor.core.fss.pipeline import diagnose
     from rwa_monitor.telemetry.fss_model import load_model
     check_output(args.output, args.file, args.params_file, args.model)
@@ -75,6 +76,7 @@ def run(args: argparse.Namespace) -> int:
         check_wheels(cal, [w for w, ch in tele.wheels.items() if ch.friction is not None],
                      cal_path)
     wheels = {}
+    events = []
     not_examined = {}
     for wheel_id, wheel in tele.wheels.items():
         if wheel.friction is None:
@@ -87,12 +89,14 @@ def run(args: argparse.Namespace) -> int:
                                             model, config)
         else:
             wheels[wheel_id] = diagnose(speed, friction, time, model, config)
+        first = range(len(tele.time))[sl].start
+        events.extend(e.to_json() for e in window_events(wheel_id, wheels[wheel_id], time, first))
     if not wheels:
         raise RwaMonitorError(f'{args.file}: no wheel with both speed and friction columns')
     # A window mostly not tested is unknown with its counts (core/fss/pipeline.py).
     not_examined.update({w: verdict_text(r['coverage']) for w, r in wheels.items()
                          if 'coverage' in r})
-    document = {'wheels': wheels, 'not_examined': not_examined}
+    document = {'wheels': wheels, 'events': events, 'not_examined': not_examined}
     with quiet_broken_pipe():
         write_output(args.output, json.dumps(document, indent=1) + '\n')
         out = sys.stderr if args.output == STDOUT else sys.stdout

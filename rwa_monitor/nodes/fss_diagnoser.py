@@ -12,8 +12,10 @@ counted (``skipped_busy``).
 
 Outputs: each anomaly that a diagnosis flags and the previous one did not is published
 on ``anomalies`` (AnomalyEvent, detector ``fss``, kind ``dry``/``viscous``/``fss1``/
-``fss2``; ``time``/``index`` = the window's first sample, the declaration = its last,
-with the window bounds and the extracted base dry and viscous friction); each wheel's
+``fss2``), built by :func:`rwa_monitor.core.fss.events.window_events` as ``rwa-monitor
+diagnose`` builds it: ``time``/``index`` = the onset of the change when the window holds
+one (else the window's first sample), the declaration = the window's last sample, with
+the window bounds and the extracted base dry and viscous friction; each wheel's
 health on ``/diagnostics`` (OK, or WARN listing the anomalies of the last window, STALE
 when telemetry stops), with the counters of bad input. Bad input: as the llr_detector
 node for messages; per wheel, a stamp not after the last one is dropped and counted,
@@ -35,6 +37,7 @@ import queue
 from typing import Any, Sequence
 
 from diagnostic_msgs.msg import DiagnosticArray
+import numpy as np
 from rclpy.clock import Clock
 from rclpy.clock_type import ClockType
 from rclpy.node import Node
@@ -43,6 +46,7 @@ from sensor_msgs.msg import JointState
 from rwa_monitor.core import keys, streams
 from rwa_monitor.core.calibrate import diagnose_fss
 from rwa_monitor.core.events import AnomalyEvent
+from rwa_monitor.core.fss.events import window_events
 from rwa_monitor.core.fss.pipeline import diagnose, FssConfig, SlidingWindow
 from rwa_monitor.core.schema import FSS, fss_config
 from rwa_monitor.exceptions import ConfigError
@@ -56,7 +60,6 @@ from rwa_monitor.telemetry.fss_model import load_model
 
 NODE_NAME = 'fss_diagnoser'
 INPUT_ID = 'telemetry/wheels'
-DETECTOR = 'fss'
 MAX_KEPT = 10_000  # events kept in memory for in-process users (demo, tests)
 ERROR_HOLD_S = 60.0  # a wheel whose diagnosis failed shows ERROR this long (wall time)
 
@@ -240,21 +243,20 @@ class FssDiagnoserNode(Node):
         else:
             future = self._worker.submit(diagnose, speed, friction, time_s, self._model,
                                          self._config)
-        future.add_done_callback(
-            lambda f: self._done.put((wheel_id, first_index, time_s[0], time_s[-1], f)))
+        future.add_done_callback(lambda f: self._done.put((wheel_id, first_index, time_s, f)))
 
     def publish_results(self) -> None:
         """Publish the diagnoses that the worker finished (timer callback)."""
         while True:
             try:
-                wheel_id, first, start, end, future = self._done.get_nowait()
+                wheel_id, first, time_s, future = self._done.get_nowait()
             except queue.Empty:
                 return
             wheel = self.wheels[wheel_id]
             wheel.busy = False
             try:
                 result = future.result()
-                self._record(wheel_id, wheel, result, first, start, end)
+                self._record(wheel_id, wheel, result, first, time_s)
             except Exception as err:  # noqa: BLE001 - a failed window never stops the node
                 self._failed(wheel_id, wheel, 'diagnosis_failed', err)
 
@@ -279,29 +281,23 @@ class FssDiagnoserNode(Node):
                                        f'{self._silence.timeout:g} s: freed')
 
     def _record(self, wheel_id: str, wheel: _Wheel, result: dict, first: int,
-                start: float, end: float) -> None:
+                time_s: np.ndarray) -> None:
         wheel.diagnoses += 1
         wheel.result = result
-        wheel.window_bounds = (start, end)
-        new = [k for k, v in result['anomalies'].items() if v and not wheel.flags.get(k)]
+        wheel.window_bounds = (float(time_s[0]), float(time_s[-1]))
+        found = window_events(wheel_id, result, time_s, first, previous=wheel.flags)
         wheel.flags = dict(result['anomalies'])
-        if not new:
+        if not found:
             return
-        est = result['estimates']
-        last = first + wheel.window.length - 1
-        found = [AnomalyEvent(
-            detector=DETECTOR, component=wheel_id, kind=kind, time=float(start),
-            index=int(first), declared_time=float(end), declared_index=int(last),
-            details={keys.WINDOW_START: float(start), keys.WINDOW_END: float(end),
-                     keys.BASE_DRY: est['base_dry_nm'], keys.VISCOUS: est['viscous_nms'],
-                     keys.NOISE_STD: est['noise_std_nm']}) for kind in new]
         self.alarms.record(found)   # journalled (fsynced) before it is published
         out = DiagnosticArray()
-        out.header.stamp = messages.to_stamp(float(end))
+        out.header.stamp = messages.to_stamp(found[0].declared_time)
         out.status = [messages.event_status(e, self.get_name()) for e in found]
         self._anomaly_pub.publish(out)
+        start, end = wheel.window_bounds
         for event in found:
-            self.get_logger().warning(f'{wheel_id}: {event.kind} anomaly in the window '
+            self.get_logger().warning(f'{wheel_id}: {event.kind} anomaly from t='
+                                      f'{event.time:.1f} s in the window '
                                       f't={start:.1f}..{end:.1f} s')
         self.events.extend(found)
 
