@@ -1,7 +1,8 @@
 """``python -m bench faults``: every case of issue 24 as a scenario, its outcome tabled.
 
 Cases come from ``bench/faults_files.py`` (outputs, names, journals, configuration,
-fuzzed readers) and, when present, ``bench/faults_verdicts.py`` (honest verdicts); each
+fuzzed readers), ``bench/faults_nodes.py`` (node start-up, journal, replay) and, when
+present, ``bench/faults_verdicts.py`` (honest verdicts); each
 module exposes ``CASES``: ``(name, scenario)`` pairs, ``scenario(folder)`` running in a
 fresh temporary folder and returning a one-line outcome, raising AssertionError when the
 behaviour is wrong. Any other exception is a failed case too (its type and message are
@@ -20,7 +21,7 @@ from typing import Any, Callable
 
 from bench import report
 
-MODULES = ('bench.faults_files', 'bench.faults_verdicts')
+MODULES = ('bench.faults_files', 'bench.faults_verdicts', 'bench.faults_nodes')
 
 
 def collect() -> list[tuple[str, str, Callable[[pathlib.Path], str]]]:
