@@ -27,6 +27,7 @@ import numpy as np
 REPO = pathlib.Path(__file__).resolve().parents[1]
 LLR = 'rwa_monitor.nodes.llr_detector'
 REPLAY = 'rwa_monitor.nodes.replay'
+RECORDER = 'rwa_monitor.nodes.recorder'
 
 
 def harness() -> Any:
@@ -87,11 +88,12 @@ class NodeProcess:
                                  f'{self.stderr[-300:]}') from None
 
 
-def start_refused(args: list[object], timeout: float = 120.0) -> tuple[int, str]:
-    """Start rwa-monitor-llr with ``args``; return (exit code, stderr) (it must end)."""
+def start_refused(args: list[object], module: str = LLR,
+                  timeout: float = 120.0) -> tuple[int, str]:
+    """Start the node of ``module`` with ``args``; return (exit code, stderr) (it must end)."""
     lease = harness().DomainLease()
     try:
-        node = NodeProcess(LLR, args, lease.domain_id)
+        node = NodeProcess(module, args, lease.domain_id)
         return node.finish(timeout), node.stderr.strip()
     finally:
         lease.release()
@@ -113,6 +115,77 @@ def wheels_file(folder: pathlib.Path, rows: int) -> tuple[pathlib.Path, np.ndarr
     write_telemetry(path, Telemetry(time=stamps, wheels={
         'rw1': Wheel(np.linspace(1.0, 2.0, rows), np.zeros(rows))}))
     return path, stamps
+
+
+# ------------------------------------------------------------------ 1. and 2. data
+def recorder_folder(folder: pathlib.Path) -> str:
+    """Let the recorder replace its own recording, never a folder holding a user's database."""
+    import sqlite3
+    lease = harness().DomainLease()
+    try:
+        codes = []
+        for _ in range(2):              # the second run replaces the first one's recording
+            node = NodeProcess(RECORDER, ['-p', f'output:={folder / "rec"}'], lease.domain_id)
+            assert node.wait_for('recording ', 120.0), node.stderr[-300:]
+            codes.append(node.finish(30.0, interrupt=True))
+    finally:
+        lease.release()
+    assert codes == [0, 0] and (folder / 'rec' / 'metadata.yaml').is_file(), codes
+    user = folder / 'mine'
+    user.mkdir()
+    with sqlite3.connect(user / 'data.db3') as db:
+        db.execute('create table notes (text)')
+    db.close()
+    before = (user / 'data.db3').read_bytes()
+    line = one_error_line(*start_refused(['-p', f'output:={user}'], RECORDER), 'data.db3')
+    assert (user / 'data.db3').read_bytes() == before and len(list(user.iterdir())) == 1
+    return ('a second run replaced the recording of the first (exit 0 on Ctrl-C each); a '
+            f'folder holding data.db3: exit 2, "...{line.split("this folder: ")[-1][:150]}", '
+            'untouched')
+
+
+def live_wheel_names(folder: pathlib.Path) -> str:
+    """Wheel ids of a live message that are not valid names: dropped, counted, no crash."""
+    from diagnostic_msgs.msg import DiagnosticArray
+    from rclpy.node import Node
+    from sensor_msgs.msg import JointState
+
+    from rwa_monitor.nodes import messages
+    from rwa_monitor.nodes.common import DIAGNOSTICS_QOS, telemetry_qos
+    bad = ['../../x', 'rw 1', 'rw1\nforged log line', 'a' * 65, 'x' * 100_000]
+    names, sent = ['rw1', *bad], 20
+    journal = folder / 'events.jsonl'
+    ros = harness()
+    with ros.RosWorld() as world:
+        node = NodeProcess(LLR, ['-p', f'events_file:={journal}', '-p',
+                                 'diagnostic_period:=0.5'], world.domain_id)
+        try:
+            feeder = world.node(Node, 'fault_feeder')
+            pub = feeder.create_publisher(JointState, 'telemetry/wheels', telemetry_qos())
+            diagnostics = ros.Collector(feeder, DiagnosticArray, '/diagnostics',
+                                        DIAGNOSTICS_QOS)
+            world.wait_for_subscribers(pub, timeout_sec=120.0)
+
+            def counters() -> dict[str, Any]:
+                found = [messages.status_fields(s) for m in diagnostics.messages
+                         for s in m.status if s.hardware_id == 'telemetry/wheels']
+                return found[-1] if found else {}
+            for i in range(sent):
+                pub.publish(messages.joint_state(1.0 + 0.1 * i, names, [5.0] * len(names),
+                                                 [1e-4] * len(names)))
+            world.wait_until(lambda: counters().get('messages') == sent, 60.0,
+                             'every message counted on /diagnostics')
+            alive = node.proc.poll() is None
+        finally:
+            code = node.finish(30.0, interrupt=True)
+    got = counters()
+    assert alive and code == 0, f'node ended (exit {code}): {node.stderr[-300:]}'
+    assert got.get('invalid_name') == sent * len(bad), got
+    assert "monitoring wheel 'rw1'" in node.stderr and node.stderr.count('monitoring') == 1
+    assert not any(b in (journal.read_text() if journal.exists() else '') for b in bad)
+    return (f'{sent} messages of rw1 and {len(bad)} invalid ids: invalid_name = '
+            f'{got["invalid_name"]} on /diagnostics, only rw1 monitored, node alive, exit 0 '
+            'on Ctrl-C')
 
 
 # -------------------------------------------------------------- 4. parameters files
@@ -288,6 +361,8 @@ def replay_timeout(folder: pathlib.Path) -> str:
 
 
 CASES: list[tuple[str, Callable[[pathlib.Path], str]]] = [
+    ('1 rwa-monitor-record output: its recording, a folder holding data.db3', recorder_folder),
+    ('2 live wheel ids that are not valid names (llr_detector)', live_wheel_names),
     ('3 node: events_file naming a foreign file or a folder', journal_refuses_node),
     ('3 node: the journal cannot be written when an anomaly is declared', unwritable_journal),
     ('4 node given a bad parameters file', bad_parameters_file),
