@@ -73,10 +73,10 @@ def run(out_dir: pathlib.Path, quick: bool) -> dict[str, Any]:
 ## Reliability: the faults of issue 24
 
 `python -m bench faults` runs each case of issue 24 as a scenario in a fresh folder
-(cases from {", ".join(f"bench/{m}.py" for m in modules)}); a case fails when the
-behaviour is wrong or the scenario crashes. {results["passed"]} of {results["total"]}
-pass. Load average during the run: {load[0]:.2f} / {load[1]:.2f} / {load[2]:.2f}
-(1 / 5 / 15 min).
+(cases from {", ".join(f"bench/{m}.py" for m in modules)});
+a case fails when the behaviour is wrong or the scenario crashes.
+{results["passed"]} of {results["total"]} pass. Load average during the run:
+{load[0]:.2f} / {load[1]:.2f} / {load[2]:.2f} (1 / 5 / 15 min).
 
 {table}
 ''')

@@ -210,10 +210,10 @@ def bad_parameters_file(folder: pathlib.Path) -> str:
             outcomes.append(f'{name}: "{line[len("error: "):][:60]}"')
         except AssertionError:
             first = re.sub(r'\[\d+\.\d+\] ', '', err.splitlines()[0] if err else '')
-            wrong.append(f'{name}: exit {code}, {len(err.splitlines())} lines, the first '
-                         f'"{first[:60]}"')
-    assert not wrong, '; '.join(wrong) + (f'; one line for {", ".join(outcomes)}'
-                                          if outcomes else '')
+            wrong.append(f'{name}: exit {code}, {len(err.splitlines())} lines ("{first[:48]}" '
+                         'first)')
+    assert not wrong, '; '.join(wrong) + (
+        f'; one line for {", ".join(o.split(":")[0] for o in outcomes)}' if outcomes else '')
     return f'{len(files)} files, each exit 2 with one line: ' + '; '.join(outcomes)
 
 
