@@ -1,7 +1,8 @@
 """``python -m bench faults``: every case of issue 24 as a scenario, its outcome tabled.
 
 Cases come from ``bench/faults_files.py`` (outputs, names, journals, configuration,
-fuzzed readers) and, when present, ``bench/faults_verdicts.py`` (honest verdicts); each
+fuzzed readers), ``bench/faults_nodes.py`` (node start-up, journal, replay) and, when
+present, ``bench/faults_verdicts.py`` (honest verdicts); each
 module exposes ``CASES``: ``(name, scenario)`` pairs, ``scenario(folder)`` running in a
 fresh temporary folder and returning a one-line outcome, raising AssertionError when the
 behaviour is wrong. Any other exception is a failed case too (its type and message are
@@ -20,7 +21,7 @@ from typing import Any, Callable
 
 from bench import report
 
-MODULES = ('bench.faults_files', 'bench.faults_verdicts')
+MODULES = ('bench.faults_files', 'bench.faults_verdicts', 'bench.faults_nodes')
 
 
 def collect() -> list[tuple[str, str, Callable[[pathlib.Path], str]]]:
@@ -72,10 +73,10 @@ def run(out_dir: pathlib.Path, quick: bool) -> dict[str, Any]:
 ## Reliability: the faults of issue 24
 
 `python -m bench faults` runs each case of issue 24 as a scenario in a fresh folder
-(cases from {", ".join(f"bench/{m}.py" for m in modules)}); a case fails when the
-behaviour is wrong or the scenario crashes. {results["passed"]} of {results["total"]}
-pass. Load average during the run: {load[0]:.2f} / {load[1]:.2f} / {load[2]:.2f}
-(1 / 5 / 15 min).
+(cases from {", ".join(f"bench/{m}.py" for m in modules)});
+a case fails when the behaviour is wrong or the scenario crashes.
+{results["passed"]} of {results["total"]} pass. Load average during the run:
+{load[0]:.2f} / {load[1]:.2f} / {load[2]:.2f} (1 / 5 / 15 min).
 
 {table}
 ''')

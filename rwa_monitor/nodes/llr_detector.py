@@ -9,7 +9,8 @@ with the keywords of :func:`rwa_monitor.core.schema.llr_kwargs`, so the node, th
 ``detect`` command and the benchmarks share one implementation and one parameter meaning.
 
 Bad input (docs/nodes.md): a message whose arrays differ in length is dropped; entries
-with an empty or repeated name are dropped; names outside ``wheels`` (when set) or
+with an empty or repeated name, or a name that is not a valid wheel id (the rule of
+file columns, telemetry/schema.py), are dropped; names outside ``wheels`` (when set) or
 beyond ``max_wheels`` are dropped; a stamp equal to (duplicate) or up to
 ``time_jump`` s before (out of order) the wheel's last one is dropped; a stamp more than
 ``time_jump`` s before it (a replay loop) restarts that wheel's detector. NaN/Inf values
@@ -109,7 +110,8 @@ class LLRDetectorNode(Node):
         self.calibration = calibration.CalibrationInForce(self.params[calibration.NAME])
         self.wheels: dict[str, _Wheel] = {}
         self.input_counters = {'messages': 0, 'length_mismatch': 0,
-                               'empty_name': 0, 'duplicate_name': 0, 'unknown_wheel': 0,
+                               'empty_name': 0, 'duplicate_name': 0, 'invalid_name': 0,
+                               'unknown_wheel': 0,
                                'too_many_wheels': 0, 'undecodable': 0,
                                'uncalibrated_wheel': 0, 'detector_failures': 0,
                                'wheels_freed': 0}
@@ -217,6 +219,10 @@ class LLRDetectorNode(Node):
         wheel = self.wheels.get(wheel_id)
         if wheel is not None:
             return wheel
+        invalid = wheels_input.name_refusal(wheel_id)
+        if invalid is not None:     # logged once whatever the name: names are unbounded
+            self._reject(invalid.counter, '', invalid.message)
+            return None
         refusal = common.wheel_refusal(wheel_id, self._allowed, len(self.wheels),
                                        self.params['max_wheels'])
         if refusal is None and not self.calibration.covers(wheel_id):

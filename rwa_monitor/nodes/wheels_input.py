@@ -14,6 +14,7 @@ from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import JointState
 
 from rwa_monitor.nodes import messages
+from rwa_monitor.telemetry.schema import NAME_RULE, valid_name
 
 # (time s, names, velocities, efforts) of one JointState.
 WheelFields = tuple[float, Sequence[str], Sequence[float], Sequence[float]]
@@ -68,6 +69,18 @@ class Refusal(NamedTuple):
 
     counter: str
     message: str
+
+
+def name_refusal(wheel_id: str) -> Refusal | None:
+    """Return the refusal of a wheel id that is not a valid name (the file readers' rule).
+
+    A wheel id from a message becomes a diagnostics key and the component of journalled
+    events, so it is checked as a column name is (telemetry/schema.py ``valid_name``).
+    """
+    if valid_name(wheel_id):
+        return None
+    return Refusal('invalid_name', f'ignoring wheel {str(wheel_id)[:80]!r}: not a valid '
+                   f'name ({NAME_RULE})')
 
 
 def wheel_refusal(wheel_id: str, allowed: set[str] | None, known: int,

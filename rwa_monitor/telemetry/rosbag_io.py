@@ -31,7 +31,8 @@ import numpy as np
 
 from rwa_monitor.exceptions import ConfigError, OutputError, TelemetrySchemaError
 from rwa_monitor.telemetry import codecs
-from rwa_monitor.telemetry.atomic import FolderOutput, install_file
+from rwa_monitor.telemetry.atomic import install_file
+from rwa_monitor.telemetry.recording_folder import recording_output
 from rwa_monitor.telemetry.schema import name_problem, Telemetry, TRUTH_PREFIX, Wheel
 from rwa_monitor.telemetry.yaml_file import read_yaml
 
@@ -45,8 +46,6 @@ MSG_TYPES = {'wheels': 'sensor_msgs/msg/JointState', 'gyro': 'sensor_msgs/msg/Im
              'reference_rate': 'geometry_msgs/msg/Vector3Stamped',
              'columns': 'sensor_msgs/msg/JointState'}
 BAG_SUFFIXES = ('.mcap', '.db3')
-# What a recording folder may hold: an existing folder with anything else is not replaced.
-RECORDING_FILES = ('metadata.yaml', '*.mcap', '*.db3', '*.db3-wal', '*.db3-shm')
 _FRAME = 'body'
 
 
@@ -253,14 +252,14 @@ def write(path: str | os.PathLike, tele: Telemetry) -> None:
     """Write ``tele`` as a rosbag2 directory, or a bare ``.mcap``/``.db3`` file by suffix.
 
     Through telemetry/atomic.py: a folder is built beside ``path`` and swapped in whole
-    (an existing folder may hold only a recording: RECORDING_FILES), a bare file is
-    written like every other output file.
+    (an existing folder may hold only a recording: telemetry/recording_folder.py), a bare
+    file is written like every other output file.
     """
     target = pathlib.Path(path)
     bare = target.suffix.lower() in BAG_SUFFIXES
     storage = 'sqlite3' if target.suffix.lower() == '.db3' else 'mcap'
     if not bare:
-        output = FolderOutput(target, RECORDING_FILES, 'part of a rosbag2 recording')
+        output = recording_output(target)
         try:
             _write_bag(output.open(), tele, storage)
             output.commit()
@@ -345,7 +344,7 @@ class RecordingWriter:
         self.path = pathlib.Path(path)
         if self.path.suffix:
             raise OutputError(f'{self.path}: a recording folder needs a name without suffix')
-        self._output = FolderOutput(self.path, RECORDING_FILES, 'part of a rosbag2 recording')
+        self._output = recording_output(self.path)
         self._writer = Writer(self._output.open(), version=9,
                               storage_plugin=StoragePlugin.MCAP)
         self._writer.open()
