@@ -10,6 +10,7 @@ from sensor_msgs.msg import JointState
 
 from rwa_monitor.nodes import messages, wheels_input
 from rwa_monitor.nodes.common import DIAGNOSTICS_QOS, telemetry_qos
+from rwa_monitor.nodes.fss_diagnoser import FssDiagnoserNode
 from rwa_monitor.nodes.llr_detector import LLRDetectorNode
 from rwa_monitor.telemetry.schema import valid_name
 
@@ -66,3 +67,18 @@ def test_the_llr_node_drops_and_counts_invalid_wheel_ids(tmp_path):
                    for c in detector.diagnostics.components), detector.diagnostics.components
     text = journal.read_text() if journal.exists() else ''
     assert not any(bad in text for bad in INVALID)
+
+
+def test_the_fss_node_drops_and_counts_invalid_wheel_ids():
+    names = ['rw1', *INVALID]
+    n = len(names)
+    with RosWorld() as world:
+        node = world.node(FssDiagnoserNode, parameter_overrides=[
+            Parameter('use_sim_time', value=True)])
+        for i in range(5):
+            msg = messages.joint_state(1.0 + i, names, [5.0] * n, [1e-4] * n)
+            node.on_raw_wheels(serialize_message(msg))
+        assert set(node.wheels) == {'rw1'} and node.wheels['rw1'].samples == 5
+        assert node.input_counters['invalid_name'] == 5 * len(INVALID)
+        assert all(valid_name(c) or c == 'telemetry/wheels'
+                   for c in node.diagnostics.components), node.diagnostics.components

@@ -1,6 +1,9 @@
 """Node start-up (issue 24, items 3, 4 and 6): bad files exit 2, journals, -p, subscribers."""
 
+import os
 import signal
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -54,6 +57,23 @@ def test_a_bad_parameters_file_exits_2_with_one_line(tmp_path, run_main, text, f
     lines = err.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith('error: ') and fragment in lines[0], err
     assert 'Traceback' not in err
+
+
+def test_a_process_given_a_file_rcl_refuses_prints_one_line(tmp_path):
+    """The node speaks for rcl (whose own [ERROR] line goes where capsys cannot see it)."""
+    path = tmp_path / 'bad.yaml'
+    path.write_text('llr_detector:\n  ros__parameters:\n    window: [1\n')
+    lease = DomainLease()
+    try:
+        done = subprocess.run(
+            [sys.executable, '-m', 'rwa_monitor.nodes.llr_detector', '--ros-args',
+             '--params-file', str(path)], capture_output=True, text=True, timeout=120,
+            env={**os.environ, 'ROS_DOMAIN_ID': str(lease.domain_id)})
+    finally:
+        lease.release()
+    assert done.returncode == 2
+    lines = done.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith('error: '), done.stderr
 
 
 def test_a_package_error_of_the_journal_opener_refuses_the_node(

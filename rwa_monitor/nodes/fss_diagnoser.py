@@ -103,9 +103,10 @@ class FssDiagnoserNode(Node):
         self.wheels: dict[str, _Wheel] = {}
         self.events: collections.deque[AnomalyEvent] = collections.deque(maxlen=MAX_KEPT)
         self.input_counters = {'messages': 0, 'length_mismatch': 0, 'empty_name': 0,
-                               'duplicate_name': 0, 'unknown_wheel': 0, 'too_many_wheels': 0,
-                               'non_increasing_time': 0, 'diagnosis_failed': 0, 'undecodable': 0,
-                               'wheel_failures': 0, 'wheels_freed': 0}
+                               'duplicate_name': 0, 'invalid_name': 0, 'unknown_wheel': 0,
+                               'too_many_wheels': 0, 'non_increasing_time': 0,
+                               'diagnosis_failed': 0, 'undecodable': 0, 'wheel_failures': 0,
+                               'wheels_freed': 0}
         self._logged: set[tuple[str, str]] = set()
         self._allowed = common.wheel_names(self.params['wheels'])
         self._worker = concurrent.futures.ThreadPoolExecutor(
@@ -215,6 +216,10 @@ class FssDiagnoserNode(Node):
         wheel = self.wheels.get(wheel_id)
         if wheel is not None:
             return wheel
+        invalid = wheels_input.name_refusal(wheel_id)
+        if invalid is not None:     # logged once whatever the name: names are unbounded
+            self._count(invalid.counter, '', invalid.message)
+            return None
         refusal = common.wheel_refusal(wheel_id, self._allowed, len(self.wheels),
                                        self.params['max_wheels'])
         if refusal is not None:

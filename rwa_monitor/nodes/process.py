@@ -7,11 +7,12 @@ import signal
 import sys
 import textwrap
 import threading
-from typing import Any, Callable, Sequence
+from typing import Any, Callable, Iterator, Sequence
 
 import rclpy
 from rclpy.executors import ExternalShutdownException
 from rclpy.impl.implementation_singleton import rclpy_implementation
+import rclpy.logging
 from rclpy.node import Node
 
 from rwa_monitor.exceptions import RwaMonitorError
@@ -113,6 +114,22 @@ def run_node(factory: Callable[[], Node], args: Sequence[str] | None = None,
     return run_nodes([factory], args, executor, help_text=help_text)
 
 
+@contextlib.contextmanager
+def _rcl_quiet() -> Iterator[None]:
+    """Silence the ``rcl`` logger while rclpy parses the arguments, then restore it.
+
+    A level the arguments set (``--log-level rcl:=debug``) is left as they set it.
+    """
+    fatal = rclpy.logging.LoggingSeverity.FATAL
+    before = rclpy.logging.get_logger_level('rcl')
+    rclpy.logging.set_logger_level('rcl', fatal)
+    try:
+        yield
+    finally:
+        if rclpy.logging.get_logger_level('rcl') == fatal:
+            rclpy.logging.set_logger_level('rcl', before)
+
+
 def run_nodes(factories: Sequence[Callable[[], Node]], args: Sequence[str] | None = None,
               executor: str = 'events', *, help_text: str | Callable[[], str] | None = None
               ) -> int:
@@ -149,7 +166,8 @@ def run_nodes(factories: Sequence[Callable[[], Node]], args: Sequence[str] | Non
     if threading.current_thread() is threading.main_thread():
         signal.signal(signal.SIGINT, _interrupt_handler(interrupted))
     try:
-        rclpy.init(args=with_sim_time(argv))
+        with _rcl_quiet():   # our one line below says what rcl's own [ERROR] line would
+            rclpy.init(args=with_sim_time(argv))
     except RCLError as err:   # rcl refused the arguments (a parameters file it cannot parse)
         print(f'error: {rcl_error_line(err)}', file=sys.stderr)
         return 2
