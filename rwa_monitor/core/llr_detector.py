@@ -16,7 +16,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from rwa_monitor.core import llr_kernel as kern, llr_stats
+from rwa_monitor.core import llr_cstep, llr_kernel as kern, llr_stats
 from rwa_monitor.core.events import AnomalyEvent
 from rwa_monitor.core.friction import RegressorSet
 from rwa_monitor.core.llr_changes import ChangeRules, DeclaredChange
@@ -32,7 +32,7 @@ _step = kern.step
 _step_calibrated = kern.step_calibrated
 
 
-class LLRDetector(ChangeRules, GeneralModel, NoiseFitting):
+class LLRDetector(ChangeRules, GeneralModel, NoiseFitting, llr_cstep.StepOwner):
     """Streaming LLR detector of friction changes for one wheel (Algorithm 1).
 
     Parameters
@@ -282,12 +282,30 @@ class LLRDetector(ChangeRules, GeneralModel, NoiseFitting):
         self._fast = self._default and not self._fitting
         self._last_event: AnomalyEvent | None = None
 
+    @property
+    def _fast(self) -> bool:
+        """True while a sample of the paper's model is one kernel step (no noise fit)."""
+        return self.__dict__.get('_fast', False)
+
+    @_fast.setter
+    def _fast(self, fast: bool) -> None:
+        # The C call of the step (core/llr_cstep.py) is armed on the current state arrays
+        # exactly while the fast path holds; reset() assigns them before this flag.
+        self.__dict__['_fast'] = fast
+        address = llr_cstep.step_address() if fast else None
+        if address is None:
+            self._step_disarm()
+        else:
+            self._step_arm(address, self._fs, self._ints)
+
     def update(self, t: float, speed: float, friction: float,
                aux: Mapping[str, float] | None = None) -> list[AnomalyEvent]:
         """Process one sample; return the events it triggers (usually none).
 
         Non-finite values (or a missing auxiliary channel of the model) and times not after
-        the last accepted one are dropped and counted; they never enter the sums.
+        the last accepted one are dropped and counted; they never enter the sums. On the
+        fast path with three floats the call is handled in C (core/llr_cstep.py), the
+        same compiled step; this Python method is the path of every other call.
         """
         if self._fast:
             # The paper's model: one compiled call per sample (core/llr_kernel.py step),
@@ -312,6 +330,8 @@ class LLRDetector(ChangeRules, GeneralModel, NoiseFitting):
                 return []
         self._fs[kern.F_LAST_T] = t
         return self.ingest_row(row, t, f, h, w)
+
+    update = llr_cstep.compiled_update(update, '_after')
 
     def process_arrays(self, time: np.ndarray, speed: np.ndarray, friction: np.ndarray
                        ) -> list[AnomalyEvent]:
