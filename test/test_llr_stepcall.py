@@ -8,9 +8,16 @@ every kind of argument, on the golden files, and when the step raises.
 """
 
 import contextlib
+import copy
 import gc
 import inspect
+import json
 import math
+import os
+import pathlib
+import pickle
+import subprocess
+import sys
 from unittest import mock
 import weakref
 
@@ -30,6 +37,7 @@ from rwa_monitor.telemetry.parameters_file import load_block
 SETTINGS = settings(max_examples=40, deadline=None,
                     suppress_health_check=[HealthCheck.too_slow])
 COMPILED = llr_cstep.step_address() is not None
+REPO = pathlib.Path(__file__).resolve().parents[1]
 
 
 @contextlib.contextmanager
@@ -199,3 +207,56 @@ def test_arming_checks_the_arrays():
     with pytest.raises(ValueError):
         det._step_arm(0, det._fs, det._ints)
     assert det._step_armed() == COMPILED   # a refused arming leaves the armed step as it was
+
+
+@pytest.mark.parametrize('how', ['deepcopy', 'pickle'])
+def test_a_copied_detector_continues_as_the_original(how):
+    rng = np.random.default_rng(8)
+    k = np.arange(2000)
+    w = 30.0 * np.sin(2 * np.pi * k / 150)
+    f = -(1.0 + 0.5 * (k >= 1400)) * np.sign(w) - 0.05 * w + 0.2 * rng.standard_normal(k.size)
+    rows = list(zip((0.1 * k).tolist(), w.tolist(), f.tolist()))
+    det = LLRDetector('rw1', window=60)
+    for row in rows[:1000]:
+        det.update(*row)
+    twin = copy.deepcopy(det) if how == 'deepcopy' else pickle.loads(pickle.dumps(det))
+    assert twin._fs is not det._fs and twin._step_armed() == det._step_armed() == COMPILED
+    first, second = feed(det, rows[1000:]), feed(twin, rows[1000:])
+    assert first and [e.to_json() for e in second] == [e.to_json() for e in first]
+    same_state(det, twin)
+
+
+WITHOUT_C_MODULE = '''
+import inspect, json, sys
+sys.modules['rwa_monitor.core._stepcall'] = None   # import fails: as if never built
+import numpy as np
+from rwa_monitor.core import llr_cstep
+from rwa_monitor.core.llr import LLRDetector
+assert not llr_cstep.available() and llr_cstep.step_address() is None
+assert inspect.isfunction(LLRDetector.update)
+t, w, f = np.load(sys.argv[1]).T
+det = LLRDetector('rw1', window=60, noise_std=0.2)
+assert det._fast and not det._step_armed()
+events = [e.to_json() for row in zip(t.tolist(), w.tolist(), f.tolist())
+          for e in det.update(*row)] + [e.to_json() for e in det.finish()]
+print(json.dumps({'events': events, 'fs': det._fs.tobytes().hex()}))
+'''
+
+
+def test_without_the_c_module_the_python_update_gives_the_same_events(tmp_path):
+    rng = np.random.default_rng(11)
+    k = np.arange(3000)
+    w = 25.0 * np.sin(2 * np.pi * k / 300)
+    f = -(1.0 + 0.4 * (k >= 1800)) * np.sign(w) - 0.05 * w + 0.2 * rng.standard_normal(k.size)
+    stream = np.column_stack([0.1 * k, w, f])
+    np.save(tmp_path / 'stream.npy', stream)
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(
+        [str(REPO)] + [p for p in [os.environ.get('PYTHONPATH')] if p]))
+    out = subprocess.run([sys.executable, '-c', WITHOUT_C_MODULE, str(tmp_path / 'stream.npy')],
+                         env=env, cwd=REPO, capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr[-3000:]
+    plain = json.loads(out.stdout.strip().splitlines()[-1])
+    det = LLRDetector('rw1', window=60, noise_std=0.2)
+    events = feed(det, [tuple(row) for row in stream.tolist()])
+    assert events and [e.to_json() for e in events] == plain['events']
+    assert det._fs.tobytes().hex() == plain['fs']

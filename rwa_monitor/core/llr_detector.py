@@ -298,6 +298,15 @@ class LLRDetector(ChangeRules, GeneralModel, NoiseFitting, llr_cstep.StepOwner):
         else:
             self._step_arm(address, self._fs, self._ints)
 
+    def __getstate__(self) -> dict[str, Any]:
+        """Return the instance attributes (copy, pickle): the C base holds no state."""
+        return dict(self.__dict__)
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        """Set the instance attributes, then arm the C call on the arrays set."""
+        self.__dict__.update(state)
+        self._fast = state['_fast']
+
     def update(self, t: float, speed: float, friction: float,
                aux: Mapping[str, float] | None = None) -> list[AnomalyEvent]:
         """Process one sample; return the events it triggers (usually none).
