@@ -228,7 +228,8 @@ compiled_get(PyObject *self, PyObject *obj, PyObject *Py_UNUSED(type))
 static PyObject *
 compiled_getattro(CompiledUpdate *self, PyObject *name)
 {
-    /* __doc__, __name__, __qualname__, __module__, __annotations__ of the Python method. */
+    /* __name__, __qualname__, __annotations__ ... of the Python method (__doc__, __module__:
+       getset below, as the type has its own). */
     PyObject *out = PyObject_GenericGetAttr((PyObject *)self, name);
     if (out != NULL || !PyErr_ExceptionMatches(PyExc_AttributeError))
         return out;
@@ -260,9 +261,9 @@ compiled_dealloc(CompiledUpdate *self)
 }
 
 static PyObject *
-compiled_doc(CompiledUpdate *self, void *Py_UNUSED(closure))
+compiled_wrapped_attr(CompiledUpdate *self, void *name)
 {
-    return PyObject_GetAttrString(self->python, "__doc__");
+    return PyObject_GetAttrString(self->python, (const char *)name);
 }
 
 static PyMemberDef compiled_members[] = {
@@ -272,7 +273,8 @@ static PyMemberDef compiled_members[] = {
 };
 
 static PyGetSetDef compiled_getset[] = {
-    {"__doc__", (getter)compiled_doc, NULL, NULL, NULL},
+    {"__doc__", (getter)compiled_wrapped_attr, NULL, NULL, "__doc__"},
+    {"__module__", (getter)compiled_wrapped_attr, NULL, NULL, "__module__"},
     {NULL, NULL, NULL, NULL, NULL},
 };
 
