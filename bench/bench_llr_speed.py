@@ -92,11 +92,12 @@ def _river(name: str, values: list[float]) -> tuple[float, int]:
 
 
 def _ours_python_path(rows: list[tuple[float, float, float]]) -> float:
-    """Return the samples per CPU s of our streaming update without the C call armed."""
+    """Return the samples per CPU s of our streaming update with the C call never armed."""
     from unittest import mock
 
-    from rwa_monitor.core import llr_cstep
-    with mock.patch.object(llr_cstep, 'step_address', return_value=None):
+    from rwa_monitor.core import llr_cstep, llr_detector
+    with mock.patch.object(llr_cstep, 'step_address', return_value=None), \
+            mock.patch.object(llr_detector, '_C_CALL', False):
         return len(rows) / _ours_streaming(rows)[0]
 
 
@@ -254,8 +255,10 @@ def markdown(res: dict[str, Any], load: tuple[tuple[float, ...], tuple[float, ..
         '',
         '"ours streaming" is `LLRDetector.update` as installed: a method implemented in C '
         '(core/_stepcall.c) calling the compiled step as a C function (core/llr_cstep.py); '
-        '"ours streaming, Python path" the same detector with that C call not armed (no C '
-        "module), the Python method calling the compiled step through numba's dispatcher. "
+        '"ours streaming, Python path" the same detector with that C call never armed (the '
+        'C method hands each call to the Python method, which calls the compiled step '
+        "through numba's dispatcher; without the C module the Python method is called "
+        'directly). '
         '"empty ... call": a function that does nothing, called per sample in the same '
         'loop, the floor of a per-sample update made that way: a Python function of three '
         "floats, a numba function of our step's arguments (two state arrays, three floats) "

@@ -27,7 +27,7 @@ import numpy as np
 import pytest
 from test_llr_equivalence import streams
 
-from rwa_monitor.core import llr_cstep, llr_kernel as kern
+from rwa_monitor.core import llr_cstep, llr_detector, llr_kernel as kern
 from rwa_monitor.core.llr import detect_batch_with_counters, LLRDetector
 from rwa_monitor.core.schema import llr_kwargs
 from rwa_monitor.pipelines import llr as llr_pipeline
@@ -42,8 +42,9 @@ REPO = pathlib.Path(__file__).resolve().parents[1]
 
 @contextlib.contextmanager
 def python_path():
-    """Detectors made or reset inside never arm the C step: every update runs in Python."""
-    with mock.patch.object(llr_cstep, 'step_address', return_value=None):
+    """Inside, no detector arms the C step: every update runs the Python method."""
+    with mock.patch.object(llr_cstep, 'step_address', return_value=None), \
+            mock.patch.object(llr_detector, '_C_CALL', False):
         yield
 
 
@@ -92,9 +93,11 @@ def test_the_c_module_is_built_and_armed_on_the_fast_path():
     assert det._fast and det._step_armed()
     fitting = LLRDetector('rw1', window=20, noise_fit_samples=30)
     assert not fitting._fast and not fitting._step_armed()
-    for k in range(30):
+    for k in range(31):   # the fit at the 30th sample; the next call arms the C step
         fitting.update(0.1 * k, 10.0 + k, 0.01 * k)
     assert fitting._fast and fitting._step_armed()
+    fitting.reset()
+    assert not fitting._fast and not fitting._step_armed()
 
 
 def test_update_keeps_the_signature_and_doc_of_the_python_method():
@@ -159,16 +162,17 @@ def _zero_noise_level(det):
 
 
 def test_a_step_that_raises_raises_on_both_paths_with_the_same_state():
-    compiled = LLRDetector('rw1', window=20, noise_std=0.1)
-    with python_path():
-        plain = LLRDetector('rw1', window=20, noise_std=0.1)
-    for det in (compiled, plain):
-        det.update(0.0, 5.0, 0.1)
-        _zero_noise_level(det)
-        with pytest.raises(ArithmeticError):
-            det.update(0.1, 5.0, 0.1)
-    assert compiled._step_armed() == COMPILED
-    same_state(compiled, plain)
+    dets = []
+    for path in (contextlib.nullcontext, python_path):
+        with path():
+            det = LLRDetector('rw1', window=20, noise_std=0.1)
+            det.update(0.0, 5.0, 0.1)
+            _zero_noise_level(det)
+            with pytest.raises(ArithmeticError):
+                det.update(0.1, 5.0, 0.1)
+            dets.append((det, det._step_armed()))
+    assert [armed for _, armed in dets] == [COMPILED, False]
+    same_state(dets[0][0], dets[1][0])
 
 
 def test_reset_arms_the_new_arrays():

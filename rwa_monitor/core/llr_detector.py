@@ -30,6 +30,7 @@ _KERNEL_COUNTERS = (('non_finite', kern.I_NON_FINITE), ('out_of_range', kern.I_O
                     ('ill_conditioned', kern.I_ILL))
 _step = kern.step
 _step_calibrated = kern.step_calibrated
+_C_CALL = llr_cstep.available()
 
 
 class LLRDetector(ChangeRules, GeneralModel, NoiseFitting, llr_cstep.StepOwner):
@@ -281,18 +282,15 @@ class LLRDetector(ChangeRules, GeneralModel, NoiseFitting, llr_cstep.StepOwner):
         self._buffer: list[tuple[int, float, float, Any, float]] = []
         self._fast = self._default and not self._fitting
         self._last_event: AnomalyEvent | None = None
+        self._arm_step()
 
-    @property
-    def _fast(self) -> bool:
-        """True while a sample of the paper's model is one kernel step (no noise fit)."""
-        return self.__dict__.get('_fast', False)
+    def _arm_step(self) -> None:
+        """Arm the C call of the step on the state arrays while the fast path holds.
 
-    @_fast.setter
-    def _fast(self, fast: bool) -> None:
-        # The C call of the step (core/llr_cstep.py) is armed on the current state arrays
-        # exactly while the fast path holds; reset() assigns them before this flag.
-        self.__dict__['_fast'] = fast
-        address = llr_cstep.step_address() if fast else None
+        Called by :meth:`reset` (new arrays) and by the Python :meth:`update` when it finds
+        the fast path unarmed (after the noise fit, a copy or a restored state).
+        """
+        address = llr_cstep.step_address() if self._fast else None
         if address is None:
             self._step_disarm()
         else:
@@ -305,7 +303,7 @@ class LLRDetector(ChangeRules, GeneralModel, NoiseFitting, llr_cstep.StepOwner):
     def __setstate__(self, state: dict[str, Any]) -> None:
         """Set the instance attributes, then arm the C call on the arrays set."""
         self.__dict__.update(state)
-        self._fast = state['_fast']
+        self._arm_step()
 
     def update(self, t: float, speed: float, friction: float,
                aux: Mapping[str, float] | None = None) -> list[AnomalyEvent]:
@@ -319,6 +317,8 @@ class LLRDetector(ChangeRules, GeneralModel, NoiseFitting, llr_cstep.StepOwner):
         if self._fast:
             # The paper's model: one compiled call per sample (core/llr_kernel.py step),
             # which takes Python and numpy numbers as floats; others are converted first.
+            if _C_CALL and not self._step_armed():
+                self._arm_step()
             try:
                 flags = _step(self._fs, self._ints, t, speed, friction)
             except TypeError:
