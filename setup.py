@@ -17,7 +17,7 @@ node fail its check of the console script's ``__requires__``.
 from glob import glob
 import sys
 
-from setuptools import find_packages, setup
+from setuptools import Extension, find_packages, setup
 
 package_name = 'rwa_monitor'
 
@@ -77,6 +77,11 @@ CONSOLE_SCRIPTS = ['rwa-monitor = rwa_monitor.cli.main:main'] + [
     f'{name} = rwa_monitor.nodes.{module}:main'
     for node, (script, module) in NODES.items() for name in (script, node)]
 
+# The one C call per streaming sample (docs/llr.md "Streaming call"); optional: without a C
+# compiler the package installs and the detector runs its compiled step from Python.
+EXT_MODULES = [Extension('rwa_monitor.core._stepcall', ['rwa_monitor/core/_stepcall.c'],
+                         optional=True)]
+
 setup(
     name=package_name,
     version='0.1.0',
@@ -91,6 +96,7 @@ setup(
     python_requires='>=3.11',
     install_requires=['setuptools'] if ROS_BUILD else INSTALL_REQUIRES,
     extras_require={} if ROS_BUILD else EXTRAS_REQUIRE,
+    ext_modules=EXT_MODULES,
     zip_safe=True,
     maintainer='rwa_monitor maintainers',
     maintainer_email='rwa-monitor@example.org',

@@ -3,18 +3,20 @@
 One nominal (fault-free) stream of 200,000 samples (SI realistic profile, one wheel, 10 Hz,
 seed 7; :func:`rwa_monitor.sim.friction.simulate_friction`) goes, in each round, through:
 
-- our LLR detector sample by sample (``LLRDetector.update`` in a Python loop) and over
-  the whole arrays (``detect_batch``), parameters of bench_llr's throughput case (w = 400,
-  r = 1e-4, noise level and AR model estimated);
+- our LLR detector sample by sample (``LLRDetector.update`` in a Python loop: its C
+  method, and its Python path with the C call not armed) and over the whole arrays
+  (``detect_batch``), parameters of bench_llr's throughput case (w = 400, r = 1e-4,
+  noise level and AR model estimated);
 - the river library's ADWIN and PageHinkley drift detectors (default parameters) on the
   friction torque, one ``update`` per sample in the same kind of Python loop.
 
 Samples per CPU second of this process (``time.process_time``: a loaded shared machine
 changes the wall clock, not the work); medians over the rounds, and the ratios to ADWIN
 measured in the same run. False alarms: declarations of ours (``revision`` 0), drift
-flags of the others, on this fault-free stream. Peak memory: the RSS high-water mark of a
-fresh process that runs one detector both ways on the stream. Goals (issue 25):
-streaming >= ADWIN, batch >= 7 x ADWIN, peak RSS < 250 MB.
+flags of the others, on this fault-free stream. The floors: calls that do nothing, one
+per sample, made each way a per-sample update can call compiled code. Peak memory: the
+RSS high-water mark of a fresh process that runs one detector both ways on the stream.
+Goals (issue 25): streaming >= ADWIN, batch >= 7 x ADWIN, peak RSS < 250 MB.
 """
 
 from __future__ import annotations
@@ -32,6 +34,7 @@ from bench import report
 
 N = 200_000
 PARAMS = {'window': 400, 'k_verif': 'auto', 'false_alarm_rate': 1e-4, 'noise_std': 'auto'}
+FLOORS = ('empty Python call', 'empty compiled call', 'empty ctypes call', 'empty C call')
 GOALS = {'streaming_vs_adwin': 1.0, 'batch_vs_adwin': 7.0, 'peak_rss_mb': 250.0}
 # VmHWM: the high-water mark of this process's own memory (ru_maxrss would also count
 # the benchmark process it was forked from, on Linux).
@@ -88,24 +91,82 @@ def _river(name: str, values: list[float]) -> tuple[float, int]:
     return time.process_time() - start, alarms
 
 
-def _call_floor(rows: list[tuple[float, float, float]]) -> float:
-    """Return the samples per CPU s of a compiled call that does nothing, ``step``'s arguments.
+def _ours_python_path(rows: list[tuple[float, float, float]]) -> float:
+    """Return the samples per CPU s of our streaming update with the C call never armed."""
+    from unittest import mock
 
-    The floor of any per-sample call from Python into compiled code (the dispatcher
-    unpacking two arrays and three floats), which bounds our streaming rate.
+    from rwa_monitor.core import llr_cstep, llr_detector
+    with mock.patch.object(llr_cstep, 'step_address', return_value=None), \
+            mock.patch.object(llr_detector, '_C_CALL', False):
+        return len(rows) / _ours_streaming(rows)[0]
+
+
+def _empty_calls(rows: list[tuple[float, float, float]]) -> dict[str, float]:
+    """Return the samples per CPU s of calls that do nothing, per way of calling.
+
+    Each takes our step's arguments: ``Python call``, a Python function of three floats;
+    ``compiled call``, a numba function of two state arrays and three floats through its
+    dispatcher (``llr_kernel.step``'s way); ``ctypes call``, a numba C function of two
+    pointers, two lengths and three floats through ctypes; ``C call``, that C function
+    through the detector's C method (core/_stepcall.c, ``llr_cstep``'s way). The floor of
+    a per-sample update made each way.
     """
-    import numpy as np
-    from numba import njit
+    import ctypes
 
-    @njit('int64(float64[::1], int64[::1], float64, float64, float64)')
-    def nothing(fs, ints, t, w, f):
+    import numpy as np
+    from numba import carray, cfunc, njit, types
+
+    from rwa_monitor.core import _stepcall
+
+    def python(t, w, f):
         return 0
 
+    @njit('int64(float64[::1], int64[::1], float64, float64, float64)')
+    def compiled(fs, ints, t, w, f):
+        return 0
+
+    @cfunc(types.int64(types.CPointer(types.float64), types.int64,
+                       types.CPointer(types.int64), types.int64,
+                       types.float64, types.float64, types.float64))
+    def nothing(fs, n_fs, ints, n_ints, t, w, f):
+        return carray(ints, (n_ints,))[0]
+
+    class Owner(_stepcall.StepOwner):
+        def update(self, t, w, f):
+            return []
+        update = _stepcall.CompiledUpdate(update, 'update')
+
     fs, ints = np.zeros(8), np.zeros(8, dtype=np.int64)
-    start = time.process_time()
-    for t_k, w_k, f_k in rows:
-        nothing(fs, ints, t_k, w_k, f_k)
-    return len(rows) / (time.process_time() - start)
+    owner = Owner()
+    owner._step_arm(nothing.address, fs, ints)
+    c_type = ctypes.CFUNCTYPE(ctypes.c_int64, ctypes.c_void_p, ctypes.c_int64, ctypes.c_void_p,
+                              ctypes.c_int64, ctypes.c_double, ctypes.c_double, ctypes.c_double)
+    by_ctypes = c_type(nothing.address)
+    fs_p, ints_p = fs.ctypes.data, ints.ctypes.data
+
+    def python_loop():
+        for t_k, w_k, f_k in rows:
+            python(t_k, w_k, f_k)
+
+    def compiled_loop():
+        for t_k, w_k, f_k in rows:
+            compiled(fs, ints, t_k, w_k, f_k)
+
+    def ctypes_loop():
+        for t_k, w_k, f_k in rows:
+            by_ctypes(fs_p, 8, ints_p, 8, t_k, w_k, f_k)
+
+    def c_loop():
+        for t_k, w_k, f_k in rows:
+            owner.update(t_k, w_k, f_k)
+
+    rates = {}
+    for name, loop in (('Python', python_loop), ('compiled', compiled_loop),
+                       ('ctypes', ctypes_loop), ('C', c_loop)):
+        start = time.process_time()
+        loop()
+        rates[f'empty {name} call'] = len(rows) / (time.process_time() - start)
+    return rates
 
 
 def _peak_rss_mb() -> float:
@@ -121,9 +182,9 @@ def measure(rounds: int) -> dict[str, Any]:
     rows = list(zip(t.tolist(), w.tolist(), f.tolist()))
     friction = f.tolist()
     _ours_batch(t[:5000], w[:5000], f[:5000])   # compile / load the kernels first
-    per_s: dict[str, list[float]] = {k: [] for k in ('ours streaming', 'ours batch',
-                                                     'ADWIN', 'PageHinkley',
-                                                     'empty compiled call')}
+    per_s: dict[str, list[float]] = {k: [] for k in (
+        'ours streaming', 'ours batch', 'ADWIN', 'PageHinkley', 'ours streaming, Python path',
+        *FLOORS)}
     alarms: dict[str, int] = {}
     same = True
     for round_no in range(rounds):
@@ -137,8 +198,11 @@ def measure(rounds: int) -> dict[str, Any]:
         for name in ('ADWIN', 'PageHinkley'):
             seconds, alarms[name] = _river(name, friction)
             per_s[name].append(N / seconds)
-        per_s['empty compiled call'].append(_call_floor(rows))
-        alarms['empty compiled call'] = '-'
+        per_s['ours streaming, Python path'].append(_ours_python_path(rows))
+        alarms['ours streaming, Python path'] = '-'
+        for name, rate in _empty_calls(rows).items():
+            per_s[name].append(rate)
+            alarms[name] = '-'
         print(f'  round {round_no + 1}/{rounds}: ' + ', '.join(
             f'{k} {v[-1] / 1e6:.2f} M/s' for k, v in per_s.items()), flush=True)
     median = {k: statistics.median(v) for k, v in per_s.items()}
@@ -148,7 +212,9 @@ def measure(rounds: int) -> dict[str, Any]:
     met = {'streaming_vs_adwin': ratio['ours streaming'] >= GOALS['streaming_vs_adwin'],
            'batch_vs_adwin': ratio['ours batch'] >= GOALS['batch_vs_adwin'],
            'peak_rss_mb': rss < GOALS['peak_rss_mb']}
-    return {'n': N, 'params': PARAMS, 'rounds': rounds, 'per_s': per_s, 'median': median,
+    from rwa_monitor.core import llr_cstep
+    return {'n': N, 'params': PARAMS, 'rounds': rounds,
+            'c_call_armed': llr_cstep.step_address() is not None, 'per_s': per_s, 'median': median,
             'ratio_to_adwin': ratio, 'false_alarms': alarms, 'batch_equals_streaming': same,
             'peak_rss_mb': rss, 'peak_rss_first_mb': rss_first, 'goals': GOALS, 'met': met}
 
@@ -176,6 +242,7 @@ def markdown(res: dict[str, Any], load: tuple[tuple[float, ...], tuple[float, ..
         report.table(['detector', 'M samples / CPU s', 'range', 'x ADWIN', 'false alarms'],
                      rows),
         '',
+        f'C call armed in "ours streaming": {res["c_call_armed"]}. '
         f'Batch events == streaming events: {res["batch_equals_streaming"]}. Peak RSS of '
         f'one detector process (imports, the stream, streaming then batch on it): '
         f'{res["peak_rss_mb"]:.0f} MB with the compiled kernels cached '
@@ -186,11 +253,20 @@ def markdown(res: dict[str, Any], load: tuple[tuple[float, ...], tuple[float, ..
         f'{verdict[met["batch_vs_adwin"]]} ({ratio["ours batch"]:.2f}x); peak RSS < 250 MB: '
         f'{verdict[met["peak_rss_mb"]]}.',
         '',
-        '"empty compiled call": a compiled function that does nothing, called per sample '
-        'with the arguments of our step (two state arrays, three floats): the floor of any '
-        'per-sample call from Python into compiled code on this machine, '
-        f'{res["ratio_to_adwin"]["empty compiled call"]:.2f}x ADWIN. Our streaming update '
-        'is that call plus the step itself and the Python method around it.',
+        '"ours streaming" is `LLRDetector.update` as installed: a method implemented in C '
+        '(core/_stepcall.c) calling the compiled step as a C function (core/llr_cstep.py); '
+        '"ours streaming, Python path" the same detector with that C call never armed (the '
+        'C method hands each call to the Python method, which calls the compiled step '
+        "through numba's dispatcher; without the C module the Python method is called "
+        'directly). '
+        '"empty ... call": a function that does nothing, called per sample in the same '
+        'loop, the floor of a per-sample update made that way: a Python function of three '
+        "floats, a numba function of our step's arguments (two state arrays, three floats) "
+        'through its dispatcher, a numba C function of two pointers, two lengths and three '
+        'floats through ctypes, and that C function through our C method '
+        f'({ratio["empty Python call"]:.2f}x, {ratio["empty compiled call"]:.2f}x, '
+        f'{ratio["empty ctypes call"]:.2f}x, {ratio["empty C call"]:.2f}x ADWIN; docs/llr.md '
+        '"Streaming call").',
     ])
 
 

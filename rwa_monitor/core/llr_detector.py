@@ -16,7 +16,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from rwa_monitor.core import llr_kernel as kern, llr_stats
+from rwa_monitor.core import llr_cstep, llr_kernel as kern, llr_stats
 from rwa_monitor.core.events import AnomalyEvent
 from rwa_monitor.core.friction import RegressorSet
 from rwa_monitor.core.llr_changes import ChangeRules, DeclaredChange
@@ -30,9 +30,10 @@ _KERNEL_COUNTERS = (('non_finite', kern.I_NON_FINITE), ('out_of_range', kern.I_O
                     ('ill_conditioned', kern.I_ILL))
 _step = kern.step
 _step_calibrated = kern.step_calibrated
+_C_CALL = llr_cstep.available()
 
 
-class LLRDetector(ChangeRules, GeneralModel, NoiseFitting):
+class LLRDetector(ChangeRules, GeneralModel, NoiseFitting, llr_cstep.StepOwner):
     """Streaming LLR detector of friction changes for one wheel (Algorithm 1).
 
     Parameters
@@ -281,17 +282,43 @@ class LLRDetector(ChangeRules, GeneralModel, NoiseFitting):
         self._buffer: list[tuple[int, float, float, Any, float]] = []
         self._fast = self._default and not self._fitting
         self._last_event: AnomalyEvent | None = None
+        self._arm_step()
+
+    def _arm_step(self) -> None:
+        """Arm the C call of the step on the state arrays while the fast path holds.
+
+        Called by :meth:`reset` (new arrays) and by the Python :meth:`update` when it finds
+        the fast path unarmed (after the noise fit, a copy or a restored state).
+        """
+        address = llr_cstep.step_address() if self._fast else None
+        if address is None:
+            self._step_disarm()
+        else:
+            self._step_arm(address, self._fs, self._ints)
+
+    def __getstate__(self) -> dict[str, Any]:
+        """Return the instance attributes (copy, pickle): the C base holds no state."""
+        return dict(self.__dict__)
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        """Set the instance attributes, then arm the C call on the arrays set."""
+        self.__dict__.update(state)
+        self._arm_step()
 
     def update(self, t: float, speed: float, friction: float,
                aux: Mapping[str, float] | None = None) -> list[AnomalyEvent]:
         """Process one sample; return the events it triggers (usually none).
 
         Non-finite values (or a missing auxiliary channel of the model) and times not after
-        the last accepted one are dropped and counted; they never enter the sums.
+        the last accepted one are dropped and counted; they never enter the sums. On the
+        fast path with three floats the call is handled in C (core/llr_cstep.py), the
+        same compiled step; this Python method is the path of every other call.
         """
         if self._fast:
             # The paper's model: one compiled call per sample (core/llr_kernel.py step),
             # which takes Python and numpy numbers as floats; others are converted first.
+            if _C_CALL and not self._step_armed():
+                self._arm_step()
             try:
                 flags = _step(self._fs, self._ints, t, speed, friction)
             except TypeError:
@@ -312,6 +339,8 @@ class LLRDetector(ChangeRules, GeneralModel, NoiseFitting):
                 return []
         self._fs[kern.F_LAST_T] = t
         return self.ingest_row(row, t, f, h, w)
+
+    update = llr_cstep.compiled_update(update, '_after')
 
     def process_arrays(self, time: np.ndarray, speed: np.ndarray, friction: np.ndarray
                        ) -> list[AnomalyEvent]:
