@@ -65,7 +65,7 @@ def plan(seeds: tuple[int, ...] = EVAL_SEEDS) -> list[dict[str, Any]]:
     return runs
 
 
-def _text(events) -> list[str]:
+def event_texts(events) -> list[str]:
     """Return each event as the JSON text of the events file (every field, sorted keys)."""
     return [json.dumps(e if isinstance(e, dict) else e.to_json(), sort_keys=True)
             for e in events]
@@ -122,15 +122,15 @@ def compare_file(tele, kwargs: dict[str, Any], cal_path: str) -> dict[str, Any]:
         for wheel in tele.wheels:
             nominal = NominalWheel(cal['wheels'][wheel]) if cal_arg else None
             paths = detector_paths(tele, wheel, kwargs, nominal)
-            ref = _text(paths['streaming'])
+            ref = event_texts(paths['streaming'])
             mine = [e for e in cli if e['component'] == wheel]
             counters = paths['counters']
             wheels[wheel] = {
                 'events': len(ref),
                 'declarations': sum(e.revision == 0 for e in paths['streaming']),
-                'process_arrays_equal': _text(paths['process_arrays']) == ref,
-                'detect_batch_equal': _text(paths['detect_batch']) == ref,
-                'detect_cli_equal': _text(mine) == _text(json.loads(json.dumps(
+                'process_arrays_equal': event_texts(paths['process_arrays']) == ref,
+                'detect_batch_equal': event_texts(paths['detect_batch']) == ref,
+                'detect_cli_equal': event_texts(mine) == event_texts(json.loads(json.dumps(
                     [e.to_json() for e in paths['streaming']]))),
                 'counters_equal': (counters['streaming'] == counters['process_arrays']
                                    == counters['detect_batch']),
