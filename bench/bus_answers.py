@@ -306,7 +306,33 @@ def markdown_kinds(llr: dict[str, Any]) -> list[str]:
             'of its revisions in order, the last is the end-of-record one when marked '
             'final):', '',
             table(['seed', 'wheel', 'injected', 'kinds', 'final', 'z dry / z viscous (final)',
-                   'reason (undecided)', 'delay (s)'], detail)]
+                   'reason (undecided)', 'delay (s)'], detail), ''] + _kind_notes(files)
+
+
+def _kind_notes(files: list[dict[str, Any]]) -> list[str]:
+    """Return the wrong kinds, the other declarations and how far the estimates are."""
+    lines = []
+    for mode in ('calibrated', 'uncalibrated'):
+        wrong = [(f['seed'], c) for f in files for c in f['modes'][mode]['kinds']['changes']
+                 if c.get('verdict') == 'wrong']
+        lines.append(f'- {mode}: final kind wrong: ' + ('none' if not wrong else '; '.join(
+            f'seed {seed} {c["wheel"]} ({c["expected"]} injected): {" -> ".join(c["kinds"])}'
+            f'{" confirmed" if c["confirmed"] else ""}, estimated change {c["time"]:.1f} s, '
+            f'declared {c["declared_time"]:.1f} s, z dry {_num(c["z_dry"])}, z viscous '
+            f'{_num(c["z_viscous"])}' for seed, c in wrong)))
+        far = [c for f in files for c in f['modes'][mode]['kinds']['changes']
+               if c['detected'] and abs(c['time'] - FAULT_TIME_S) > 600.0]
+        lines.append(f'- {mode}: first declarations after the change whose estimated change '
+                     f'time is more than 600 s from {FAULT_TIME_S:g} s (likely not the injected '
+                     f'change): {len(far)} of {sum(len(f["changes"]) for f in files)}')
+    other = [(f['seed'], d, what) for f in files for what in ('false', 'extra')
+             for d in f['modes']['calibrated']['kinds'][what]]
+    lines.append('- calibrated, every other declaration: ' + ('none' if not other else '; '.join(
+        f'seed {seed} {d["wheel"]} ({what}): estimated change {d["time"]:.1f} s, declared '
+        f'{d["declared_time"]:.1f} s, {" -> ".join(d["kinds"])}'
+        f'{" (final step)" if d["final_step"] else ""}{", " + d["reason"] if d["reason"] else ""}'
+        for seed, d, what in other)))
+    return lines
 
 
 def _num(value: float | None) -> str:
@@ -315,13 +341,19 @@ def _num(value: float | None) -> str:
 
 def markdown_identify(ident: dict[str, Any]) -> list[str]:
     """Return the identification table: per file and wheel, joint and separate."""
-    rows, notes = [], []
+    rows, notes, worst, same = [], [], {'joint': 0.0, 'separately': 0.0}, {}
     for seed, res in ident.items():
+        fitted = res['joint']['summary']['wheels']
         for w in WHEELS:
             j, s = res['joint']['wheels'][w], res['separately']['wheels'][w]
             rows.append([seed, w, f'{j["noise_floor"]:.3g}', f'{j["before"]:.3f}',
                          ', '.join(j['effects']) or '(none)', f'{j["after"]:.3f}',
+                         _parameters(fitted[w]['effects']),
                          ', '.join(s['effects']) or '(none)', f'{s["after"]:.3f}'])
+        for mode in worst:
+            worst[mode] = max([worst[mode]] + [v['after'] for v in res[mode]['wheels'].values()])
+            same[mode] = same.get(mode, 0) + (len({tuple(sorted(v['effects'])) for v in res[
+                mode]['wheels'].values()}) == 1)
         joint, alone = (res[m]['summary'].get('consistency', {}) for m in ('joint',
                                                                            'separately'))
         notes.append(f'seed {seed}: joint common set {", ".join(joint.get("reference", []))}'
@@ -329,8 +361,25 @@ def markdown_identify(ident: dict[str, Any]) -> list[str]:
                      f'{res["joint"]["cpu_s"]:.0f} s CPU joint, '
                      f'{res["separately"]["cpu_s"]:.0f} s separately')
     return [table(['seed', 'wheel', 'noise floor (N m)', 'held-out before / floor',
-                   'joint: effects', 'joint: after / floor', 'separately: effects',
-                   'separately: after / floor'], rows), ''] + [f'- {n}' for n in notes]
+                   'joint: effects', 'joint: after / floor',
+                   'joint: hysteresis speed, excess; stribeck speed, excess; band',
+                   'separately: effects', 'separately: after / floor'], rows), '',
+            f'Same effect set on the four wheels: joint {same["joint"]} of {len(ident)} files, '
+            f'separately {same["separately"]} of {len(ident)}; worst held-out RMSE / floor: '
+            f'joint {worst["joint"]:.3f}, separately {worst["separately"]:.3f}.', ''] + [
+                f'- {n}' for n in notes]
+
+
+def _parameters(effects: dict[str, dict[str, Any]]) -> str:
+    """Return the fitted speeds (rad/s) and sizes (N m) of the bus's three effects."""
+    parts = []
+    for name in ('stribeck_hysteresis', 'stribeck'):
+        if name in effects:
+            e = effects[name]
+            parts.append(f'{e["velocity_rad_s"]:.3f}, {e["static_excess_nm"]:.2e}')
+    if 'presliding' in effects:
+        parts.append(f'{effects["presliding"]["band_rad_s"]:.3f}')
+    return '; '.join(parts) or '-'
 
 
 def _flags(consistency: dict[str, Any]) -> str:
