@@ -9,11 +9,13 @@ from rwa_monitor.sim.friction import Anomaly, simulate_friction
 PAPER = {'window': 500, 'k_verif': 250, 'false_alarm_rate': 1e-5}
 
 
-def paper_file(seed: int, n: int = 4000, change: int = 1500, dry: float = 0.5):
-    """Return the papers' own profile (Fig. 3, scaled units, 1 Hz) with one dry step."""
-    tele = simulate_friction(wheels=('rw1',), n_samples=n, rate_hz=1.0, profile='fig3',
+def paper_file(seed: int, n: int = 4000, change: int = 1500, dry: float = 0.5,
+               viscous: float = 0.0, profile: str = 'fig3'):
+    """Return one of the papers' own profiles (scaled units, 1 Hz) with one step."""
+    kind = 'both' if dry and viscous else 'dry' if dry else 'viscous'
+    tele = simulate_friction(wheels=('rw1',), n_samples=n, rate_hz=1.0, profile=profile,
                              units='scaled', seed=seed,
-                             anomalies=[Anomaly('rw1', 'dry', float(change), dry, 0.0)])
+                             anomalies=[Anomaly('rw1', kind, float(change), dry, viscous)])
     wheel = tele.wheels['rw1']
     return tele.time, wheel.speed, wheel.friction
 
