@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from rwa_monitor.core import keys, llr_growth
+from rwa_monitor.core import keys, llr_growth, llr_kinds
 from rwa_monitor.core.llr import detect_batch
 
 
@@ -92,3 +92,19 @@ def test_the_demo_names_both_injected_kinds():
         events = detect_batch(tele.time, ch.speed, ch.friction, component=wheel)
         assert {e.index for e in events} == {events[0].index}
         assert events[-1].kind == kind and events[-1].details[keys.KIND_CONFIRMED]
+
+
+def test_growth_never_makes_a_single_step_kind_both():
+    # A confirmed dry step (its viscous component within 1.96) whose after segment grows in
+    # the viscous direction is withdrawn (undecided, reason grows), with the viscous guess
+    # if only that growth is significant and its own otherwise; never `both`, which the
+    # step tests alone confirm (each component significant given the other at the level).
+    dx = np.array([[0.5, 0.0], [0.0, 0.025], [0.5, 0.001]])
+    step = llr_kinds.Category('dry', dx[0].copy(), (4.2, 0.7), 1.0, True, 'dry')
+    reject = 14.17
+    assert llr_kinds.refuted(step, (1.0, 20.0), reject, dx) == step
+    for chi, guess in (((16.1, 14.2), 'dry'), ((16.1, 3.0), 'viscous')):
+        out = llr_kinds.refuted(step, chi, reject, dx)
+        assert (out.kind, out.confirmed, out.guess, out.reason) == \
+            ('undecided', False, guess, 'grows')
+        assert np.array_equal(out.dx, dx[llr_kinds.KINDS.index(guess)])

@@ -273,7 +273,10 @@ class ChangeRules:
         has re-checks to come gets one more categorisation on every sample after it that
         the record holds (the same tests and levels as a re-check), as an event with
         ``final`` True and the samples it used, whether the kind changed or not; the
-        change is then closed. The batch path calls it after the last row; a live
+        change is then closed. A kind confirmed earlier is kept, when this evaluation does
+        not confirm one, only if its tests still find each of its components at the
+        category level (:func:`llr_kinds.supports`): the record as a whole, not its
+        shorter prefix, bears the answer. The batch path calls it after the last row; a live
         detector keeps its re-check schedule and calls it only when its input ends.
         Returns [] when no declaration is open.
         """
@@ -296,7 +299,8 @@ class ChangeRules:
                                    self._noise_var, self._z_thr, np.asarray(cat.ramp))
         if not final and not revision_due(cat.kind, cat.guess, cat.confirmed, new):
             return []
-        if final and cat.confirmed and not new.confirmed:
+        if final and cat.confirmed and not new.confirmed and \
+                llr_kinds.supports(new, cat.kind, self._z_thr):
             new = new._replace(kind=cat.kind, guess=cat.guess, confirmed=True)
         cat.kind, cat.guess, cat.confirmed = new.kind, new.guess, new.confirmed
         cat.revision += 1

@@ -219,21 +219,37 @@ def categorise(before: np.ndarray, n_before: int, after: np.ndarray, p: int,
 
 def refuted(step: Category, chi: tuple[float, float], reject: float, dx: np.ndarray
             ) -> Category:
-    """Return the step category, unless the ramp tests refute its single kind.
+    """Return the step category, unless the growth tests refute its single kind.
 
-    Not in the paper (docs/llr.md "Kinds on ramps"). ``chi[h]``: the significance of the
-    growth of the kind other than ``h`` beside ``h``'s own (:func:`ramp_statistics`).
-    When the change grows in the other kind's direction at the category level (``chi >
-    reject``), a confirmed step of kind ``h`` alone is refuted: ``both`` (confirmed) if
-    it grows in both directions, else ``undecided`` with the other kind as guess.
+    Not in the paper (docs/llr.md "Kinds on ramps", "Kinds that survive collinearity").
+    ``chi[h]``: the significance of the growth of the kind other than ``h`` beside
+    ``h``'s own (:func:`ramp_statistics`). When the change grows in the other kind's
+    direction (``chi[h] > reject``), a confirmed step of kind ``h`` alone is withdrawn:
+    ``undecided`` (reason ``grows``), with the other kind as guess, or ``h`` if it grows
+    in both directions. Never ``both``: a confirmed ``both`` states that each component
+    is significant given the other at the category level (the step tests), and here the
+    other kind's step is not significant even at 5 % (a condition of ``h``'s
+    confirmation); two growth statistics whose columns nearly coincide are one piece of
+    evidence, on the step model's fit, not on a second component.
     """
     if not step.confirmed or step.kind not in KINDS[:2]:
         return step
     h = KINDS.index(step.kind)
     if chi[h] <= reject:
         return step
-    if chi[1 - h] > reject:
-        return step._replace(kind=KINDS[2], dx=dx[2].copy(), guess=KINDS[2],
-                             shape=SHAPES[1])
-    return step._replace(kind=UNDECIDED, dx=dx[1 - h].copy(), confirmed=False,
-                         guess=KINDS[1 - h], shape=SHAPES[1])
+    guess = h if chi[1 - h] > reject else 1 - h
+    return step._replace(kind=UNDECIDED, dx=dx[guess].copy(), confirmed=False,
+                         guess=KINDS[guess], shape=SHAPES[1], reason='grows')
+
+
+def supports(category: Category, kind: str, z_threshold: float) -> bool:
+    """Return True if the step tests of ``category`` find each component of ``kind``.
+
+    Not in the paper (docs/llr.md "End of record"). ``kind`` (dry, viscous or both)
+    claims that its components are non-zero; each is found when its test given the other
+    component rejects at the category level (``|z| > z_threshold``, the z of
+    :func:`categorise`). The end of record keeps an earlier confirmed kind only where the
+    final evaluation, on every sample after the change, still supports it.
+    """
+    components = {KINDS[0]: (0,), KINDS[1]: (1,), KINDS[2]: (0, 1)}[kind]
+    return all(abs(category.z[i]) > z_threshold for i in components)
