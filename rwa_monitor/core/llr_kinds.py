@@ -141,10 +141,13 @@ def categorise(before: np.ndarray, n_before: int, after: np.ndarray, p: int,
     tests (:func:`ramp_kind` on the best time shape of each hypothesis,
     :func:`ramp_shapes`; docs/llr.md "Kinds on ramps") may name the kind in which the
     change grows; if it differs from the step outcome and a growth of the other kind of
-    the same torque rate would have been found (:func:`ramp_growth`, the guard of
-    :func:`separable`), it replaces it, with ``shape`` ``ramp`` and the step estimate
-    ``dx`` of that kind; a confirmed single step kind refuted by a significant growth of
-    the other kind is withdrawn (:func:`refuted`). A step verdict that stands is not
+    the same torque rate would have been found (the guard of :func:`separable`), it
+    replaces it, with ``shape`` ``ramp`` and the step estimate ``dx`` of that kind; a
+    confirmed single step kind refuted by a significant growth of the other kind is
+    withdrawn to ``undecided`` (:func:`refuted`; never ``both``, which only the step tests
+    confirm). When the growth columns cannot be told from the step offsets and each other
+    (:func:`growth_separation` below :data:`MIN_SEPARATION`) the growth tests are not
+    used and the step outcome stands. A step verdict that stands is not
     confirmed when the after segment grows (:func:`grows`): the step model it rests on is
     rejected, and a step fit of a growing level shares the rise between the directions
     (``undecided``, guess the better single kind). A step has no growth: a true single
