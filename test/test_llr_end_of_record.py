@@ -103,7 +103,7 @@ def test_a_confirmed_kind_at_the_end_is_one_the_final_tests_support():
     # a `both` of its declaration (z_viscous -3.94 on 760 samples, -2.38 on all 2,523) and,
     # with a viscous step, a `dry` of its first re-check (z_dry 3.40, then 2.57). Now a
     # confirmed `both` has both components beyond z* and a kind kept at the end of record
-    # its own: each final event's confirmed kind is supported by its own z values.
+    # its own (every confirmed step-shaped final is checked in the next test).
     z_star = llr_stats.z_threshold(1e-3)
     for seed, dry, viscous in ((2731, 0.5, 0.0), (3273, 0.5, 0.0), (3273, 0.0, 0.025)):
         t, w, f = paper_file(seed, dry=dry, viscous=viscous)
@@ -157,4 +157,7 @@ def test_no_confirmed_wrong_kind_at_the_end_of_fresh_paper_files():
             assert final.details[keys.FINAL]
             if final.details[keys.KIND_CONFIRMED] and final.kind != kind:
                 wrong.append((seed, kind, final.kind))
+            if final.details[keys.KIND_CONFIRMED] and \
+                    final.details[keys.KIND_SHAPE] == 'step':
+                assert _supported(final, z_star), final
     assert wrong == []
