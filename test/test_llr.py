@@ -195,10 +195,10 @@ def _kind_probability(kind: str, d_dry: float, d_visc: float, w_before, w_after)
     level``). Neglects the spread of the estimated change time and noise level.
     """
     from scipy.stats import norm
-    from rwa_monitor.core import llr_stats
+    from rwa_monitor.core import llr_kinds, llr_stats
     z_star = llr_stats.z_threshold(1e-3)
     before, after = _rows_sum(w_before), _rows_sum(w_after)
-    info = llr_stats.component_information(before, after, 2)
+    info = llr_kinds.component_information(before, after, 2)
     sd = [1.0 / math.sqrt(i) for i in info]
     reject = [norm.cdf(abs(step) / s - z_star) for step, s in zip((d_dry, d_visc), sd)]
     if kind == 'both':
@@ -207,7 +207,7 @@ def _kind_probability(kind: str, d_dry: float, d_visc: float, w_before, w_after)
     inv = [np.linalg.inv(llr_stats.unpack(row, 2)[0]) for row in (before, after)]
     s_hh = np.linalg.inv(inv[0] + inv[1])[h, h]
     scale = (1.0, float(np.mean(np.abs(w_after))))
-    detectable = llr_stats.detectable_steps(info, 1.0, z_star)
+    detectable = llr_kinds.detectable_steps(info, 1.0, z_star)
     margin = abs((d_dry, d_visc)[h]) - detectable[1 - h] * scale[1 - h] / scale[h]
     guard = norm.cdf(margin * math.sqrt(s_hh))
     return reject[h] * 0.95 * guard * (1.0 - 1e-3)
@@ -257,24 +257,24 @@ def test_categorisation_accuracy_on_seeded_changes():
 def test_component_information_is_the_inverse_variance_of_the_change():
     # Joint fit x before, x + dx after: cov(dx) = sigma^2 (Pi_b^-1 + Pi_a^-1), so the
     # information on one component with the other free is 1 / cov_ii.
-    from rwa_monitor.core import llr_stats
+    from rwa_monitor.core import llr_kinds, llr_stats
     w = paper_speed(6000)
     before, after = _rows_sum(w[:2000]), _rows_sum(w[2000:])
     unpack = lambda row: llr_stats.unpack(row, 2)[0]   # noqa: E731
     cov = np.linalg.inv(unpack(before)) + np.linalg.inv(unpack(after))
-    info = llr_stats.component_information(before, after, 2)
+    info = llr_kinds.component_information(before, after, 2)
     assert info == pytest.approx((1.0 / cov[0, 0], 1.0 / cov[1, 1]), rel=1e-9)
     # Constant speed after the change: the directions cannot be separated.
     flat = _rows_sum(np.full(3000, 25.0))
-    assert llr_stats.component_information(before, flat, 2) == (0.0, 0.0)
-    assert llr_stats.detectable_steps((0.0, 0.0), 1.0, 3.29) == (math.inf, math.inf)
+    assert llr_kinds.component_information(before, flat, 2) == (0.0, 0.0)
+    assert llr_kinds.detectable_steps((0.0, 0.0), 1.0, 3.29) == (math.inf, math.inf)
 
 
 def test_constant_speed_after_the_change_stays_undecided():
     # No post-change speed variation: dry a and viscous a / |w| give the same torque, so
     # neither single-component change can be rejected (chi = 0): undecided, whatever the
     # step, with the better single kind as guess.
-    from rwa_monitor.core import llr_stats
+    from rwa_monitor.core import llr_kinds, llr_stats
     rng = np.random.default_rng(5)
     w = np.concatenate([paper_speed(3000), np.full(3000, 25.0)])
     f = -(1.0 + 0.5 * (np.arange(6000) >= 3000)) * np.sign(w) - 0.05 * w
@@ -283,8 +283,8 @@ def test_constant_speed_after_the_change_stays_undecided():
     terms = np.column_stack([h[:, 0] ** 2, h[:, 0] * h[:, 1], h[:, 1] ** 2, h[:, 0] * f,
                              h[:, 1] * f, f * f])
     before, after = terms[:3000].sum(axis=0), terms[3000:].sum(axis=0)
-    cat = llr_stats.categorise(before, 3000, after, 2, None, llr_stats.z_threshold(1e-3))
-    assert cat.kind == llr_stats.UNDECIDED and not cat.confirmed
+    cat = llr_kinds.categorise(before, 3000, after, 2, None, llr_stats.z_threshold(1e-3))
+    assert cat.kind == llr_kinds.UNDECIDED and not cat.confirmed
     assert cat.detectable == (math.inf, math.inf)
     # Half the samples before the change moved to a varying speed: now the kind is found.
     w2 = paper_speed(6000)
@@ -293,7 +293,7 @@ def test_constant_speed_after_the_change_stays_undecided():
     h2 = np.column_stack([-np.sign(w2), -w2])
     terms2 = np.column_stack([h2[:, 0] ** 2, h2[:, 0] * h2[:, 1], h2[:, 1] ** 2,
                               h2[:, 0] * f2, h2[:, 1] * f2, f2 * f2])
-    cat2 = llr_stats.categorise(terms2[:3000].sum(axis=0), 3000, terms2[3000:].sum(axis=0),
+    cat2 = llr_kinds.categorise(terms2[:3000].sum(axis=0), 3000, terms2[3000:].sum(axis=0),
                                 2, None, llr_stats.z_threshold(1e-3))
     assert (cat2.kind, cat2.confirmed) == ('dry', True)
 

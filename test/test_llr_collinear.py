@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from rwa_monitor.core import keys, llr_stats
+from rwa_monitor.core import keys, llr_growth, llr_kinds
 from rwa_monitor.core.llr import detect_batch
 
 
@@ -18,15 +18,19 @@ def coast(w0: float, dry: float, viscous: float, inertia: float, n: int, dt: flo
 
 def spin_downs(seed: int, factor: float = 3.7, n: int = 15_000, dt: float = 0.1,
                noise: float = 5e-5, dry: float = 2e-3, viscous: float = 2e-6,
-               inertia: float = 0.05):
-    """Two coasts from ~400 rad/s; the second with its dry friction x ``factor``."""
+               inertia: float = 0.05, viscous_factor: float = 1.0):
+    """Two coasts from ~400 rad/s; the second with its dry friction x ``factor``.
+
+    ``viscous_factor``: the second coast's viscous friction likewise.
+    """
     rng = np.random.default_rng(seed)
     speeds, frictions = [], []
     for run in range(2):
         d = dry * (factor if run else 1.0)
-        w = coast(400.0 * (1 + 0.02 * rng.standard_normal()), d, viscous, inertia, n, dt)
+        v = viscous * (viscous_factor if run else 1.0)
+        w = coast(400.0 * (1 + 0.02 * rng.standard_normal()), d, v, inertia, n, dt)
         speeds.append(w)
-        frictions.append(-d * np.sign(w) - viscous * w + noise * rng.standard_normal(n))
+        frictions.append(-d * np.sign(w) - v * w + noise * rng.standard_normal(n))
     w = np.concatenate(speeds)
     return np.arange(w.size) * dt, w, np.concatenate(frictions), n
 
@@ -43,10 +47,10 @@ def test_growth_separation_measures_the_alternatives_collinearity():
     dt = 0.1
     u = np.arange(3000) * dt
     w = coast(300.0, 7.4e-3, 2e-6, 0.05, 3000, dt)
-    assert max(llr_stats.growth_separation(_after_gram(w, u), 2)) < 1e-5
+    assert max(llr_growth.growth_separation(_after_gram(w, u), 2)) < 1e-5
     swing = 12.0 * np.sin(2 * np.pi * np.arange(3000) / 5000.0) + 5.0
-    assert min(llr_stats.growth_separation(_after_gram(swing, u), 2)) > 10 * \
-        llr_stats.MIN_SEPARATION
+    assert min(llr_growth.growth_separation(_after_gram(swing, u), 2)) > 10 * \
+        llr_growth.MIN_SEPARATION
 
 
 def test_spin_downs_get_no_confident_wrong_kind():
@@ -88,3 +92,19 @@ def test_the_demo_names_both_injected_kinds():
         events = detect_batch(tele.time, ch.speed, ch.friction, component=wheel)
         assert {e.index for e in events} == {events[0].index}
         assert events[-1].kind == kind and events[-1].details[keys.KIND_CONFIRMED]
+
+
+def test_growth_never_makes_a_single_step_kind_both():
+    # A confirmed dry step (its viscous component within 1.96) whose after segment grows in
+    # the viscous direction is withdrawn (undecided, reason grows), with the viscous guess
+    # if only that growth is significant and its own otherwise; never `both`, which the
+    # step tests alone confirm (each component significant given the other at the level).
+    dx = np.array([[0.5, 0.0], [0.0, 0.025], [0.5, 0.001]])
+    step = llr_kinds.Category('dry', dx[0].copy(), (4.2, 0.7), 1.0, True, 'dry')
+    reject = 14.17
+    assert llr_kinds.refuted(step, (1.0, 20.0), reject, dx) == step
+    for chi, guess in (((16.1, 14.2), 'dry'), ((16.1, 3.0), 'viscous')):
+        out = llr_kinds.refuted(step, chi, reject, dx)
+        assert (out.kind, out.confirmed, out.guess, out.reason) == \
+            ('undecided', False, guess, 'grows')
+        assert np.array_equal(out.dx, dx[llr_kinds.KINDS.index(guess)])

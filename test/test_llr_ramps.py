@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from rwa_monitor.core import keys, llr_stats
+from rwa_monitor.core import keys, llr_growth, llr_kinds, llr_stats
 from rwa_monitor.core.llr import detect_batch, LLRDetector
 
 Z_STAR = llr_stats.z_threshold(1e-3)
@@ -56,7 +56,7 @@ def _sums(name: str, noise: np.ndarray | None):
     terms = _terms(w, f)
     u = (np.arange(N_AFTER) * DT)
     return (terms[:N_BEFORE].sum(axis=0), terms[N_BEFORE:].sum(axis=0),
-            llr_stats.ramp_sums(terms[N_BEFORE:], u))
+            llr_growth.ramp_sums(terms[N_BEFORE:], u))
 
 
 def _noncentrality(name: str) -> tuple[float, float]:
@@ -67,23 +67,23 @@ def _noncentrality(name: str) -> tuple[float, float]:
     statistic follows with unit white noise.
     """
     before, after, ramp = _sums(name, None)
-    row = llr_stats.ramp_shapes(ramp, 2)[-1]
-    return llr_stats.ramp_statistics(llr_stats.ramp_fits(before, after, row, 2), 1.0)
+    row = llr_growth.ramp_shapes(ramp, 2)[-1]
+    return llr_growth.ramp_statistics(llr_growth.ramp_fits(before, after, row, 2), 1.0)
 
 
-def _categorise(name: str, seed: int) -> llr_stats.Category:
+def _categorise(name: str, seed: int) -> llr_kinds.Category:
     noise = np.random.default_rng(seed).standard_normal(N_BEFORE + N_AFTER)
     before, after, ramp = _sums(name, noise)
-    return llr_stats.categorise(before, N_BEFORE, after, 2, 1.0, Z_STAR, ramp)
+    return llr_kinds.categorise(before, N_BEFORE, after, 2, 1.0, Z_STAR, ramp)
 
 
 def test_ramp_limits_are_the_chi_square_quantiles():
-    reject, absent = llr_stats.ramp_limits(1, Z_STAR)
+    reject, absent = llr_growth.ramp_limits(1, Z_STAR)
     assert reject == pytest.approx(Z_STAR ** 2, rel=1e-9)
-    assert absent == pytest.approx(llr_stats.Z_ABSENT ** 2, rel=1e-9)
+    assert absent == pytest.approx(llr_kinds.Z_ABSENT ** 2, rel=1e-9)
     # Two degrees of freedom: P(chi2_2 > x) = exp(-x / 2).
-    assert llr_stats.ramp_limits(2, Z_STAR)[0] == pytest.approx(-2.0 * math.log(1e-3))
-    assert llr_stats.ramp_limits(3, Z_STAR)[0] == pytest.approx(stats.chi2.isf(1e-3, 3))
+    assert llr_growth.ramp_limits(2, Z_STAR)[0] == pytest.approx(-2.0 * math.log(1e-3))
+    assert llr_growth.ramp_limits(3, Z_STAR)[0] == pytest.approx(stats.chi2.isf(1e-3, 3))
 
 
 def test_full_ramp_model_is_the_separate_fit_of_the_after_segment():
@@ -101,7 +101,7 @@ def test_full_ramp_model_is_the_separate_fit_of_the_after_segment():
     hb, fb = h[:N_BEFORE], f[:N_BEFORE]
     expected = (float(np.linalg.lstsq(hb, fb, rcond=None)[0] @ (hb.T @ fb))
                 + float(np.linalg.lstsq(z, fa, rcond=None)[0] @ (z.T @ fa)))
-    explained = llr_stats.ramp_fits(before, after, llr_stats.ramp_shapes(ramp, 2)[-1], 2)
+    explained = llr_growth.ramp_fits(before, after, llr_growth.ramp_shapes(ramp, 2)[-1], 2)
     assert explained[0] == pytest.approx(expected, rel=1e-9)
     assert explained[0] >= max(explained[1], explained[2])
 
@@ -118,11 +118,11 @@ def test_a_ramp_is_named_its_kind(name, kind):
     single kind needs a false significance of the other kind's growth at 1e-3.
     """
     before, after, ramp = _sums(name, None)
-    step = llr_stats.categorise(before, N_BEFORE, after, 2, 1.0, Z_STAR)
+    step = llr_kinds.categorise(before, N_BEFORE, after, 2, 1.0, Z_STAR)
     assert (step.kind, step.confirmed) == ('both', True)
     h = llr_stats.KINDS.index(kind)
     lam = _noncentrality(name)
-    reject, absent = llr_stats.ramp_limits(1, Z_STAR)
+    reject, absent = llr_growth.ramp_limits(1, Z_STAR)
     assert lam[h] == pytest.approx(0.0, abs=1e-6)
     p_named = (stats.chi2.cdf(absent, 1) * stats.ncx2.sf(reject, 1, lam[1 - h])
                * (1.0 - 1e-3))
@@ -161,8 +161,8 @@ def test_a_growing_change_is_not_confirmed_by_the_step_rule(name, kind):
     (probability from the non-central chi-square, checked below).
     """
     before, after, ramp = _sums(name, None)
-    shapes = llr_stats.ramp_shapes(ramp, 2)
-    lam = llr_stats.growth_statistic(after, shapes, 1.0, 2)
+    shapes = llr_growth.ramp_shapes(ramp, 2)
+    lam = llr_growth.growth_statistic(after, shapes, 1.0, 2)
     limit = stats.chi2.isf(1e-3 / shapes.shape[0], 2)
     miss = stats.ncx2.cdf(limit, 2, lam)
     assert miss < 1e-6
@@ -173,8 +173,8 @@ def test_a_growing_change_is_not_confirmed_by_the_step_rule(name, kind):
     # A step does not grow: its statistic is central (noise-free 0), so the check takes a
     # step's verdict away only through a false significance at the category level.
     before, after, ramp = _sums('both step', None)
-    assert llr_stats.growth_statistic(after, llr_stats.ramp_shapes(ramp, 2), 1.0,
-                                      2) == pytest.approx(0.0, abs=1e-6)
+    assert llr_growth.growth_statistic(after, llr_growth.ramp_shapes(ramp, 2), 1.0,
+                                       2) == pytest.approx(0.0, abs=1e-6)
 
 
 def test_a_both_step_stays_both():
@@ -198,9 +198,9 @@ def test_ramp_shapes_include_a_ramp_that_stopped():
     rng = np.random.default_rng(0)
     terms = rng.standard_normal((30, 6))
     u = np.arange(30) * DT
-    blocks = np.array([llr_stats.ramp_sums(terms[a:b], u[a:b])
+    blocks = np.array([llr_growth.ramp_sums(terms[a:b], u[a:b])
                        for a, b in ((0, 10), (10, 20), (20, 30))])
-    shapes = llr_stats.ramp_shapes(blocks, 2)
+    shapes = llr_growth.ramp_shapes(blocks, 2)
     for i, end in enumerate((9, 19, 29)):
         r = np.minimum(u, u[end])
         assert shapes[i, :6] == pytest.approx((terms * r[:, None]).sum(axis=0), rel=1e-12)
@@ -266,7 +266,7 @@ def test_a_second_change_during_a_ramp_is_still_declared(second):
     A viscous (dry) step of torque ~1 sd (3 sd) at 11000, while the dry ramp declared at
     about 8100 is still followed: a new change is declared within 500 samples of it in
     every run (measured 6/6 each), because a step beside the growing ramp is significant
-    at 1e-3 (:func:`llr_stats.continues`).
+    at 1e-3 (:func:`llr_growth.continues`).
     """
     for seed in range(3):
         t, w, f = _ramp_run(seed, 6.0, 0.0, second=second)

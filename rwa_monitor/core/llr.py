@@ -11,7 +11,9 @@ code. Where each part lives:
 - :mod:`rwa_monitor.core.llr_changes`: declaration, revision, re-check, continuation;
 - :mod:`rwa_monitor.core.llr_general`: the per-sample step of larger models (p > 2);
 - :mod:`rwa_monitor.core.llr_common`: parameters, p_k, events, the noise model;
-- :mod:`rwa_monitor.core.llr_stats`: categorisation statistics;
+- :mod:`rwa_monitor.core.llr_stats`: prefix sums, fits and quantiles;
+  :mod:`rwa_monitor.core.llr_kinds`: the kind of a change;
+  :mod:`rwa_monitor.core.llr_growth`: the after-segment growth statistics;
 - :mod:`rwa_monitor.core.llr_batch`: whole arrays.
 
 The algorithm as implemented, its departures from the paper and the categorisation design

@@ -17,7 +17,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from rwa_monitor.core import llr_kernel as kern, llr_stats
+from rwa_monitor.core import llr_growth, llr_kernel as kern, llr_kinds, llr_stats
 from rwa_monitor.core.events import AnomalyEvent
 from rwa_monitor.core.gchi2 import skip_threshold
 from rwa_monitor.core.llr_common import (candidate_log_p2, checkpoints, declaration,
@@ -35,7 +35,7 @@ class DeclaredChange:
     new reference starts (the after segment is ``gap`` + the new reference). ``checks``:
     positions where the kind is re-checked (:func:`llr_common.checkpoints`), ``points``:
     the remaining positions where the ramp sums take in samples
-    (:func:`llr_common.ramp_points`), ``ramp``: :func:`llr_stats.ramp_sums` blocks of
+    (:func:`llr_common.ramp_points`), ``ramp``: :func:`llr_growth.ramp_sums` blocks of
     ``[tau, ramp_end]`` (times since ``time``).
     """
 
@@ -216,7 +216,7 @@ class ChangeRules:
         """Return True if the change declared at ``n`` is the previous one still growing.
 
         Possible while the previous change's kind is still re-checked (its ramp sums are
-        kept up to date): :func:`llr_stats.continues` on its segments up to ``n`` and on
+        kept up to date): :func:`llr_growth.continues` on its segments up to ``n`` and on
         the samples ``[tau, n]``. If so, its ramp sums take in the samples up to ``n``.
         """
         prev = self._cat
@@ -227,18 +227,18 @@ class ChangeRules:
             blocks.append(self._ramp_block(prev.ramp_end + 1, n, prev.time))
         after = prev.gap + self._prefix_now()
         times = self._rings().time[np.arange(tau, n + 1) % self._L]
-        if not llr_stats.continues(prev.before, prev.n_before, after, np.asarray(blocks),
-                                   self._terms(tau, n), times - prev.time, prev.kind,
-                                   self._p, self._noise_var, self._z_thr):
+        if not llr_growth.continues(prev.before, prev.n_before, after, np.asarray(blocks),
+                                    self._terms(tau, n), times - prev.time, prev.kind,
+                                    self._p, self._noise_var, self._z_thr):
             return False
         prev.ramp = blocks
         prev.ramp_end = n
         return True
 
     def _ramp_block(self, first: int, last: int, t0: float) -> np.ndarray:
-        """Return :func:`llr_stats.ramp_sums` of positions ``first..last`` (in the ring)."""
+        """Return :func:`llr_growth.ramp_sums` of positions ``first..last`` (in the ring)."""
         times = self._rings().time[np.arange(first, last + 1) % self._L]
-        return llr_stats.ramp_sums(self._terms(first, last), times - t0)
+        return llr_growth.ramp_sums(self._terms(first, last), times - t0)
 
     def _terms(self, first: int, last: int) -> np.ndarray:
         """Return the per-sample terms of positions ``first..last`` (in the ring), ``(n, w)``.
@@ -273,7 +273,10 @@ class ChangeRules:
         has re-checks to come gets one more categorisation on every sample after it that
         the record holds (the same tests and levels as a re-check), as an event with
         ``final`` True and the samples it used, whether the kind changed or not; the
-        change is then closed. The batch path calls it after the last row; a live
+        change is then closed. A kind confirmed earlier is kept, when this evaluation does
+        not confirm one, only if its tests still find each of its components at the
+        category level (:func:`llr_kinds.supports`): the record as a whole, not its
+        shorter prefix, bears the answer. The batch path calls it after the last row; a live
         detector keeps its re-check schedule and calls it only when its input ends.
         Returns [] when no declaration is open.
         """
@@ -292,11 +295,12 @@ class ChangeRules:
                  ) -> list[AnomalyEvent]:
         """Re-check the kind of the last declared change on its after segment up to ``j``."""
         cat = self._cat
-        new = llr_stats.categorise(cat.before, cat.n_before, after, self._p,
+        new = llr_kinds.categorise(cat.before, cat.n_before, after, self._p,
                                    self._noise_var, self._z_thr, np.asarray(cat.ramp))
         if not final and not revision_due(cat.kind, cat.guess, cat.confirmed, new):
             return []
-        if final and cat.confirmed and not new.confirmed:
+        if final and cat.confirmed and not new.confirmed and \
+                llr_kinds.supports(new, cat.kind, self._z_thr):
             new = new._replace(kind=cat.kind, guess=cat.guess, confirmed=True)
         cat.kind, cat.guess, cat.confirmed = new.kind, new.guess, new.confirmed
         cat.revision += 1

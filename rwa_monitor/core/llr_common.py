@@ -14,7 +14,7 @@ from typing import Any, Callable, Mapping, NamedTuple
 
 import numpy as np
 
-from rwa_monitor.core import keys, llr_stats
+from rwa_monitor.core import keys, llr_kinds, llr_stats
 from rwa_monitor.core.events import AnomalyEvent
 from rwa_monitor.core.friction import coulomb_viscous, RegressorSet
 from rwa_monitor.core.gchi2 import log_lower_bound, log_sf2, log_sf2_t
@@ -98,7 +98,7 @@ def validate_parameters(component: str = 'rw1', *, window: int = 500,
                 reference_max=reference_max, noise_speed_model=noise_speed_model)
 
 
-def make_event(component: str, category: llr_stats.Category, rows: tuple[int, int, int],
+def make_event(component: str, category: llr_kinds.Category, rows: tuple[int, int, int],
                times: tuple[float, float], log_p: float, revision: int,
                final_samples: int | None = None) -> AnomalyEvent:
     """Build the AnomalyEvent of a declaration or revision.
@@ -117,8 +117,8 @@ def make_event(component: str, category: llr_stats.Category, rows: tuple[int, in
                keys.KIND_SHAPE: category.shape,
                keys.DETECTABLE_DRY: category.detectable[0],
                keys.DETECTABLE_VISCOUS: category.detectable[1]}
-    if category.kind == llr_stats.UNDECIDED:
-        details[keys.KIND_REASON] = llr_stats.REASONS.get(category.reason, category.reason)
+    if category.kind == llr_kinds.UNDECIDED:
+        details[keys.KIND_REASON] = llr_kinds.REASONS.get(category.reason, category.reason)
     if final_samples is not None:
         details[keys.FINAL] = True
         details[keys.FINAL_SAMPLES] = int(final_samples)
@@ -133,7 +133,7 @@ class Declaration(NamedTuple):
 
     change: int
     restart: int
-    category: llr_stats.Category
+    category: llr_kinds.Category
 
 
 def declaration(prefix: np.ndarray, first: int, c: int, k_min: int, n: int,
@@ -145,12 +145,12 @@ def declaration(prefix: np.ndarray, first: int, c: int, k_min: int, n: int,
     covering ``[max(c, k_min - window), n + 1]``. Change position ``tau``: the ML refinement
     (:func:`llr_stats.refine_change`) over ``k_min +- window`` if enabled, else ``k_min``
     (the argmin of p_k, Algorithm 1 line 15). Categorisation: before = ``[c, tau)``, after
-    = ``[tau, n]`` (:func:`llr_stats.categorise`). The new reference starts at
+    = ``[tau, n]`` (:func:`llr_kinds.categorise`). The new reference starts at
     ``max(tau, k_min)``, the later of the two change estimates, so that an estimate that
     falls before the true change does not put pre-change samples in it (they would be
     declared as the same change again). With a sliding reference (``reference_max``) the
     caller passes ``c`` = the start of the reference window and rows relative to it.
-    ``ramp_of(tau)``: the :func:`llr_stats.ramp_sums` of ``[tau, n]`` (the kind of a
+    ``ramp_of(tau)``: the :func:`llr_growth.ramp_sums` of ``[tau, n]`` (the kind of a
     growing change, docs/llr.md "Kinds on ramps"); None: steps only.
     """
     p = cfg['regressors'].p
@@ -163,11 +163,11 @@ def declaration(prefix: np.ndarray, first: int, c: int, k_min: int, n: int,
     before = prefix[tau - first]
     after = prefix[n + 1 - first] - before
     ramp = None if ramp_of is None else ramp_of(tau)
-    category = llr_stats.categorise(before, tau - c, after, p, noise_var, z_thr, ramp)
+    category = llr_kinds.categorise(before, tau - c, after, p, noise_var, z_thr, ramp)
     return Declaration(tau, max(tau, k_min), category)
 
 
-def revision_due(kind: str, guess: str, confirmed: bool, new: llr_stats.Category) -> bool:
+def revision_due(kind: str, guess: str, confirmed: bool, new: llr_kinds.Category) -> bool:
     """Return True when a re-check of a declared change's kind gives a revision event.
 
     Not in the paper (docs/llr.md "Categorisation"): a kind confirmed for the first time
@@ -197,7 +197,7 @@ def ramp_points(n: int, checks: list[int], window: int) -> list[int]:
     Every ``window`` samples after ``n`` up to the last re-check, and at each re-check
     (:func:`checkpoints`): the streaming detector holds the per-sample terms of the last
     ``2 window + k_verif + 2`` samples only, so it adds them to the time-weighted sums
-    (:func:`llr_stats.ramp_sums`) block by block; the batch path takes the same blocks so
+    (:func:`llr_growth.ramp_sums`) block by block; the batch path takes the same blocks so
     that both sum the same floats in the same order.
     """
     if not checks:

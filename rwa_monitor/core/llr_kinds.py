@@ -1,0 +1,258 @@
+"""The kind of a declared change: dry, viscous, both or undecided.
+
+Not in the llr-realtime paper, which promises a categorisation but gives none; the design
+and its error bounds are in docs/llr.md "Categorisation dry / viscous / both", "Kinds on
+ramps" and "Kinds that survive collinearity". Nested likelihood-ratio tests of the step
+hypotheses (:func:`rwa_monitor.core.llr_stats.change_fits`), the information each
+component has (:func:`component_information`) and the after-segment growth statistics of
+:mod:`rwa_monitor.core.llr_growth`. Runs once per declaration or revision, never per
+sample.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+
+from rwa_monitor.core.llr_growth import (after_gram, grows, growth_separation,
+                                         MIN_SEPARATION, ramp_fits, ramp_kind, ramp_shapes,
+                                         ramp_statistics)
+from rwa_monitor.core.llr_stats import (before_noise_var, change_fits, chi2_upper, KINDS,
+                                        level_of, solve_scaled, unpack)
+
+# The data cannot tell dry from viscous (docs/llr.md "Categorisation"): an event kind.
+UNDECIDED = 'undecided'
+# A single-component kind is confirmed only if the other component is not significant
+# even at 5 % (two-sided): between this and the category level the data are ambiguous.
+Z_ABSENT = 1.959963984540054
+POWER_Z = 1.2815515655446004   # one-sided normal quantile of 0.9 (detectable steps)
+SHAPES = ('step', 'ramp')
+# Why a kind stays undecided (the event's ``kind_reason``).
+REASONS = {
+    'small': 'neither single-component change is rejected: the data fit either',
+    'speed': 'speed variation too small to separate dry from viscous for a change of this '
+             'size',
+    'ambiguous': 'the other component lies between the 5 % and the category level',
+    'grows': 'the change grows: the step model is rejected and no growth kind is named',
+}
+
+
+class Category(NamedTuple):
+    """Kind of one change, its estimate, the component z values and the noise variance.
+
+    ``kind`` is ``undecided`` when the data cannot tell dry from viscous; ``guess`` is then
+    the single-component kind that fits better (else ``guess == kind``); ``dx`` is the
+    estimate under ``guess``. ``detectable`` = smallest dry step (N m) and viscous step
+    (N m s) the after segment would reveal with 90 % power at the category level.
+    ``shape``: ``ramp`` when the kind was named by the ramp models (:func:`ramp_fits`),
+    else ``step``.
+    """
+
+    kind: str
+    dx: np.ndarray
+    z: tuple[float, float]
+    noise_var: float
+    confirmed: bool
+    guess: str = ''
+    detectable: tuple[float, float] = (math.inf, math.inf)
+    shape: str = SHAPES[0]
+    reason: str = ''   # why ``undecided`` (a key of REASONS), else ''
+
+
+def component_information(before: np.ndarray, after: np.ndarray, p: int
+                          ) -> tuple[float, float]:
+    """Return the information ``(I_dry, I_viscous)`` of the joint fit on the change ``dx``.
+
+    Not in the paper. In the joint fit (``x`` before, ``x + dx`` after) the information
+    on ``dx`` is the Schur complement ``S = Pi_a - Pi_a (Pi_b + Pi_a)^+ Pi_a`` (its
+    inverse is ``Pi_b^-1 + Pi_a^-1`` when both exist); on one component with the others
+    free it is ``I_i = S_ii - S_ir S_rr^+ S_ri``, so that ``var(dx_i) = sigma^2 / I_i``.
+    0 when the segments cannot separate the component from the others (constant speed
+    after the change, wheel at rest).
+    """
+    pi_b, _, _ = unpack(before, p)
+    pi_a, _, _ = unpack(after, p)
+    total = pi_b + pi_a
+    s_mat = pi_a - pi_a @ np.column_stack([solve_scaled(total, col) for col in pi_a.T])
+    s_mat = 0.5 * (s_mat + s_mat.T)
+    out = []
+    for i in (0, 1):
+        rest = [j for j in range(p) if j != i]
+        s_rr = s_mat[np.ix_(rest, rest)]
+        s_ri = s_mat[rest, i]
+        info = float(s_mat[i, i] - s_ri @ solve_scaled(s_rr, s_ri))
+        scale = max(float(s_mat[i, i]), 1e-300)
+        out.append(info if info > 1e-9 * scale else 0.0)
+    return out[0], out[1]
+
+
+def detectable_steps(info: tuple[float, float], noise_var: float, z_threshold: float
+                     ) -> tuple[float, float]:
+    """Return the dry and viscous steps found with 90 % power by the component tests.
+
+    Not in the paper. The likelihood-ratio test of one component (information ``I``,
+    :func:`component_information`) at level ``z_threshold`` has power 0.9 for a step of
+    ``(z* + z_0.9) sigma / sqrt(I)``: infinite when the post-change speed range cannot
+    separate the two.
+    """
+    return tuple(math.inf if i <= 0.0 else (z_threshold + POWER_Z) * math.sqrt(noise_var / i)
+                 for i in info)
+
+
+def separable(dx: np.ndarray, h: int, detectable: tuple[float, float], mean_speed: float
+              ) -> bool:
+    """Return True if a change of kind ``h`` (0 dry, 1 viscous) of this size is separable.
+
+    Not in the paper (docs/llr.md "Categorisation", condition 1): the torque of the
+    change under the single-kind fit ``dx[h]`` is at least the smallest step of the other
+    kind its test finds with 90 % power (:func:`detectable_steps`), both at the
+    post-change mean speed ``mean_speed`` (a dry step ``a`` = a viscous step ``a / |w|_a``
+    there).
+    """
+    scale = (1.0, mean_speed)
+    return detectable[1 - h] * scale[1 - h] <= abs(float(dx[h, h])) * scale[h]
+
+
+def categorise(before: np.ndarray, n_before: int, after: np.ndarray, p: int,
+               noise_var: float | None, z_threshold: float,
+               ramp: np.ndarray | None = None) -> Category:
+    """Return the :class:`Category` (kind, dx, z, sigma^2, confirmed) of one change.
+
+    Not in the paper (which promises a categorisation but gives none); the design and its
+    error bounds are in docs/llr.md "Categorisation". Nested likelihood-ratio tests on the
+    joint fit of :func:`change_fits`, ``sigma^2`` from the before fit, each of level
+    ``z_threshold`` (two-sided normal quantile): ``chi_v = (RSS_dry - RSS_both) /
+    sigma^2`` rejects the dry-only change when ``> z*^2``, ``chi_d = (RSS_viscous -
+    RSS_both) / sigma^2`` the viscous-only change (1 degree of freedom each; the squared
+    marginal z of ``dx`` when the after segment is identifiable). ``z_dry = sign(dx_dry)
+    sqrt(chi_d)``, ``z_viscous`` likewise. Both rejected -> ``both``. One rejected, say
+    viscous-only, -> ``dry`` if besides the viscous component is not significant even at
+    5 % (``|z_viscous| <= Z_ABSENT``) and a pure viscous change of the same torque at the
+    post-change mean speed ``|w|_a`` would have been found with 90 % power
+    (:func:`detectable_steps`); ``viscous`` symmetrically. These
+    are *confirmed*. Otherwise :data:`UNDECIDED` with ``guess`` the single-component kind
+    that fits better. ``dx`` is always the estimate of the hypothesis of ``guess``
+    (constrained fit for a single component), never the free fit of an unidentifiable
+    segment.
+
+    ``ramp``: the block rows (:func:`ramp_sums`) of the after segment. Given, the growth
+    tests (:func:`ramp_kind` on the best time shape of each hypothesis,
+    :func:`ramp_shapes`; docs/llr.md "Kinds on ramps") may name the kind in which the
+    change grows; if it differs from the step outcome and a growth of the other kind of
+    the same torque rate would have been found (the guard of :func:`separable`), it
+    replaces it, with ``shape`` ``ramp`` and the step estimate ``dx`` of that kind; a
+    confirmed single step kind refuted by a significant growth of the other kind is
+    withdrawn to ``undecided`` (:func:`refuted`; never ``both``, which only the step tests
+    confirm). When the growth columns cannot be told from the step offsets and each other
+    (:func:`growth_separation` below :data:`MIN_SEPARATION`) the growth tests are not
+    used and the step outcome stands. A step verdict that stands is not
+    confirmed when the after segment grows (:func:`grows`): the step model it rests on is
+    rejected, and a step fit of a growing level shares the rise between the directions
+    (``undecided``, guess the better single kind). A step has no growth: a true single
+    step is named the other kind, or loses its confirmation, only through a false
+    significance at the category level.
+    """
+    before = np.asarray(before, dtype=float)
+    after = np.asarray(after, dtype=float)
+    explained, dx = change_fits(before, after, p)
+    s2 = before_noise_var(before, n_before, p) if noise_var is None else float(noise_var)
+    chi_v = max(float(explained[2] - explained[0]), 0.0) / s2
+    chi_d = max(float(explained[2] - explained[1]), 0.0) / s2
+    z_d = math.copysign(math.sqrt(chi_d), float(dx[2, 0]))
+    z_v = math.copysign(math.sqrt(chi_v), float(dx[2, 1]))
+    limit = z_threshold * z_threshold
+    no_dry_only = chi_v > limit
+    no_viscous_only = chi_d > limit
+    info = component_information(before, after, p)
+    detectable = detectable_steps(info, s2, z_threshold)
+    pi_a = unpack(after, p)[0]
+    mean_speed = float(pi_a[0, 1] / pi_a[0, 0]) if pi_a[0, 0] > 0.0 else 0.0
+    reason = ''
+    if no_dry_only and no_viscous_only:
+        step = Category(KINDS[2], dx[2].copy(), (z_d, z_v), s2, True, KINDS[2], detectable)
+    else:
+        if no_dry_only or no_viscous_only:
+            h = 1 if no_dry_only else 0
+            absent = abs((z_d, z_v)[1 - h]) <= Z_ABSENT
+            split = separable(dx, h, detectable, mean_speed)
+            confirmed = absent and split
+            kind = KINDS[h] if confirmed else UNDECIDED
+            reason = '' if confirmed else ('speed' if not split else 'ambiguous')
+        else:
+            h = 0 if explained[0] >= explained[1] else 1
+            confirmed, kind = False, UNDECIDED
+            reason = 'small' if separable(dx, h, detectable, mean_speed) else 'speed'
+        step = Category(kind, dx[h].copy(), (z_d, z_v), s2, confirmed, KINDS[h], detectable,
+                        reason=reason)
+    if ramp is None:
+        return step
+    shapes = ramp_shapes(ramp, p)
+    fits = ramp_fits(before, after, shapes, p)
+    best = fits.max(axis=0)
+    gram = after_gram(after, shapes, p)[0][int(np.argmax(fits[:, 0]))]
+    if min(growth_separation(gram, p)) < MIN_SEPARATION:
+        # The growth alternatives cannot be told from a step and a speed term here (a
+        # monotone spin-down, a wheel that keeps one speed): the simpler explanation, the
+        # step outcome, stands (undecided: with its own reason); a confirmed step verdict
+        # cannot be checked for growth.
+        return step
+    named = ramp_kind(best, s2, z_threshold)
+    if named is not None and step.kind == KINDS[named]:
+        return step
+    if named is not None and separable(dx, named, detectable, mean_speed):
+        return Category(KINDS[named], dx[named].copy(), (z_d, z_v), s2, True, KINDS[named],
+                        detectable, SHAPES[1])
+    if named is None:
+        # The statistics are the best of the candidate time shapes: Bonferroni over them,
+        # as the step check (grows) does.
+        level = level_of(z_threshold) / shapes.shape[0]
+        step = refuted(step, ramp_statistics(best, s2), chi2_upper(1, level), dx)
+    growing = step.confirmed and step.shape == SHAPES[0] and grows(
+        after, shapes, s2, p, z_threshold)
+    if growing:
+        h = 0 if explained[0] >= explained[1] else 1
+        return step._replace(kind=UNDECIDED, dx=dx[h].copy(), confirmed=False,
+                             guess=KINDS[h], reason='grows')
+    if step.kind == UNDECIDED and not step.reason:
+        step = step._replace(reason='grows')
+    return step
+
+
+def refuted(step: Category, chi: tuple[float, float], reject: float, dx: np.ndarray
+            ) -> Category:
+    """Return the step category, unless the growth tests refute its single kind.
+
+    Not in the paper (docs/llr.md "Kinds on ramps", "Kinds that survive collinearity").
+    ``chi[h]``: the significance of the growth of the kind other than ``h`` beside
+    ``h``'s own (:func:`ramp_statistics`). When the change grows in the other kind's
+    direction (``chi[h] > reject``), a confirmed step of kind ``h`` alone is withdrawn:
+    ``undecided`` (reason ``grows``), with the other kind as guess, or ``h`` if it grows
+    in both directions. Never ``both``: a confirmed ``both`` states that each component
+    is significant given the other at the category level (the step tests), and here the
+    other kind's step is not significant even at 5 % (a condition of ``h``'s
+    confirmation); two growth statistics whose columns nearly coincide are one piece of
+    evidence, on the step model's fit, not on a second component.
+    """
+    if not step.confirmed or step.kind not in KINDS[:2]:
+        return step
+    h = KINDS.index(step.kind)
+    if chi[h] <= reject:
+        return step
+    guess = h if chi[1 - h] > reject else 1 - h
+    return step._replace(kind=UNDECIDED, dx=dx[guess].copy(), confirmed=False,
+                         guess=KINDS[guess], shape=SHAPES[1], reason='grows')
+
+
+def supports(category: Category, kind: str, z_threshold: float) -> bool:
+    """Return True if the step tests of ``category`` find each component of ``kind``.
+
+    Not in the paper (docs/llr.md "End of record"). ``kind`` (dry, viscous or both)
+    claims that its components are non-zero; each is found when its test given the other
+    component rejects at the category level (``|z| > z_threshold``, the z of
+    :func:`categorise`). The end of record keeps an earlier confirmed kind only where the
+    final evaluation, on every sample after the change, still supports it.
+    """
+    components = {KINDS[0]: (0,), KINDS[1]: (1,), KINDS[2]: (0, 1)}[kind]
+    return all(abs(category.z[i]) > z_threshold for i in components)
