@@ -72,8 +72,9 @@ def prune(design: Design, added: list[AddedEffect], alpha_held: float
     sat at its own speed the band's held-out gain was 0.4). Each effect is tested as it
     was at entry, against the model without it (its nonlinear parameters fixed): p below
     its step's level, held-out LR above the chi^2 critical value at ``alpha_held``, BIC
-    gain positive. The weakest failing effect (smallest held-out LR) is removed, the
-    list changed in place, and the test repeated. A removed effect is not tried again.
+    gain positive, its weight of the physical sign (effects.POSITIVE_WEIGHT). The weakest
+    failing effect (smallest held-out LR) is removed, the list changed in place, and the
+    test repeated. A removed effect is not tried again.
     """
     removed: list[dict] = []
     while len(added) > 1:
@@ -81,7 +82,7 @@ def prune(design: Design, added: list[AddedEffect], alpha_held: float
         failing = []
         for eff in added:
             own = drop_one(design, full, eff.columns)
-            if own['dof'] == 0:
+            if own['dof'] == 0 or not fx.physical_weights(eff.kind, full.coef[eff.columns]):
                 failing.append((-np.inf, eff, own))
                 continue
             own['bic_gain'] = own['lr'] - (own['dof'] + eff.evidence['parameters']

@@ -19,17 +19,22 @@ together, the way one would argue from several specimens of one part:
    sum_k (LR_k - dof_k ln n_k) - q ln(sum_k n_k) > 0 (q shared nonlinear parameters,
    counted once). Among significant effects the largest summed held-out LR wins, with
    select.py's precedence between alternative explanations of one structure (cosine
-   and Vuong's test on the wheels' pooled, variance-weighted rows). The fallback is
-   scored the same way (each wheel its own knots) and added only when no named effect
-   is significant (physics first, select.py).
-3. The loop stops when every wheel's residual passes the structure and whiteness tests,
-   when nothing pooled is significant, or after ``max_effects``.
+   and Vuong's test on the wheels' pooled, variance-weighted rows). After each addition
+   the shared parameters of every common effect are profiled again and effects that no
+   longer pass the pooled tests are removed (joint_backfit.py).
+3. The loop runs on named effects and stops when every wheel's residual passes the
+   structure and whiteness tests, when nothing named is significant on the pooled
+   evidence, or after ``max_effects``. The catch-all (each wheel its own knots, scored
+   the same way) is admitted only when no named set reaches the floor
+   (:func:`_named_first`).
 4. Each wheel is then refitted with the common set: the continuous parameter of each
    effect (Stribeck speed, band width) is re-profiled on the wheel's own data (one
    coordinate pass, within one grid ratio of the shared value); shapes, exponents and
    frequencies stay shared.
-5. consistency.py tests whether a wheel's own data contradict its siblings.
+5. joint_flags.py tests whether a wheel's own data contradict its siblings.
 
+Modules: joint_candidates.py (the shared grids), joint_scoring.py (pooled evidence, one
+step), joint_backfit.py, joint_flags.py; this one runs the loop and refits the wheels.
 Jumps are segmented per wheel (baseline.py) before, and searched again per wheel with
 the common effects in the background, as in select.identify.
 """
@@ -167,6 +172,8 @@ def _named_first(datas: list[IdentData], segments: list[Segments], alpha: float,
                                'effects': [a['candidate'].name for a in r.added],
                                'held_out_over_floor2': r.held_out(),
                                'reaches_floor': r.catch_all is None} for r in runs]
+        for sel in joint.selections.values():   # selection.json of every wheel
+            sel.alternatives = joint.alternatives
     return joint
 
 

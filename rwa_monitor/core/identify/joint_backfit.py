@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 from scipy import stats
 
+from rwa_monitor.core.identify import effects as fx
 from rwa_monitor.core.identify.joint_scoring import score_joint, shared_params, Wheels
 from rwa_monitor.core.identify.scoring import drop_one, likelihood_ratio, significant
 
@@ -48,7 +49,8 @@ def prune_joint(wheels: Wheels, added: list[dict], alpha_held: float
 
     Each effect's pooled evidence against the model without it (its parameters fixed):
     summed LR and held-out LR over the wheels that have it, BIC gain with its shared
-    parameters paid once, at its step's level. The weakest failing one goes first.
+    parameters paid once, at its step's level; the wheels' mean weight of the physical
+    sign (effects.POSITIVE_WEIGHT). The weakest failing one goes first.
     """
     removed: list[dict] = []
     while len(added) > 1:
@@ -56,19 +58,25 @@ def prune_joint(wheels: Wheels, added: list[dict], alpha_held: float
         for a in added:
             lr = held = gain = 0.0
             dof = n_total = 0
+            weights = []
             for k, s in enumerate(a['per']):
                 if s is None:
                     continue
                 full = wheels.current[k]
-                own = drop_one(wheels.designs[k], full, wheels.columns_of(added, a, k))
+                columns = wheels.columns_of(added, a, k)
+                weights.append(full.coef[columns])
+                own = drop_one(wheels.designs[k], full, columns)
                 lr, held, dof = lr + own['lr'], held + own['lr_held_out'], dof + own['dof']
                 gain += own['lr'] - own['dof'] * float(np.log(full.n_train))
                 n_total += full.n_train
             entry = {'lr': lr, 'dof': dof, 'lr_held_out': held,
                      'p_value': float(stats.chi2.sf(lr, dof)) if dof else 1.0,
                      'bic_gain': gain - a['candidate'].free * float(np.log(max(n_total, 1)))}
-            if dof == 0 or not significant(entry, a['evidence']['level'], alpha_held):
-                failing.append((held if dof else -np.inf, a, entry))
+            physical = fx.physical_weights(a['candidate'].kind, np.mean(weights, axis=0))
+            if dof == 0 or not physical:
+                failing.append((-np.inf, a, entry))
+            elif not significant(entry, a['evidence']['level'], alpha_held):
+                failing.append((held, a, entry))
         if not failing:
             break
         _, a, entry = min(failing, key=lambda item: item[0])

@@ -20,7 +20,8 @@ from rwa_monitor.core.identify.baseline import Segments
 from rwa_monitor.core.identify.data import IdentData
 from rwa_monitor.core.identify.fitting import Design, held_out_mask
 from rwa_monitor.core.identify.joint_candidates import joint_candidates, JointCandidate
-from rwa_monitor.core.identify.scoring import likelihood_ratio, significant
+from rwa_monitor.core.identify.scoring import likelihood_ratio, NO_ADMISSIBLE_FIT
+from rwa_monitor.core.identify.scoring import significant
 from rwa_monitor.core.identify.ties import PRECEDENCE, SAME_STRUCTURE
 
 
@@ -70,6 +71,10 @@ class Wheels:
             if not np.all(np.isfinite(cols)):
                 return None
             out.append({'params': params, 'fit': design.fit(cols), 'columns': cols})
+        weights = [s['fit'].coef[d.X.shape[1]:] for s, d in zip(out, self.designs)
+                   if s is not None]
+        if weights and not fx.physical_weights(kind, np.mean(weights, axis=0)):
+            return None   # the wheels' mean weight has the unphysical sign
         return out
 
     def pooled_lr(self, per: list[dict | None]) -> float:
@@ -205,7 +210,7 @@ def joint_step(wheels: Wheels, residuals: list[np.ndarray], tried: set[str], alp
         s = score_joint(wheels, cand)
         if s is None:
             record['candidates'].append({'name': cand.name,
-                                         'skipped': 'adds nothing the model lacks'})
+                                         'skipped': NO_ADMISSIBLE_FIT})
             continue
         s['significant'] = significant(s['evidence'], level, alpha_held)
         record['candidates'].append({'name': cand.name, 'params': shared_params(s),

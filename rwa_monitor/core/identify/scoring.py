@@ -31,16 +31,24 @@ class AddedEffect:
     evidence: dict
 
 
+NO_ADMISSIBLE_FIT = ('adds nothing the model lacks, or only with the unphysical sign of its '
+                     'weight (effects.POSITIVE_WEIGHT)')
+
+
 def likelihood_ratio(n: int, rss0: float, rss1: float) -> float:
     """Return n log(RSS_0 / RSS_1): the likelihood ratio with unknown noise variance."""
     return float(n * np.log(max(rss0, 1e-300) / max(rss1, 1e-300)))
 
 
 def _try(design: Design, cand: fx.Candidate, data: IdentData, params: dict):
+    """Return (params, fit, columns) at one point, or None: not finite, unphysical sign."""
     cols = fx.evaluate(cand.kind, params, data)
     if not np.all(np.isfinite(cols)):
         return None
-    return params, design.fit(cols), cols
+    fit = design.fit(cols)
+    if not fx.physical_weights(cand.kind, fit.coef[design.X.shape[1]:]):
+        return None
+    return params, fit, cols
 
 
 def _refine(design: Design, cand: fx.Candidate, data: IdentData, best: tuple) -> tuple:

@@ -40,7 +40,8 @@ from rwa_monitor.core.identify.baseline import check_identifiable, find_jumps, S
 from rwa_monitor.core.identify.data import IdentData
 from rwa_monitor.core.identify.fitting import Design, Fit, held_out_mask
 from rwa_monitor.core.identify.residuals import diagnose
-from rwa_monitor.core.identify.scoring import AddedEffect, score_candidate, significant
+from rwa_monitor.core.identify.scoring import AddedEffect, NO_ADMISSIBLE_FIT
+from rwa_monitor.core.identify.scoring import score_candidate, significant
 from rwa_monitor.core.identify.ties import preferred
 from rwa_monitor.core.params import check_int, check_real
 
@@ -268,7 +269,7 @@ def selection_step(design: Design, current: Fit, data: IdentData, residual: np.n
         s = score_candidate(design, current, cand, data)
         if s is None:
             record['candidates'].append({'name': cand.name,
-                                         'skipped': 'adds nothing the model lacks'})
+                                         'skipped': NO_ADMISSIBLE_FIT})
             continue
         s['significant'] = significant(s['evidence'], level, alpha_held)
         record['candidates'].append({'name': cand.name, 'params': s['params'],
