@@ -131,9 +131,10 @@ def _refine(wheels: Wheels, cand: JointCandidate, best: list[dict | None]) -> li
     def loss(log_value: float) -> float:
         per = at(log_value)
         return np.inf if per is None else -wheels.pooled_lr(per)
-    res = optimize.minimize_scalar(loss, bounds=(np.log(centre / ratio),
-                                                 np.log(centre * ratio)),
-                                   method='bounded', options={'xatol': 1e-3})
+    with np.errstate(invalid='ignore'):   # inf - inf at inadmissible points: golden step
+        res = optimize.minimize_scalar(loss, bounds=(np.log(centre / ratio),
+                                                     np.log(centre * ratio)),
+                                       method='bounded', options={'xatol': 1e-3})
     per = at(res.x)
     return per if per is not None and wheels.pooled_lr(per) > wheels.pooled_lr(best) \
         else best

@@ -63,8 +63,10 @@ def _refine(design: Design, cand: fx.Candidate, data: IdentData, best: tuple) ->
     def rss(log_value: float) -> float:
         got = _try(design, cand, data, {**best[0], key: float(np.exp(log_value))})
         return np.inf if got is None else got[1].rss_train
-    res = optimize.minimize_scalar(rss, bounds=(np.log(centre / ratio), np.log(centre * ratio)),
-                                   method='bounded', options={'xatol': 1e-3})
+    with np.errstate(invalid='ignore'):   # inf - inf at inadmissible points: golden step
+        res = optimize.minimize_scalar(rss, bounds=(np.log(centre / ratio),
+                                                    np.log(centre * ratio)),
+                                       method='bounded', options={'xatol': 1e-3})
     got = _try(design, cand, data, {**best[0], key: float(np.exp(res.x))})
     return got if got is not None and got[1].rss_train < best[1].rss_train else best
 
