@@ -72,7 +72,9 @@ def prune_joint(wheels: Wheels, added: list[dict], alpha_held: float
             entry = {'lr': lr, 'dof': dof, 'lr_held_out': held,
                      'p_value': float(stats.chi2.sf(lr, dof)) if dof else 1.0,
                      'bic_gain': gain - a['candidate'].free * float(np.log(max(n_total, 1)))}
-            physical = fx.physical_weights(a['candidate'].kind, np.mean(weights, axis=0))
+            kind = a['candidate'].kind
+            physical = kind not in fx.POSITIVE_WEIGHT or fx.physical_weights(
+                kind, np.mean(weights, axis=0))
             if dof == 0 or not physical:
                 failing.append((-np.inf, a, entry))
             elif not significant(entry, a['evidence']['level'], alpha_held):

@@ -73,7 +73,8 @@ class Wheels:
             out.append({'params': params, 'fit': design.fit(cols), 'columns': cols})
         weights = [s['fit'].coef[d.X.shape[1]:] for s, d in zip(out, self.designs)
                    if s is not None]
-        if weights and not fx.physical_weights(kind, np.mean(weights, axis=0)):
+        if kind in fx.POSITIVE_WEIGHT and weights and not fx.physical_weights(
+                kind, np.mean(weights, axis=0)):
             return None   # the wheels' mean weight has the unphysical sign
         return out
 
