@@ -68,8 +68,9 @@ def prune(design: Design, added: list[AddedEffect], alpha_held: float
     """Remove added effects that no longer pass the entry tests; return what went.
 
     After re-profiling, an effect that entered early can be redundant (on the windage
-    file a pre-sliding band took the Stribeck curve at step 0; once the Stribeck term
-    sat at its own speed the band's held-out gain was 0.4). Each effect is tested as it
+    file, before the sign rule of effects.POSITIVE_WEIGHT, a pre-sliding band took the
+    Stribeck curve at step 0; once the Stribeck term sat at its own speed the band's
+    held-out gain was 0.4). Each effect is tested as it
     was at entry, against the model without it (its nonlinear parameters fixed): p below
     its step's level, held-out LR above the chi^2 critical value at ``alpha_held``, BIC
     gain positive, its weight of the physical sign (effects.POSITIVE_WEIGHT). The weakest
