@@ -79,6 +79,20 @@ SMOOTH_KNOTS = 12
 NEAR_ZERO = (0.005, 0.01, 0.02, 0.04, 0.08)  # quantiles of abs(w): extra knots
 
 
+POSITIVE_WEIGHT = ('stribeck', 'stribeck_hysteresis', 'presliding', 'drag')
+# Effects whose weight has a physical sign (positive: it opposes the motion): the
+# Stribeck and hysteresis excess is the static level above Coulomb (friction rises as
+# the wheel leaves rest), the pre-sliding weight is the Coulomb level the ramp replaces
+# (friction falls inside the band), drag is a loss. A fit with the other sign is not that
+# effect: a pre-sliding band with a negative weight is a Stribeck curve, a Stribeck term
+# with a negative excess and a speed scale of the whole range is curvature (drag).
+
+
+def physical_weights(kind: str, weights: np.ndarray) -> bool:
+    """Return whether an effect's fitted weights have their physical sign (POSITIVE_WEIGHT)."""
+    return kind not in POSITIVE_WEIGHT or bool(np.all(np.asarray(weights) > 0))
+
+
 def canonical_order(names) -> list[str]:
     """Return effect names in the vocabulary's order (NAMED, then the fallback), then by name.
 

@@ -137,7 +137,8 @@ def details(selection) -> dict:
                   'failing_before': selection.diagnostics_before['failing'],
                   'tests_after': _tests(selection.diagnostics_after),
                   'failing_after': selection.diagnostics_after['failing'],
-                  'steps': selection.steps})
+                  'steps': selection.steps,
+                  'named_sets_compared': selection.alternatives})
 
 
 def markdown(selection, rep: dict, title: str) -> str:
