@@ -34,8 +34,10 @@ RATES = {0.0: 6000, 40.0: 2000}   # replay rate -> rows of the 10 Hz recording
 LOADERS = 3                       # busy-loop processes beside the 2-core machine's load
 REPLAY_TIMEOUT_S = 240.0
 QUIET_S = 10.0                    # s without a count moving after the replay exited
+SETTLE_BEFORE_S = 2.0             # main's rule: start after 2 s of steady matched counts
 WARM_UP_ROWS = 300                # a first replay, not counted: the detectors' kernels compile
 _START = re.compile(r'starting after ([\d.]+) s.*?subscribers: ([^()\n]*)')
+_CHANGE = re.compile(r'after ([\d.]+) s, matched subscribers: ([^\n]*)')
 
 
 class _Listener(nodes_chain._Listener):
@@ -60,17 +62,35 @@ def _busy_loops(count: int) -> list[subprocess.Popen]:
             for _ in range(count)]
 
 
-def start_counts(log: str) -> dict[str, Any]:
-    """Return the wait (s) and matched counts from the replay's 'starting after' line."""
-    found = _START.search(log)
-    if not found:
-        return {}
+def _counts(text: str) -> dict[str, int]:
     counts = {}
-    for item in found.group(2).split(','):
+    for item in text.split(','):
         topic, _, n = item.strip().rpartition(' ')
         if topic and n.isdigit():
             counts[topic] = int(n)
-    return {'waited_s': float(found.group(1)), 'matched': counts}
+    return counts
+
+
+def start_counts(log: str) -> dict[str, Any]:
+    """Return the wait (s) and matched counts from the replay's 'starting after' line.
+
+    With the replay's log of every change of the counts while waiting (this code, not
+    main's), also the time of the last change and ``steady_gap_s``, the longest time the
+    counts stood still with a subscriber matched before that last change: a gap of 2 s
+    or more is a run where a rule of "2 s of steady counts" would have started before
+    the last subscriber matched.
+    """
+    found = _START.search(log)
+    if not found:
+        return {}
+    out: dict[str, Any] = {'waited_s': float(found.group(1)),
+                           'matched': _counts(found.group(2))}
+    changes = [(float(t), _counts(text)) for t, text in _CHANGE.findall(log)]
+    if changes:
+        out['last_change_s'] = changes[-1][0]
+        gaps = [b[0] - a[0] for a, b in zip(changes, changes[1:]) if any(a[1].values())]
+        out['steady_gap_s'] = round(max(gaps, default=0.0), 2)
+    return out
 
 
 class Detectors:
@@ -163,6 +183,8 @@ def _summary(runs: list[dict[str, Any]]) -> dict[str, Any]:
             'matched_at_start_of_lossy': [r['replay_start'].get('matched') for r in lossy],
             'runs_warning_late': sum(any('matched after' in w for w in r['replay_warnings'])
                                      for r in runs),
+            'last_change_s': [r['replay_start'].get('last_change_s') for r in runs],
+            'steady_gap_s': [r['replay_start'].get('steady_gap_s') for r in runs],
             'waited_s': [r['replay_start'].get('waited_s') for r in runs],
             'load': [round(r['load'], 1) for r in runs]}
 
@@ -215,8 +237,11 @@ def markdown(results: dict[str, Any]) -> str:
         lost = '; '.join(', '.join(f'{n} {v}' for n, v in r.items()) for r in s['lost'])
         short = '; '.join(', '.join(f'{t.rsplit("/", 1)[-1]} {m}' for t, m in c.items())
                           for c in s['matched_at_start_of_lossy'] if c)
+        gaps = [g for g in s.get('steady_gap_s', []) if g is not None]
+        caught = (f'{sum(g >= SETTLE_BEFORE_S for g in gaps)}/{len(gaps)}; max '
+                  f'{max(gaps):.1f} s' if gaps else '-')
         rows.append([key, f'{s["runs"] - s["runs_with_loss"]}/{s["runs"]}', lost or '-',
-                     short or '-', s['runs_warning_late'],
+                     short or '-', caught, s['runs_warning_late'],
                      f'{min(waited):.1f}-{max(waited):.1f}' if waited else '-',
                      f'{min(s["load"]):.1f}-{max(s["load"]):.1f}'])
     rates = ', '.join(f'rate {r:g}: {n} rows' for r, n in RATES.items())
@@ -234,6 +259,7 @@ def markdown(results: dict[str, Any]) -> str:
              'the 1-minute average when each replay started.', '',
              report.table(['checkout, rate', 'runs complete', 'lost (node rows; wheels = '
                            'llr wheel samples)', 'matched at start of the lossy runs',
+                           'a subscriber matched after >= 2 s of steady counts',
                            'runs warning of a late subscriber', 'replay waited (s)', 'load'],
                           rows)]
     return '\n'.join(lines)
