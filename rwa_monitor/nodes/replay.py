@@ -9,7 +9,8 @@ the recording's topics); ``/clock`` (the telemetry time) for the sim-time detect
 
 ``rate`` is the time factor (1.0 real time). At every rate the replay first waits for
 its subscribers (:mod:`rwa_monitor.nodes.subscriber_wait`: ``min_subscribers`` on
-``telemetry/wheels``, every subscriber the graph knows matched, or ``subscriber_timeout``).
+``telemetry/wheels``, every subscriber the graph knows matched, the discovery time and
+counts steady for 2 s, or ``subscriber_timeout``); a subscriber matching later is logged.
 ``rate`` 0 publishes as fast as the subscribers take it, without loss (at least one
 wheels subscriber), ``burst`` rows per executor turn; see docs/nodes.md for why no
 message is lost. ``/clock`` goes out at most every ``CLOCK_PERIOD`` s of steady time. A
@@ -53,6 +54,7 @@ _BACK_OFF = 0.05  # s of steady time without publishing after a subscriber refus
 # /clock at most this often (s of steady time), and with the last row: each /clock message
 # costs every sim-time node a callback (docs/nodes.md "Where the time goes").
 CLOCK_PERIOD = 0.01
+ACK_TIMEOUT = 5.0  # s each topic waits, after the last row, for its subscribers' acknowledgements
 
 
 class TelemetryReplay(Node):
@@ -264,6 +266,7 @@ class TelemetryReplay(Node):
                 break
         last = self.next_row - 1
         now = self._steady_s()
+        self.subscribers.check_late(now, self.published)
         if now - self._last_clock >= CLOCK_PERIOD or self.next_row >= len(self._time):
             self._clock_pub.publish(messages.clock(float(self._time[last])))
             self._last_clock = now
@@ -286,9 +289,13 @@ class TelemetryReplay(Node):
         self.destroy_timer(self._timer)
         self.get_logger().info(f'replay done: {self.published} rows published')
         if self.params['exit_when_done']:
-            for pub in (self._wheels_pub, self._gyro_pub, self._star_pub, self._ref_pub):
-                if pub is not None:
-                    pub.wait_for_all_acked(rclpy.duration.Duration(seconds=5.0))
+            unacked = [pub.topic_name for pub in self._data_pubs if not pub.wait_for_all_acked(
+                rclpy.duration.Duration(seconds=ACK_TIMEOUT))]
+            if unacked:
+                self.get_logger().warning(
+                    f'a subscriber of {", ".join(unacked)} had not acknowledged every row '
+                    f'{ACK_TIMEOUT:g} s after the last: the rows it had not received are '
+                    'lost to it')
             rclpy.try_shutdown(context=self.context)
 
     def _health(self) -> tuple[bytes, str, dict[str, Any]]:
