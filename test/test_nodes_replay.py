@@ -147,6 +147,18 @@ def test_a_subscriber_matched_during_the_discovery_time_gets_every_row(tmp_path,
     assert replay.subscribers.late == 0
 
 
+def test_the_expected_subscribers_matched_skip_the_discovery_time(tmp_path, monkeypatch):
+    monkeypatch.setattr(subscriber_wait, 'SETTLE_S', 0.2)
+    monkeypatch.setattr(subscriber_wait, 'DISCOVERY_S', 60.0)
+    path = tmp_path / 'tele.csv'
+    write_telemetry(path, _telemetry(n=10))
+    with RosWorld() as world:
+        listen = _Listener(world)
+        replay = _replay(world, path, min_subscribers=1)
+        world.wait_until(lambda: replay.done and len(listen.wheels) == 10, 20.0, 'every row')
+    assert replay.subscribers.waited_s < 5.0     # neither DISCOVERY_S nor the timeout
+
+
 def test_a_subscriber_matched_after_the_start_is_logged_and_counted(tmp_path, monkeypatch):
     monkeypatch.setattr(subscriber_wait, 'DISCOVERY_S', 0.0)
     monkeypatch.setattr(subscriber_wait, 'SETTLE_S', 0.1)

@@ -13,7 +13,8 @@ never lost a sample. The replay therefore waits, at every rate, until
 - every subscription the ROS graph knows on each of its topics is matched;
 - at least one topic has a subscriber, :data:`DISCOVERY_S` have passed since the wait
   began (one discovery announcement period and a margin: a participant that missed the
-  first announcements is found by then) and the counts have not changed for
+  first announcements is found by then) — unless ``min_subscribers`` > 0 are matched on
+  the first topic: the user said whom to expect — and the counts have not changed for
   :data:`SETTLE_S`;
 
 or until ``subscriber_timeout`` seconds of steady time have passed (0: do not wait). At
@@ -80,7 +81,8 @@ class SubscriberWait:
             return False
         complete = (main >= min_subscribers and any(m for m, _ in counts.values())
                     and all(m >= known for m, known in counts.values())
-                    and waited >= DISCOVERY_S and now - self._changed >= SETTLE_S)
+                    and (waited >= DISCOVERY_S or 0 < min_subscribers <= main)
+                    and now - self._changed >= SETTLE_S)
         timed_out = not timeout or waited >= timeout
         if not (complete or timed_out):
             return False
