@@ -15,7 +15,11 @@ declarations are core/llr_changes.py.
 Compiled by :mod:`rwa_monitor.core.jit` (numba, no fast-math: the same IEEE operations in
 the same order whatever the caller; docs/architecture.md "Compiled kernels"), the
 per-sample functions inlined into the entry points; plain Python functions when numba is
-absent or disabled. Also here: the calibrated nominal lookup (:func:`nominal_residual`)
+absent or disabled. The loops over arrays (:func:`run`, :func:`accept_run`,
+:func:`ingest_run`) are compiled without numba's reference counting (``_nrt=False``, an
+option of numba's own): they allocate nothing, and the atomic counts of the arrays handed
+to the inlined functions, which its pruning leaves in a loop with branches, were a third
+of the loop's time. Also here: the calibrated nominal lookup (:func:`nominal_residual`)
 and both in one call (:func:`step_calibrated`).
 """
 
@@ -151,15 +155,6 @@ def test(fs, ints, k, at, bt, ct, ut, vt):
     if det > fs[F_MIN_EXC] * ac and dett > 0.0:
         x1 = (c * u - b * v) / det
         x2 = (a * v - b * u) / det
-        dof = -1
-        if ints[I_ESTIMATED]:
-            s2 = (e - (x1 * u + x2 * v)) / (n_p - 2)
-            floor = fs[F_FLOOR_REL] * e / n_p + fs[F_FLOOR_ABS]
-            if not s2 > floor:
-                s2 = floor
-            dof = n_p - 2
-        else:
-            s2 = fs[F_NOISE_VAR]
         aw = at - a
         bw = bt - b
         cw = ct - c
@@ -167,8 +162,24 @@ def test(fs, ints, k, at, bt, ct, ut, vt):
         g2 = (vt - v) - (bw * x1 + cw * x2)
         d1 = (ct * g1 - bt * g2) / dett
         d2 = (at * g2 - bt * g1) / dett
-        y = (a * d1 * d1 + 2.0 * b * d1 * d2 + c * d2 * d2) / s2
-        tr = (ct * aw - 2.0 * bt * bw + at * cw) / dett
+        q = a * d1 * d1 + 2.0 * b * d1 * d2 + c * d2 * d2    # y = q / s2
+        tn = ct * aw - 2.0 * bt * bw + at * cw             # tr = tn / dett
+        if ints[I_ESTIMATED]:
+            rss = e - (x1 * u + x2 * v)                     # s2 >= rss / (n_p - 2)
+            if below_skip(q, dett, float(n_p - 2), rss, tn, fs[F_YSTAR]):
+                return declare_flag(fs, ints, k)
+            s2 = rss / (n_p - 2)
+            floor = fs[F_FLOOR_REL] * e / n_p + fs[F_FLOOR_ABS]
+            if not s2 > floor:
+                s2 = floor
+            dof = n_p - 2
+        else:
+            s2 = fs[F_NOISE_VAR]
+            if below_skip(q, dett, 1.0, s2, tn, fs[F_YSTAR]):
+                return declare_flag(fs, ints, k)
+            dof = -1
+        y = q / s2
+        tr = tn / dett
         if tr > 0.0 and y > 0.0 and not y / tr < fs[F_YSTAR]:
             dm = (aw * cw - bw * bw) / dett
             logpmin = fs[F_LOGPMIN]
@@ -181,9 +192,47 @@ def test(fs, ints, k, at, bt, ct, ut, vt):
                 return EXACT
     else:
         ints[I_ILL] += 1
+    return declare_flag(fs, ints, k)
+
+
+@njit(cache=True, inline='always')
+def declare_flag(fs, ints, k):
+    """Return DECLARE if p_min is at or below r and ``k`` past the verification, else 0."""
     if fs[F_LOGPMIN] <= fs[F_LOGR] and k > ints[I_KMIN] + ints[I_KVERIF]:
         return DECLARE
     return 0
+
+
+# Range of the factors within which below_skip decides (2^-250 to 2^250): every product
+# it forms and every quotient of the test it stands for is then a normal float.
+SKIP_TINY = 2.0 ** -250
+SKIP_HUGE = 2.0 ** 250
+# Relative margin of below_skip, far above the few roundings it must cover (~1e-15).
+SKIP_MARGIN = 1.0 - 2.0 ** -30
+
+
+@njit(cache=True, inline='always')
+def below_skip(q, dett, m, rss, tn, ystar):
+    """Return True if :func:`test`'s division chain would find ``y / tr < y*`` (no tail).
+
+    ``y = fl(q / s2)`` with ``s2 >= fl(rss / m)`` (the floor only raises it; ``m = n_p - 2``,
+    or 1 with ``s2 = rss`` the known variance), ``tr = fl(tn / dett)``, ``dett > 0``: the
+    test skips the candidate when ``tr <= 0``, ``y <= 0`` or ``fl(y / tr) < y*``. This
+    decides the same without its five divisions, for the ~98 % of samples far below the
+    threshold: True only if ``fl(fl(q dett) m) < fl(fl(fl(y* rss) tn) K)``, ``K = 1 -
+    2^-30``, with ``q, dett, rss, tn, y*`` in ``[2^-250, 2^250]`` and ``1 <= m < 2^53``.
+    Proof: every product and quotient involved then lies in the normal range, each
+    operation has a relative error below ``u = 2^-53``; ``1 / s2 <= m / (rss (1 - u))``,
+    so ``fl(y / tr) <= q dett m / (rss tn) (1 + u)^2 / (1 - u)^2``, and the condition gives
+    ``q dett m / (rss tn) < y* K (1 + u)^3 / (1 - u)^2``; together ``fl(y / tr) < y* K (1 +
+    u)^5 / (1 - u)^4 < y*``. A ``y`` that underflows makes ``y / tr`` (``tr >= 2^-500``)
+    smaller than ``2^-500 < y*``: skipped as well. False means: run the test as written
+    (the same floats; test/test_llr_skip.py checks both against each other).
+    """
+    return (SKIP_TINY <= q <= SKIP_HUGE and SKIP_TINY <= dett <= SKIP_HUGE
+            and SKIP_TINY <= rss <= SKIP_HUGE and SKIP_TINY <= tn <= SKIP_HUGE
+            and SKIP_TINY <= ystar <= SKIP_HUGE
+            and q * dett * m < ystar * rss * tn * SKIP_MARGIN)
 
 
 @njit(cache=True, error_model='numpy')
@@ -335,7 +384,7 @@ def step(fs, ints, t, w, f):
 
 
 @njit('int64(float64[::1], int64[::1], float64[::1], float64[::1], float64[::1], int64)',
-      cache=True)
+      cache=True, _nrt=False)
 def run(fs, ints, t, w, f, start):
     """:func:`step` over the samples ``start, start + 1, ...`` of whole arrays.
 
@@ -353,7 +402,7 @@ def run(fs, ints, t, w, f, start):
 
 
 @njit('int64(float64[::1], int64[::1], float64[::1], float64[::1], float64[::1], int64, '
-      'int64[::1])', cache=True)
+      'int64[::1])', cache=True, _nrt=False)
 def accept_run(fs, ints, t, w, f, start, rows):
     """:func:`accept` over the samples ``start, start + 1, ...`` until ``rows`` is full.
 
@@ -371,6 +420,22 @@ def accept_run(fs, ints, t, w, f, start, rows):
             m += 1
         i += 1
     return i
+
+
+@njit('int64(float64[::1], int64[::1], int64[::1], float64[::1], float64[::1], float64[::1], '
+      'float64[::1], int64)', cache=True, _nrt=False)
+def ingest_run(fs, ints, rows, t, f, h1, h2, start):
+    """:func:`ingest` over accepted samples ``start, start + 1, ...`` given as arrays.
+
+    The replay of the samples that waited for the noise fit (already divided by the noise
+    level); returns as :func:`run` does (flags in ``ints[I_FLAGS]``).
+    """
+    for i in range(start, t.size):
+        flags = ingest(fs, ints, rows[i], t[i], f[i], h1[i], h2[i])
+        if flags:
+            ints[I_FLAGS] = flags
+            return i
+    return t.size
 
 
 # Calibrated nominal lookup (core/calibrate.py NominalWheel): one table array per wheel.
