@@ -113,6 +113,19 @@ def allocate(length: int, width: int, term_width: int, ar_max: int
     return fs, ints
 
 
+# Ring offsets and array positions are never negative; masking the sign bit tells the
+# compiler so, and spares each ring access numba's fix-up of negative indices (its
+# instructions were an eighth of the per-sample loop).
+NON_NEGATIVE = (1 << 63) - 1
+
+
+@njit(cache=True, inline='always')
+def ring_row(fs, o):
+    """Return the six floats of ``fs`` from offset ``o`` (a prefix row of the ring)."""
+    return (fs[(o + 0) & NON_NEGATIVE], fs[(o + 1) & NON_NEGATIVE], fs[(o + 2) & NON_NEGATIVE],
+            fs[(o + 3) & NON_NEGATIVE], fs[(o + 4) & NON_NEGATIVE], fs[(o + 5) & NON_NEGATIVE])
+
+
 @njit(cache=True, error_model='numpy', inline='always')
 def test(fs, ints, k, at, bt, ct, ut, vt):
     """Algorithm 1 lines 9-18 at candidate ``k`` (p = 2); return EXACT, DECLARE or 0.
@@ -128,22 +141,12 @@ def test(fs, ints, k, at, bt, ct, ut, vt):
     """
     length = ints[I_L]
     o = ints[I_O_RPREF] + 6 * (k & (length - 1))
-    a = fs[o]
-    b = fs[o + 1]
-    c = fs[o + 2]
-    u = fs[o + 3]
-    v = fs[o + 4]
-    e = fs[o + 5]
+    a, b, c, u, v, e = ring_row(fs, o)
     r = ints[I_R]
     if r >= 0 and k - r > ints[I_C]:
         # Sliding reference: P_k = [k - R, k - 1] (docs/llr.md, "Slow drifts").
         o = ints[I_O_RPREF] + 6 * ((k - r) & (length - 1))
-        b0 = fs[o]
-        b1 = fs[o + 1]
-        b2 = fs[o + 2]
-        b3 = fs[o + 3]
-        b4 = fs[o + 4]
-        b5 = fs[o + 5]
+        b0, b1, b2, b3, b4, b5 = ring_row(fs, o)
         a, b, c, u, v, e = a - b0, b - b1, c - b2, u - b3, v - b4, e - b5
         at, bt, ct, ut, vt = at - b0, bt - b1, ct - b2, ut - b3, vt - b4
         n_p = r
@@ -312,18 +315,18 @@ def ingest(fs, ints, row, t, f, h1, h2):
     length = ints[I_L]
     s = j & (length - 1)
     o = ints[I_O_RTERM] + 3 * s
-    fs[o] = h1
-    fs[o + 1] = h2
-    fs[o + 2] = f
-    fs[ints[I_O_RTIME] + s] = t
-    ints[I_SCALARS + s] = row
+    fs[(o + 0) & NON_NEGATIVE] = h1
+    fs[(o + 1) & NON_NEGATIVE] = h2
+    fs[(o + 2) & NON_NEGATIVE] = f
+    fs[(ints[I_O_RTIME] + s) & NON_NEGATIVE] = t
+    ints[(I_SCALARS + s) & NON_NEGATIVE] = row
     o = ints[I_O_RPREF] + 6 * ((j + 1) & (length - 1))
-    fs[o] = p0
-    fs[o + 1] = p1
-    fs[o + 2] = p2
-    fs[o + 3] = p3
-    fs[o + 4] = p4
-    fs[o + 5] = p5
+    fs[(o + 0) & NON_NEGATIVE] = p0
+    fs[(o + 1) & NON_NEGATIVE] = p1
+    fs[(o + 2) & NON_NEGATIVE] = p2
+    fs[(o + 3) & NON_NEGATIVE] = p3
+    fs[(o + 4) & NON_NEGATIVE] = p4
+    fs[(o + 5) & NON_NEGATIVE] = p5
     flags = REVISE if j == ints[I_CHECKPOINT] else 0
     w = ints[I_W]
     k = j - w + 1
@@ -393,7 +396,7 @@ def run(fs, ints, t, w, f, start):
     array length when all were processed. The batch path: the per-sample loop of the
     streaming detector, compiled, with Python only at those rare samples.
     """
-    for i in range(start, t.size):
+    for i in range(start & NON_NEGATIVE, t.size):
         flags = sample(fs, ints, t[i], w[i], f[i])
         if flags:
             ints[I_FLAGS] = flags
@@ -430,7 +433,7 @@ def ingest_run(fs, ints, rows, t, f, h1, h2, start):
     The replay of the samples that waited for the noise fit (already divided by the noise
     level); returns as :func:`run` does (flags in ``ints[I_FLAGS]``).
     """
-    for i in range(start, t.size):
+    for i in range(start & NON_NEGATIVE, t.size):
         flags = ingest(fs, ints, rows[i], t[i], f[i], h1[i], h2[i])
         if flags:
             ints[I_FLAGS] = flags
