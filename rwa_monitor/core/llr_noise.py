@@ -201,6 +201,46 @@ def whiten(values: np.ndarray, ar: tuple[float, ...]) -> np.ndarray:
     return out
 
 
+class SampleColumns:
+    """Accepted samples of the paper's model waiting for the noise fit, held as arrays.
+
+    What :meth:`NoiseFitting._buffer_arrays` takes from the batch path: iterating gives the
+    ``(row, t, f, h, speed)`` tuples :meth:`LLRDetector.update` would have buffered (``h =
+    (-sign w, -w)``, the same floats), so it stands for the buffer list, and the fit reads
+    the arrays without those tuples. A sample appended later (a stream after a batch)
+    is kept in a list after them.
+    """
+
+    def __init__(self, rows: np.ndarray, t: np.ndarray, f: np.ndarray, speed: np.ndarray
+                 ) -> None:
+        self.rows, self.t, self.f, self.speed = rows, t, f, speed
+        self._later: list[tuple] = []
+
+    def regressors(self) -> tuple[np.ndarray, np.ndarray]:
+        """Return the two regressor columns of the arrays (``-sign w``, ``-w``)."""
+        w = self.speed
+        return np.where(w > 0.0, -1.0, np.where(w < 0.0, 1.0, 0.0)), -w
+
+    def complete(self) -> bool:
+        """Return True if no sample was appended after the arrays."""
+        return not self._later
+
+    def __len__(self) -> int:
+        return self.rows.size + len(self._later)
+
+    def __iter__(self):
+        h1, h2 = self.regressors()
+        yield from zip(self.rows.tolist(), self.t.tolist(), self.f.tolist(),
+                       zip(h1.tolist(), h2.tolist()), self.speed.tolist())
+        yield from self._later
+
+    def append(self, item: tuple) -> None:
+        self._later.append(item)
+
+    def extend(self, items) -> None:
+        self._later.extend(items)
+
+
 class NoiseFitting:
     """Buffer the first samples, fit the noise model on them, then prewhiten every sample."""
 
@@ -242,20 +282,25 @@ class NoiseFitting:
         end = kern.accept_run(self._fs, self._ints, t, w, f, start, rows)
         rows = rows[rows >= 0]
         at = start + rows - row0
-        speed = w[at]
-        h1 = np.where(speed > 0.0, -1.0, np.where(speed < 0.0, 1.0, 0.0))
-        self._buffer.extend(zip(rows.tolist(), t[at].tolist(), f[at].tolist(),
-                                zip(h1.tolist(), (-speed).tolist()), speed.tolist()))
+        samples = SampleColumns(rows, t[at], f[at], w[at])
+        if not self._buffer and rows.size == self._fit_n:
+            self._buffer = samples   # the whole buffer at once: kept as arrays
+        else:
+            self._buffer.extend(samples)
         return end
 
     def _fit_and_replay(self) -> list[AnomalyEvent]:
         """Fit the noise model on the buffered samples, then process them."""
         buffer = self._buffer
-        rows, times, friction, regressors, speed = zip(*buffer)
-        h = np.fromiter(chain.from_iterable(regressors), float,
-                        len(buffer) * self._p).reshape(len(buffer), self._p)
-        friction = np.array(friction, dtype=float)
-        speed = np.array(speed, dtype=float)
+        if isinstance(buffer, SampleColumns) and buffer.complete():
+            rows, times, friction, speed = buffer.rows, buffer.t, buffer.f, buffer.speed
+            h = np.column_stack(buffer.regressors())
+        else:
+            rows, times, friction, regressors, speed = zip(*buffer)
+            h = np.fromiter(chain.from_iterable(regressors), float,
+                            len(buffer) * self._p).reshape(len(buffer), self._p)
+            friction = np.array(friction, dtype=float)
+            speed = np.array(speed, dtype=float)
         speeds = np.abs(speed) if self._speed_model else None
         model = fit_noise_model(h, friction, self._ar_max, speeds)
         if self._speed_model and not speed_fit_done(len(buffer), self._fit_n, model):
