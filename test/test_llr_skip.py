@@ -1,4 +1,4 @@
-"""The kernel's division-free skip (core/llr_kernel.py ``below_skip``) never skips a test.
+"""The kernel's division-free skip (core/llr_skip.py ``below_skip``) never skips a test.
 
 ``below_skip`` may rule a candidate out only where the test as written (the division
 chain ``s2 = rss / m`` floored, ``y = q / s2``, ``tr = tn / dett``, ``y / tr < y*``) would
@@ -12,7 +12,7 @@ import math
 import numpy as np
 from test_llr import friction_signal
 
-from rwa_monitor.core import llr_kernel as kern
+from rwa_monitor.core.llr_skip import below_skip
 from rwa_monitor.core.llr_stats import NOISE_FLOOR_ABS, NOISE_FLOOR_REL
 
 
@@ -70,7 +70,7 @@ def test_skip_only_where_the_division_chain_skips_on_a_stream():
     for q, dett, m, rss, tn, floor in zip(*stream_statistics()):
         ratio = chain_ratio(q, dett, m, rss, tn, floor)
         for ystar in thresholds_around(ratio):
-            if kern.below_skip(q, dett, m, rss, tn, ystar):
+            if below_skip(q, dett, m, rss, tn, ystar):
                 assert chain_skips(q, dett, m, rss, tn, ystar, floor)
                 decided += 1
             elif ystar > ratio * (1.0 + 1e-6):
@@ -90,17 +90,17 @@ def test_skip_only_where_the_division_chain_skips_on_random_magnitudes():
         args = (float(q[i]), float(dett[i]), float(m[i]), float(rss[i]), float(tn[i]))
         ratio = chain_ratio(*args, float(floor[i]))
         for ystar in thresholds_around(ratio):
-            if 2.0 ** -250 <= ystar <= 2.0 ** 250 and kern.below_skip(*args, ystar):
+            if 2.0 ** -250 <= ystar <= 2.0 ** 250 and below_skip(*args, ystar):
                 assert chain_skips(*args, ystar, float(floor[i]))
 
 
 def test_skip_declines_outside_its_range_and_on_non_finite_values():
     ok = (1e-3, 1e12, 500.0, 1e-4, 1e12)
-    assert kern.below_skip(*ok, 1e9)
+    assert below_skip(*ok, 1e9)
     for i, bad in [(0, 0.0), (0, -1e-3), (1, math.inf), (3, -1e-4), (3, math.nan),
                    (4, 0.0), (4, 2.0 ** 251), (0, 2.0 ** -251)]:
         args = list(ok)
         args[i] = bad
-        assert not kern.below_skip(*args, 1e9)
+        assert not below_skip(*args, 1e9)
     for ystar in (0.0, math.nan, math.inf, 2.0 ** 251):
-        assert not kern.below_skip(*ok, ystar)
+        assert not below_skip(*ok, ystar)

@@ -7,10 +7,11 @@ named scalars ``F_*``, then the rings of prefix rows, terms and times, the AR co
 and lags) and ``ints`` (named scalars ``I_*``: counters, positions, then the ring of row
 indices). Entry points: :func:`step` (one sample from Python, the streaming path),
 :func:`run` (the same over whole arrays, loop compiled, the batch path), :func:`accept_run`
-(the samples waiting for the noise fit). They return flags at the rare samples that need
-Python: the exact tail of eq. (7) (a sample whose skip bound does not rule it out; ``y``,
-``tr``, ``dm`` left in ``fs``), a declaration, a revision point; categorisation and
-declarations are core/llr_changes.py.
+(the samples waiting for the noise fit), :func:`ingest_run` (their replay once it is
+fitted). The values only Python changes are read once per call (:class:`Setup`). They
+return flags at the rare samples that need Python: the exact tail of eq. (7) (a sample
+whose skip bound does not rule it out; ``y``, ``tr``, ``dm`` left in ``fs``), a
+declaration, a revision point; categorisation and declarations are core/llr_changes.py.
 
 Compiled by :mod:`rwa_monitor.core.jit` (numba, no fast-math: the same IEEE operations in
 the same order whatever the caller; docs/architecture.md "Compiled kernels"), the
@@ -30,8 +31,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from rwa_monitor.core.gchi2 import log_lower_bound
 from rwa_monitor.core.jit import njit
+from rwa_monitor.core.llr_skip import below_skip, lower_bound, SKIP_REL
 
 # Float scalars of ``fs``.
 F_LAST_T = 0
@@ -81,10 +82,6 @@ I_NON_INCREASING = 23
 I_SPEED_MODEL = 24    # 1: samples divided by the modelled noise level before the sums
 I_FLAGS = 25          # flags of the sample where :func:`run` stopped
 I_SCALARS = 26
-
-# A candidate goes to the exact tail only if its lower bound of log p_k is within this
-# relative margin above p_min (candidate_log_p2 tests 1e-9; rounding is ~1e-15).
-SKIP_REL = 1e-7
 
 # Flags returned by step / ingest / test (0: nothing to do, the usual case).
 REVISE = 2    # the position is a revision point of the last declared change
@@ -239,58 +236,6 @@ def declare_flag(fs, ints, k):
     if fs[F_LOGPMIN] <= fs[F_LOGR] and k > ints[I_KMIN] + ints[I_KVERIF]:
         return DECLARE
     return 0
-
-
-# Range of the factors within which below_skip decides (2^-250 to 2^250): every product
-# it forms and every quotient of the test it stands for is then a normal float.
-SKIP_TINY = 2.0 ** -250
-SKIP_HUGE = 2.0 ** 250
-# Relative margin of below_skip, far above the few roundings it must cover (~1e-15).
-SKIP_MARGIN = 1.0 - 2.0 ** -30
-
-
-@njit(cache=True, inline='always')
-def below_skip(q, dett, m, rss, tn, ystar):
-    """Return True if :func:`test`'s division chain would find ``y / tr < y*`` (no tail).
-
-    ``y = fl(q / s2)`` with ``s2 >= fl(rss / m)`` (the floor only raises it; ``m = n_p - 2``,
-    or 1 with ``s2 = rss`` the known variance), ``tr = fl(tn / dett)``, ``dett > 0``: the
-    test skips the candidate when ``tr <= 0``, ``y <= 0`` or ``fl(y / tr) < y*``. This
-    decides the same without its five divisions, for the ~98 % of samples far below the
-    threshold: True only if ``fl(fl(q dett) m) < fl(fl(fl(y* rss) tn) K)``, ``K = 1 -
-    2^-30``, with ``q, dett, rss, tn, y*`` in ``[2^-250, 2^250]`` and ``1 <= m < 2^53``.
-    Proof: every product and quotient involved then lies in the normal range, each
-    operation has a relative error below ``u = 2^-53``; ``1 / s2 <= m / (rss (1 - u))``,
-    so ``fl(y / tr) <= q dett m / (rss tn) (1 + u)^2 / (1 - u)^2``, and the condition gives
-    ``q dett m / (rss tn) < y* K (1 + u)^3 / (1 - u)^2``; together ``fl(y / tr) < y* K (1 +
-    u)^5 / (1 - u)^4 < y*``. A ``y`` that underflows makes ``y / tr`` (``tr >= 2^-500``)
-    smaller than ``2^-500 < y*``: skipped as well. False means: run the test as written
-    (the same floats; test/test_llr_skip.py checks both against each other).
-    """
-    return (SKIP_TINY <= q <= SKIP_HUGE and SKIP_TINY <= dett <= SKIP_HUGE
-            and SKIP_TINY <= rss <= SKIP_HUGE and SKIP_TINY <= tn <= SKIP_HUGE
-            and SKIP_TINY <= ystar <= SKIP_HUGE
-            and q * dett * m < ystar * rss * tn * SKIP_MARGIN)
-
-
-@njit(cache=True, error_model='numpy')
-def lower_bound(y, tr, dm, dof):
-    """Return the lower bound of log p_k that ``llr_common.candidate_log_p2`` tests.
-
-    Same formula (eigenvalues of ``Pi_T^-1 Pi_W`` from trace and determinant, clamped;
-    Gaussian bound :func:`gchi2.log_lower_bound` or, for ``dof >= 0``, the studentised one):
-    equal to it up to rounding, far below the margin SKIP_REL with which it is used.
-    """
-    half = 0.5 * tr
-    lam1 = half + math.sqrt(max(half * half - dm, 0.0))
-    lam2 = min(max(dm / lam1, 0.0), lam1)
-    b = y / (2.0 * lam1)
-    rho = lam2 / lam1
-    a = b * (1.0 - rho)
-    if dof < 0.0:
-        return log_lower_bound(a) - b * rho
-    big_a = dof * a / (dof + 2.0 * b)
-    return -0.5 * dof * math.log1p(2.0 * b / dof) + big_a + log_lower_bound(big_a)
 
 
 @njit('int64(float64[::1], int64[::1], int64, float64[::1])', cache=True)
