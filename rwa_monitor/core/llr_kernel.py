@@ -7,26 +7,32 @@ named scalars ``F_*``, then the rings of prefix rows, terms and times, the AR co
 and lags) and ``ints`` (named scalars ``I_*``: counters, positions, then the ring of row
 indices). Entry points: :func:`step` (one sample from Python, the streaming path),
 :func:`run` (the same over whole arrays, loop compiled, the batch path), :func:`accept_run`
-(the samples waiting for the noise fit). They return flags at the rare samples that need
-Python: the exact tail of eq. (7) (a sample whose skip bound does not rule it out; ``y``,
-``tr``, ``dm`` left in ``fs``), a declaration, a revision point; categorisation and
-declarations are core/llr_changes.py.
+(the samples waiting for the noise fit), :func:`ingest_run` (their replay once it is
+fitted). The values only Python changes are read once per call (:class:`Setup`). They
+return flags at the rare samples that need Python: the exact tail of eq. (7) (a sample
+whose skip bound does not rule it out; ``y``, ``tr``, ``dm`` left in ``fs``), a
+declaration, a revision point; categorisation and declarations are core/llr_changes.py.
 
 Compiled by :mod:`rwa_monitor.core.jit` (numba, no fast-math: the same IEEE operations in
 the same order whatever the caller; docs/architecture.md "Compiled kernels"), the
 per-sample functions inlined into the entry points; plain Python functions when numba is
-absent or disabled. Also here: the calibrated nominal lookup (:func:`nominal_residual`)
+absent or disabled. The loops over arrays (:func:`run`, :func:`accept_run`,
+:func:`ingest_run`) are compiled without numba's reference counting (``_nrt=False``, an
+option of numba's own): they allocate nothing, and the atomic counts of the arrays handed
+to the inlined functions, which its pruning leaves in a loop with branches, were a third
+of the loop's time. Also here: the calibrated nominal lookup (:func:`nominal_residual`)
 and both in one call (:func:`step_calibrated`).
 """
 
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 
-from rwa_monitor.core.gchi2 import log_lower_bound
 from rwa_monitor.core.jit import njit
+from rwa_monitor.core.llr_skip import below_skip, lower_bound, SKIP_REL
 
 # Float scalars of ``fs``.
 F_LAST_T = 0
@@ -77,10 +83,6 @@ I_SPEED_MODEL = 24    # 1: samples divided by the modelled noise level before th
 I_FLAGS = 25          # flags of the sample where :func:`run` stopped
 I_SCALARS = 26
 
-# A candidate goes to the exact tail only if its lower bound of log p_k is within this
-# relative margin above p_min (candidate_log_p2 tests 1e-9; rounding is ~1e-15).
-SKIP_REL = 1e-7
-
 # Flags returned by step / ingest / test (0: nothing to do, the usual case).
 REVISE = 2    # the position is a revision point of the last declared change
 EXACT = 4     # the exact tail is needed at candidate ints[I_K] (y, tr, dm in fs)
@@ -109,8 +111,56 @@ def allocate(length: int, width: int, term_width: int, ar_max: int
     return fs, ints
 
 
+class Setup(NamedTuple):
+    """The values of the state arrays that only Python changes, read once per call.
+
+    Between two returns of :func:`run` (or within one :func:`step`) the kernel never
+    writes them: read once before the loop, they stay in registers instead of being read
+    again after every store into the arrays.
+    """
+
+    mask: int          # ring length - 1
+    o_rpref: int
+    o_rterm: int
+    o_rtime: int
+    w: int
+    r: int
+    c: int
+    estimated: int
+    ar_order: int
+    speed_model: int
+    checkpoint: int
+    min_exc: float
+    ystar: float
+    floor_rel: float
+    floor_abs: float
+    noise_var: float
+
+
+@njit(cache=True, inline='always')
+def setup(fs, ints):
+    """Return the :class:`Setup` of the state arrays."""
+    return Setup(ints[I_L] - 1, ints[I_O_RPREF], ints[I_O_RTERM], ints[I_O_RTIME], ints[I_W],
+                 ints[I_R], ints[I_C], ints[I_ESTIMATED], ints[I_AR_ORDER],
+                 ints[I_SPEED_MODEL], ints[I_CHECKPOINT], fs[F_MIN_EXC], fs[F_YSTAR],
+                 fs[F_FLOOR_REL], fs[F_FLOOR_ABS], fs[F_NOISE_VAR])
+
+
+# Ring offsets and array positions are never negative; masking the sign bit tells the
+# compiler so, and spares each ring access numba's fix-up of negative indices (its
+# instructions were an eighth of the per-sample loop).
+NON_NEGATIVE = (1 << 63) - 1
+
+
+@njit(cache=True, inline='always')
+def ring_row(fs, o):
+    """Return the six floats of ``fs`` from offset ``o`` (a prefix row of the ring)."""
+    return (fs[(o + 0) & NON_NEGATIVE], fs[(o + 1) & NON_NEGATIVE], fs[(o + 2) & NON_NEGATIVE],
+            fs[(o + 3) & NON_NEGATIVE], fs[(o + 4) & NON_NEGATIVE], fs[(o + 5) & NON_NEGATIVE])
+
+
 @njit(cache=True, error_model='numpy', inline='always')
-def test(fs, ints, k, at, bt, ct, ut, vt):
+def test(fs, ints, cfg, k, at, bt, ct, ut, vt):
     """Algorithm 1 lines 9-18 at candidate ``k`` (p = 2); return EXACT, DECLARE or 0.
 
     ``(at, bt, ct, ut, vt)`` is the prefix row at ``k + w`` (T_k), the one at ``k`` (P_k)
@@ -122,44 +172,24 @@ def test(fs, ints, k, at, bt, ct, ut, vt):
     Pi_W)`` and the degrees of freedom stored: the caller computes the tail
     (``llr_common.candidate_log_p2``), records a new minimum and decides.
     """
-    length = ints[I_L]
-    o = ints[I_O_RPREF] + 6 * (k & (length - 1))
-    a = fs[o]
-    b = fs[o + 1]
-    c = fs[o + 2]
-    u = fs[o + 3]
-    v = fs[o + 4]
-    e = fs[o + 5]
-    r = ints[I_R]
-    if r >= 0 and k - r > ints[I_C]:
+    o = cfg.o_rpref + 6 * (k & cfg.mask)
+    a, b, c, u, v, e = ring_row(fs, o)
+    r = cfg.r
+    if r >= 0 and k - r > cfg.c:
         # Sliding reference: P_k = [k - R, k - 1] (docs/llr.md, "Slow drifts").
-        o = ints[I_O_RPREF] + 6 * ((k - r) & (length - 1))
-        b0 = fs[o]
-        b1 = fs[o + 1]
-        b2 = fs[o + 2]
-        b3 = fs[o + 3]
-        b4 = fs[o + 4]
-        b5 = fs[o + 5]
+        o = cfg.o_rpref + 6 * ((k - r) & cfg.mask)
+        b0, b1, b2, b3, b4, b5 = ring_row(fs, o)
         a, b, c, u, v, e = a - b0, b - b1, c - b2, u - b3, v - b4, e - b5
         at, bt, ct, ut, vt = at - b0, bt - b1, ct - b2, ut - b3, vt - b4
         n_p = r
     else:
-        n_p = k - ints[I_C]
+        n_p = k - cfg.c
     ac = a * c
     det = ac - b * b
     dett = at * ct - bt * bt
-    if det > fs[F_MIN_EXC] * ac and dett > 0.0:
+    if det > cfg.min_exc * ac and dett > 0.0:
         x1 = (c * u - b * v) / det
         x2 = (a * v - b * u) / det
-        dof = -1
-        if ints[I_ESTIMATED]:
-            s2 = (e - (x1 * u + x2 * v)) / (n_p - 2)
-            floor = fs[F_FLOOR_REL] * e / n_p + fs[F_FLOOR_ABS]
-            if not s2 > floor:
-                s2 = floor
-            dof = n_p - 2
-        else:
-            s2 = fs[F_NOISE_VAR]
         aw = at - a
         bw = bt - b
         cw = ct - c
@@ -167,9 +197,25 @@ def test(fs, ints, k, at, bt, ct, ut, vt):
         g2 = (vt - v) - (bw * x1 + cw * x2)
         d1 = (ct * g1 - bt * g2) / dett
         d2 = (at * g2 - bt * g1) / dett
-        y = (a * d1 * d1 + 2.0 * b * d1 * d2 + c * d2 * d2) / s2
-        tr = (ct * aw - 2.0 * bt * bw + at * cw) / dett
-        if tr > 0.0 and y > 0.0 and not y / tr < fs[F_YSTAR]:
+        q = a * d1 * d1 + 2.0 * b * d1 * d2 + c * d2 * d2    # y = q / s2
+        tn = ct * aw - 2.0 * bt * bw + at * cw             # tr = tn / dett
+        if cfg.estimated:
+            rss = e - (x1 * u + x2 * v)                     # s2 >= rss / (n_p - 2)
+            if below_skip(q, dett, float(n_p - 2), rss, tn, cfg.ystar):
+                return declare_flag(fs, ints, k)
+            s2 = rss / (n_p - 2)
+            floor = cfg.floor_rel * e / n_p + cfg.floor_abs
+            if not s2 > floor:
+                s2 = floor
+            dof = n_p - 2
+        else:
+            s2 = cfg.noise_var
+            if below_skip(q, dett, 1.0, s2, tn, cfg.ystar):
+                return declare_flag(fs, ints, k)
+            dof = -1
+        y = q / s2
+        tr = tn / dett
+        if tr > 0.0 and y > 0.0 and not y / tr < cfg.ystar:
             dm = (aw * cw - bw * bw) / dett
             logpmin = fs[F_LOGPMIN]
             if not lower_bound(y, tr, dm, float(dof)) > logpmin + SKIP_REL * (1.0 - logpmin):
@@ -181,45 +227,37 @@ def test(fs, ints, k, at, bt, ct, ut, vt):
                 return EXACT
     else:
         ints[I_ILL] += 1
+    return declare_flag(fs, ints, k)
+
+
+@njit(cache=True, inline='always')
+def declare_flag(fs, ints, k):
+    """Return DECLARE if p_min is at or below r and ``k`` past the verification, else 0."""
     if fs[F_LOGPMIN] <= fs[F_LOGR] and k > ints[I_KMIN] + ints[I_KVERIF]:
         return DECLARE
     return 0
 
 
-@njit(cache=True, error_model='numpy')
-def lower_bound(y, tr, dm, dof):
-    """Return the lower bound of log p_k that ``llr_common.candidate_log_p2`` tests.
-
-    Same formula (eigenvalues of ``Pi_T^-1 Pi_W`` from trace and determinant, clamped;
-    Gaussian bound :func:`gchi2.log_lower_bound` or, for ``dof >= 0``, the studentised one):
-    equal to it up to rounding, far below the margin SKIP_REL with which it is used.
-    """
-    half = 0.5 * tr
-    lam1 = half + math.sqrt(max(half * half - dm, 0.0))
-    lam2 = min(max(dm / lam1, 0.0), lam1)
-    b = y / (2.0 * lam1)
-    rho = lam2 / lam1
-    a = b * (1.0 - rho)
-    if dof < 0.0:
-        return log_lower_bound(a) - b * rho
-    big_a = dof * a / (dof + 2.0 * b)
-    return -0.5 * dof * math.log1p(2.0 * b / dof) + big_a + log_lower_bound(big_a)
-
-
 @njit('int64(float64[::1], int64[::1], int64, float64[::1])', cache=True)
 def test_row(fs, ints, k, row):
     """:func:`test` with T_k's prefix row given as an array (a restart's catch-up)."""
-    return test(fs, ints, k, row[0], row[1], row[2], row[3], row[4])
+    return test(fs, ints, setup(fs, ints), k, row[0], row[1], row[2], row[3], row[4])
 
 
 @njit(cache=True, error_model='numpy', inline='always')
 def ingest(fs, ints, row, t, f, h1, h2):
+    """:func:`ingest_sample` called from Python (the samples replayed after the noise fit)."""
+    return ingest_sample(fs, ints, setup(fs, ints), row, t, f, h1, h2)
+
+
+@njit(cache=True, error_model='numpy', inline='always')
+def ingest_sample(fs, ints, cfg, row, t, f, h1, h2):
     """Prewhiten an accepted sample, add it to the sums and ring, test; return flags.
 
     AR filter ``v_l - sum_i a_i v_(l-1-i)`` (missing lags omitted; the operations of
     :func:`llr_common.whiten`), then the six products in the order of ``llr_batch._Terms``.
     """
-    order = ints[I_AR_ORDER]
+    order = cfg.ar_order
     if order > 0:
         o_ar = ints[I_O_AR]
         o_lag = ints[I_O_LAGS]
@@ -260,26 +298,25 @@ def ingest(fs, ints, row, t, f, h1, h2):
     ints[I_POS] = j + 1
     if j == 0:
         ints[I_C_ROW] = row
-    length = ints[I_L]
-    s = j & (length - 1)
-    o = ints[I_O_RTERM] + 3 * s
-    fs[o] = h1
-    fs[o + 1] = h2
-    fs[o + 2] = f
-    fs[ints[I_O_RTIME] + s] = t
-    ints[I_SCALARS + s] = row
-    o = ints[I_O_RPREF] + 6 * ((j + 1) & (length - 1))
-    fs[o] = p0
-    fs[o + 1] = p1
-    fs[o + 2] = p2
-    fs[o + 3] = p3
-    fs[o + 4] = p4
-    fs[o + 5] = p5
-    flags = REVISE if j == ints[I_CHECKPOINT] else 0
-    w = ints[I_W]
+    s = j & cfg.mask
+    o = cfg.o_rterm + 3 * s
+    fs[(o + 0) & NON_NEGATIVE] = h1
+    fs[(o + 1) & NON_NEGATIVE] = h2
+    fs[(o + 2) & NON_NEGATIVE] = f
+    fs[(cfg.o_rtime + s) & NON_NEGATIVE] = t
+    ints[(I_SCALARS + s) & NON_NEGATIVE] = row
+    o = cfg.o_rpref + 6 * ((j + 1) & cfg.mask)
+    fs[(o + 0) & NON_NEGATIVE] = p0
+    fs[(o + 1) & NON_NEGATIVE] = p1
+    fs[(o + 2) & NON_NEGATIVE] = p2
+    fs[(o + 3) & NON_NEGATIVE] = p3
+    fs[(o + 4) & NON_NEGATIVE] = p4
+    fs[(o + 5) & NON_NEGATIVE] = p5
+    flags = REVISE if j == cfg.checkpoint else 0
+    w = cfg.w
     k = j - w + 1
-    if k > ints[I_C] + w:
-        flags |= test(fs, ints, k, p0, p1, p2, p3, p4)
+    if k > cfg.c + w:
+        flags |= test(fs, ints, cfg, k, p0, p1, p2, p3, p4)
     return flags
 
 
@@ -306,7 +343,7 @@ def accept(fs, ints, t, w, f):
 
 
 @njit(cache=True, error_model='numpy', inline='always')
-def sample(fs, ints, t, w, f):
+def sample(fs, ints, cfg, t, w, f):
     """Process one sample of model (1): accept, form ``h = (-sign w, -w)``, ingest.
 
     With a noise level growing with speed (``ints[I_SPEED_MODEL]``), ``h`` and ``f`` are
@@ -318,24 +355,24 @@ def sample(fs, ints, t, w, f):
     fs[F_LAST_T] = t
     h1 = -1.0 if w > 0.0 else (1.0 if w < 0.0 else 0.0)
     h2 = -w
-    if ints[I_SPEED_MODEL]:
+    if cfg.speed_model:
         level = fs[F_SPEED_A] + fs[F_SPEED_B] * abs(w)
         if not level > fs[F_SPEED_FLOOR]:
             level = fs[F_SPEED_FLOOR]
         f = f / level
         h1 = h1 / level
         h2 = h2 / level
-    return ingest(fs, ints, row, t, f, h1, h2)
+    return ingest_sample(fs, ints, cfg, row, t, f, h1, h2)
 
 
 @njit('int64(float64[::1], int64[::1], float64, float64, float64)', cache=True)
 def step(fs, ints, t, w, f):
     """:func:`sample` called from Python: the streaming path, one call per sample."""
-    return sample(fs, ints, t, w, f)
+    return sample(fs, ints, setup(fs, ints), t, w, f)
 
 
 @njit('int64(float64[::1], int64[::1], float64[::1], float64[::1], float64[::1], int64)',
-      cache=True)
+      cache=True, _nrt=False)
 def run(fs, ints, t, w, f, start):
     """:func:`step` over the samples ``start, start + 1, ...`` of whole arrays.
 
@@ -344,8 +381,9 @@ def run(fs, ints, t, w, f, start):
     array length when all were processed. The batch path: the per-sample loop of the
     streaming detector, compiled, with Python only at those rare samples.
     """
-    for i in range(start, t.size):
-        flags = sample(fs, ints, t[i], w[i], f[i])
+    cfg = setup(fs, ints)
+    for i in range(start & NON_NEGATIVE, t.size):
+        flags = sample(fs, ints, cfg, t[i], w[i], f[i])
         if flags:
             ints[I_FLAGS] = flags
             return i
@@ -353,7 +391,7 @@ def run(fs, ints, t, w, f, start):
 
 
 @njit('int64(float64[::1], int64[::1], float64[::1], float64[::1], float64[::1], int64, '
-      'int64[::1])', cache=True)
+      'int64[::1])', cache=True, _nrt=False)
 def accept_run(fs, ints, t, w, f, start, rows):
     """:func:`accept` over the samples ``start, start + 1, ...`` until ``rows`` is full.
 
@@ -371,6 +409,23 @@ def accept_run(fs, ints, t, w, f, start, rows):
             m += 1
         i += 1
     return i
+
+
+@njit('int64(float64[::1], int64[::1], int64[::1], float64[::1], float64[::1], float64[::1], '
+      'float64[::1], int64)', cache=True, _nrt=False)
+def ingest_run(fs, ints, rows, t, f, h1, h2, start):
+    """:func:`ingest` over accepted samples ``start, start + 1, ...`` given as arrays.
+
+    The replay of the samples that waited for the noise fit (already divided by the noise
+    level); returns as :func:`run` does (flags in ``ints[I_FLAGS]``).
+    """
+    cfg = setup(fs, ints)
+    for i in range(start & NON_NEGATIVE, t.size):
+        flags = ingest_sample(fs, ints, cfg, rows[i], t[i], f[i], h1[i], h2[i])
+        if flags:
+            ints[I_FLAGS] = flags
+            return i
+    return t.size
 
 
 # Calibrated nominal lookup (core/calibrate.py NominalWheel): one table array per wheel.
@@ -444,4 +499,4 @@ def nominal_residual(table, t, w, f):
 @njit('int64(float64[::1], int64[::1], float64[::1], float64, float64, float64)', cache=True)
 def step_calibrated(fs, ints, table, t, w, f):
     """:func:`step` of ``(t, w, nominal_residual(table, t, w, f))``: one call per sample."""
-    return sample(fs, ints, t, w, nominal_residual(table, t, w, f))
+    return sample(fs, ints, setup(fs, ints), t, w, nominal_residual(table, t, w, f))

@@ -10,6 +10,7 @@ and replay, a base of :class:`rwa_monitor.core.llr_detector.LLRDetector`.
 
 from __future__ import annotations
 
+from itertools import chain
 import math
 from typing import NamedTuple
 
@@ -200,6 +201,46 @@ def whiten(values: np.ndarray, ar: tuple[float, ...]) -> np.ndarray:
     return out
 
 
+class SampleColumns:
+    """Accepted samples of the paper's model waiting for the noise fit, held as arrays.
+
+    What :meth:`NoiseFitting._buffer_arrays` takes from the batch path: iterating gives the
+    ``(row, t, f, h, speed)`` tuples :meth:`LLRDetector.update` would have buffered (``h =
+    (-sign w, -w)``, the same floats), so it stands for the buffer list, and the fit reads
+    the arrays without those tuples. A sample appended later (a stream after a batch)
+    is kept in a list after them.
+    """
+
+    def __init__(self, rows: np.ndarray, t: np.ndarray, f: np.ndarray, speed: np.ndarray
+                 ) -> None:
+        self.rows, self.t, self.f, self.speed = rows, t, f, speed
+        self._later: list[tuple] = []
+
+    def regressors(self) -> tuple[np.ndarray, np.ndarray]:
+        """Return the two regressor columns of the arrays (``-sign w``, ``-w``)."""
+        w = self.speed
+        return np.where(w > 0.0, -1.0, np.where(w < 0.0, 1.0, 0.0)), -w
+
+    def complete(self) -> bool:
+        """Return True if no sample was appended after the arrays."""
+        return not self._later
+
+    def __len__(self) -> int:
+        return self.rows.size + len(self._later)
+
+    def __iter__(self):
+        h1, h2 = self.regressors()
+        yield from zip(self.rows.tolist(), self.t.tolist(), self.f.tolist(),
+                       zip(h1.tolist(), h2.tolist()), self.speed.tolist())
+        yield from self._later
+
+    def append(self, item: tuple) -> None:
+        self._later.append(item)
+
+    def extend(self, items) -> None:
+        self._later.extend(items)
+
+
 class NoiseFitting:
     """Buffer the first samples, fit the noise model on them, then prewhiten every sample."""
 
@@ -233,26 +274,35 @@ class NoiseFitting:
         """Buffer the samples from ``start`` on (paper's model) up to the fit; return the next.
 
         The acceptance loop compiled (core/llr_kernel.py ``accept_run``); the buffer holds
-        what :meth:`update` would have put in it, sample by sample.
+        what :meth:`update` would have put in it, sample by sample (the regressors ``(-sign
+        w, -w)`` formed with numpy: the same floats).
         """
         rows = np.full(self._fit_n - len(self._buffer), -1, dtype=np.int64)
         row0 = int(self._ints[kern.I_ROWS])
         end = kern.accept_run(self._fs, self._ints, t, w, f, start, rows)
-        for row in rows[rows >= 0].tolist():
-            i = start + row - row0
-            speed = float(w[i])
-            h1 = -1.0 if speed > 0.0 else (1.0 if speed < 0.0 else 0.0)
-            self._buffer.append((row, float(t[i]), float(f[i]), (h1, -speed), speed))
+        rows = rows[rows >= 0]
+        at = start + rows - row0
+        samples = SampleColumns(rows, t[at], f[at], w[at])
+        if not self._buffer and rows.size == self._fit_n:
+            self._buffer = samples   # the whole buffer at once: kept as arrays
+        else:
+            self._buffer.extend(samples)
         return end
 
     def _fit_and_replay(self) -> list[AnomalyEvent]:
         """Fit the noise model on the buffered samples, then process them."""
         buffer = self._buffer
-        rows = np.array([np.asarray(item[3], dtype=float) for item in buffer])
-        speeds = (np.abs(np.array([item[4] for item in buffer], dtype=float))
-                  if self._speed_model else None)
-        model = fit_noise_model(rows, np.array([item[2] for item in buffer]), self._ar_max,
-                                speeds)
+        if isinstance(buffer, SampleColumns) and buffer.complete():
+            rows, times, friction, speed = buffer.rows, buffer.t, buffer.f, buffer.speed
+            h = np.column_stack(buffer.regressors())
+        else:
+            rows, times, friction, regressors, speed = zip(*buffer)
+            h = np.fromiter(chain.from_iterable(regressors), float,
+                            len(buffer) * self._p).reshape(len(buffer), self._p)
+            friction = np.array(friction, dtype=float)
+            speed = np.array(speed, dtype=float)
+        speeds = np.abs(speed) if self._speed_model else None
+        model = fit_noise_model(h, friction, self._ar_max, speeds)
         if self._speed_model and not speed_fit_done(len(buffer), self._fit_n, model):
             self._next_fit = len(buffer) + self._fit_n
             return []
@@ -261,17 +311,40 @@ class NoiseFitting:
         self._noise = model
         self._ar = model.ar
         self._speed_std = model.speed_std
-        if self._p == 2:
-            fs, ints = self._fs, self._ints
-            ints[kern.I_AR_ORDER] = len(model.ar)
-            fs[ints[kern.I_O_AR]:ints[kern.I_O_AR] + len(model.ar)] = model.ar
-            if model.speed_std is not None:
-                ints[kern.I_SPEED_MODEL] = 1
-                fs[kern.F_SPEED_A:kern.F_SPEED_FLOOR + 1] = model.speed_std
+        if self._p != 2:
+            events: list[AnomalyEvent] = []
+            for row, t, f, h_row, w in buffer:
+                events.extend(self._ingest_fitted(row, t, f, h_row, w))
+            return events
+        fs, ints = self._fs, self._ints
+        ints[kern.I_AR_ORDER] = len(model.ar)
+        fs[ints[kern.I_O_AR]:ints[kern.I_O_AR] + len(model.ar)] = model.ar
+        if model.speed_std is not None:
+            ints[kern.I_SPEED_MODEL] = 1
+            fs[kern.F_SPEED_A:kern.F_SPEED_FLOOR + 1] = model.speed_std
+            level = speed_scale(np.abs(speed), model.speed_std)
+            friction = friction / level
+            h = h / level[:, None]
         self._fast = self._default
+        return self._replay(np.array(rows, dtype=np.int64), np.array(times, dtype=float),
+                            friction, np.ascontiguousarray(h[:, 0]),
+                            np.ascontiguousarray(h[:, 1]))
+
+    def _replay(self, rows: np.ndarray, t: np.ndarray, f: np.ndarray, h1: np.ndarray,
+                h2: np.ndarray) -> list[AnomalyEvent]:
+        """Feed the buffered samples of the paper's model, already scaled, to the kernel.
+
+        The loop compiled (core/llr_kernel.py ``ingest_run``: the AR filter, the sums and
+        the test of each sample in turn), Python at the samples whose flags need it: the
+        per-sample path of :meth:`_ingest_fitted`, over arrays.
+        """
         events: list[AnomalyEvent] = []
-        for row, t, f, h, w in buffer:
-            events.extend(self._ingest_fitted(row, t, f, h, w))
+        i, n = 0, rows.size
+        while i < n:
+            i = kern.ingest_run(self._fs, self._ints, rows, t, f, h1, h2, i)
+            if i < n:
+                events.extend(self._after(int(self._ints[kern.I_FLAGS])))
+            i += 1
         return events
 
     def _ingest_fitted(self, row: int, t: float, f: float, h, speed: float
