@@ -61,7 +61,7 @@ $(BSK_STAMP): requirements.txt requirements-bsk.txt setup.py setup.cfg rwa_monit
 	touch $(BSK_VENV)/COLCON_IGNORE $(BSK_STAMP)
 
 test-bsk: $(BSK_STAMP)
-	$(BSK_PY) -m pytest test
+	$(BSK_PY) -m pytest test -n $(TEST_WORKERS) --dist loadfile
 
 # The realistic profile (default guidance and null speed: the wheels cross zero speed):
 # a fault-free commissioning run, its calibration, then a run with a dry step on rw2 and a
