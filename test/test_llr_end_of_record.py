@@ -235,3 +235,38 @@ def test_no_confirmed_wrong_kind_at_the_end_of_fresh_long_paper_files():
             if final.details[keys.KIND_CONFIRMED] and final.kind != kind:
                 wrong.append((seed, kind, final.kind))
     assert wrong == []
+
+
+def test_the_end_of_a_closed_change_never_adds_a_component(monkeypatch):
+    # A closed change confirmed `dry` by its re-checks (seed 3660, 12,000 samples): if the
+    # whole record's evaluation says `both` (found on the bus, calibrated seed 3102 rw2:
+    # `dry` at z 32.1 / 0.3, then on all 18,407 samples z 239.8 / 3.66, a viscous share of
+    # 1.5 % of the dry torque that grows with the samples), the answer stands (no event);
+    # another single kind is given; an unconfirmed evaluation that still supports `dry`
+    # (z_dry beyond z*) keeps it (no event). `both` -> `dry`: the demo test above.
+    t, w, f = paper_file(3660, n=12_000)
+    det = LLRDetector('rw1', **PAPER)
+    events = det.process_arrays(t, w, f)
+    assert events[-1].kind == 'dry' and events[-1].details[keys.KIND_CONFIRMED]
+    assert det._cat.closed
+    real = llr_kinds.categorise
+
+    def saying(kind, confirmed):
+        def fake(*args, **kwargs):
+            out = real(*args, **kwargs)
+            return out._replace(kind=kind, guess=kind if confirmed else 'dry',
+                                confirmed=confirmed, z=(240.0, 3.7))
+        return fake
+
+    for kind, confirmed, given in (('both', True, False), ('viscous', True, True),
+                                   ('undecided', False, False)):
+        again = LLRDetector('rw1', **PAPER)
+        again.process_arrays(t, w, f)
+        monkeypatch.setattr(llr_kinds, 'categorise', saying(kind, confirmed))
+        final = again.finish()
+        monkeypatch.setattr(llr_kinds, 'categorise', real)
+        assert bool(final) == given, (kind, final)
+    assert llr_kinds.adds_component('dry', 'both') and llr_kinds.adds_component(
+        'viscous', 'both')
+    assert not any(llr_kinds.adds_component(a, b) for a, b in (
+        ('both', 'dry'), ('dry', 'viscous'), ('undecided', 'both'), ('both', 'both')))

@@ -299,13 +299,16 @@ class ChangeRules:
         tests and levels as a re-check), as an event with ``final`` True and the samples
         it used: always while its re-checks are not all done (open), and, once they are
         (closed), only when the answer differs from the last one given (kind, guess or
-        confirmation). A kind confirmed earlier is kept, when this evaluation does not
-        confirm one, only if its tests still find each of its components at the category
-        level (:func:`llr_kinds.supports`): the record as a whole, not its shorter prefix,
-        bears the answer. The change is then finished (a second call gives nothing). The
-        batch path calls it after the last row; a live detector keeps its re-check
-        schedule and calls it only when its input ends. Returns [] when no change was
-        declared, or with ``category_revisions`` 0 (no re-checks, no sums kept).
+        confirmation) and does not add a component to a confirmed single kind (one the
+        re-checks did not find and the longer record does: a misfit of the model growing
+        with the samples, or a later change). A kind confirmed earlier is kept, when this
+        evaluation does not confirm one, only if its tests still find each of its
+        components at the category level (:func:`llr_kinds.supports`): the record as a
+        whole, not its shorter prefix, bears the answer. The change is then finished (a
+        second call gives nothing). The batch path calls it after the last row; a live
+        detector keeps its re-check schedule and calls it only when its input ends.
+        Returns [] when no change was declared, or with ``category_revisions`` 0 (no
+        re-checks, no sums kept).
         """
         cat = self._cat
         if cat is None or cat.finished or not cat.checks:
@@ -334,7 +337,8 @@ class ChangeRules:
                 llr_kinds.supports(new, cat.kind, self._z_thr):
             new = new._replace(kind=cat.kind, guess=cat.guess, confirmed=True)
         answer = (new.kind, new.guess, new.confirmed)
-        if quiet and answer == (cat.kind, cat.guess, cat.confirmed):
+        if quiet and (answer == (cat.kind, cat.guess, cat.confirmed) or cat.confirmed
+                      and llr_kinds.adds_component(cat.kind, new.kind)):
             return []
         cat.kind, cat.guess, cat.confirmed = new.kind, new.guess, new.confirmed
         cat.revision += 1

@@ -284,3 +284,12 @@ def supports(category: Category, kind: str, z_threshold: float) -> bool:
     """
     components = {KINDS[0]: (0,), KINDS[1]: (1,), KINDS[2]: (0, 1)}[kind]
     return all(abs(category.z[i]) > z_threshold for i in components)
+
+
+def adds_component(kind: str, new: str) -> bool:
+    """Return True if the kind ``new`` claims a component that the kind ``kind`` does not.
+
+    ``both`` after ``dry`` or ``viscous``. The end of record of a closed change (docs/llr.md
+    "End of record", *Closed changes*) does not add one to a confirmed kind.
+    """
+    return new == KINDS[2] and kind in KINDS[:2]
