@@ -145,12 +145,16 @@ def categorise(before: np.ndarray, n_before: int, after: np.ndarray, p: int,
     replaces it, with ``shape`` ``ramp`` and the step estimate ``dx`` of that kind; a
     confirmed single step kind refuted by a significant growth of the other kind is
     withdrawn to ``undecided`` (:func:`refuted`; never ``both``, which only the step tests
-    confirm). When the growth columns cannot be told from the step offsets and each other
-    (:func:`growth_separation` below :data:`MIN_SEPARATION`) the growth tests are not
-    used and the step outcome stands. A step verdict that stands is not
-    confirmed when the after segment grows (:func:`grows`): the step model it rests on is
-    rejected, and a step fit of a growing level shares the rise between the directions
-    (``undecided``, guess the better single kind). A step has no growth: a true single
+    confirm), and so is a confirmed ``both`` one of whose step components is not
+    significant beside the other kind's step and growth (:func:`unsupported_both`). Each
+    growth test compares the best of the ``m`` time shapes with its limit at
+    ``category_level / m`` (:func:`ramp_limits`). When the growth columns cannot be told
+    from the step offsets and each other (:func:`growth_separation` below
+    :data:`MIN_SEPARATION`) the growth tests are not used and the step outcome stands. A
+    step verdict that stands is not confirmed when the after segment grows
+    (:func:`grows`): the step model it rests on is rejected, and a step fit of a growing
+    level shares the rise between the directions (``undecided``, guess the better single
+    kind). A step has no growth: a true single
     step is named the other kind, or loses its confirmation, only through a false
     significance at the category level.
     """
