@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from rwa_monitor.core import keys, llr_growth, llr_kinds
+from rwa_monitor.core import keys, llr_growth, llr_kinds, llr_stats
 from rwa_monitor.core.llr import detect_batch
 
 
@@ -108,3 +108,23 @@ def test_growth_never_makes_a_single_step_kind_both():
         assert (out.kind, out.confirmed, out.guess, out.reason) == \
             ('undecided', False, guess, 'grows')
         assert np.array_equal(out.dx, dx[llr_kinds.KINDS.index(guess)])
+
+
+def test_a_both_whose_component_is_a_growth_share_is_withdrawn():
+    # A confirmed `both` whose dry step is not significant at the category level once the
+    # viscous change may grow (chi 2.37 <= z*^2: ramp seed 3319 at its 8 L0 re-check) is
+    # withdrawn, guess the kind that explains the data alone; kept when both components
+    # stand beside the other kind's growth; never touches a single kind.
+    dx = np.array([[0.5, 0.0], [0.0, 0.025], [0.3, 0.02]])
+    explained = np.array([10.0, 12.0, 30.0])
+    step = llr_kinds.Category('both', dx[2].copy(), (-3.5, 15.0), 1.0, True, 'both')
+    limit = llr_stats.z_threshold(1e-3) ** 2
+    assert llr_kinds.unsupported_both(step, (11.0, 200.0), limit, dx, explained) == step
+    for chi, guess in (((2.37, 200.0), 'viscous'), ((200.0, 2.0), 'dry'),
+                       ((1.0, 2.0), 'viscous')):
+        out = llr_kinds.unsupported_both(step, chi, limit, dx, explained)
+        assert (out.kind, out.confirmed, out.guess, out.reason) == \
+            ('undecided', False, guess, 'grows')
+        assert np.array_equal(out.dx, dx[llr_kinds.KINDS.index(guess)])
+    single = step._replace(kind='dry', guess='dry')
+    assert llr_kinds.unsupported_both(single, (0.0, 0.0), limit, dx, explained) == single

@@ -3,9 +3,10 @@
 import math
 
 import numpy as np
+import pytest
 from scipy import stats
 
-from rwa_monitor.core import keys, llr_kinds, llr_stats
+from rwa_monitor.core import keys, llr_growth, llr_kinds, llr_stats
 from rwa_monitor.core.llr import detect_batch, LLRDetector
 from rwa_monitor.sim.friction import Anomaly, simulate_friction
 from rwa_monitor.sim.profiles import paper_profile
@@ -161,3 +162,111 @@ def test_no_confirmed_wrong_kind_at_the_end_of_fresh_paper_files():
                     final.details[keys.KIND_SHAPE] == 'step':
                 assert _supported(final, z_star), final
     assert wrong == []
+
+
+def test_a_closed_change_gets_the_answer_of_the_whole_record():
+    # Demo scenario seed 3300, rw2 (dry +2e-4 N m at 3,600 s): `dry` at its declaration,
+    # `both` at its re-checks 4 L0 and 8 L0 (z_viscous 3.90 and 3.30 on ~3,000 and ~6,000
+    # samples against z* 3.29), then nothing: the re-checks were over long before the end
+    # of the record. The end of record now also finalises the last declared change after
+    # its re-checks (docs/llr.md "End of record", *closed changes*): on all 72,000 samples
+    # after the change the tests say `dry` (z_viscous -0.29), and the event says so.
+    from rwa_monitor.cli import cmd_demo
+    from rwa_monitor.sim.friction import simulate_friction_with_truth
+    duration = cmd_demo.DEFAULT_HOURS * 3600.0
+    tele, _ = simulate_friction_with_truth(
+        wheels=list(cmd_demo.WHEELS), duration_s=duration, rate_hz=cmd_demo.RATE_HZ,
+        seed=3300,
+        anomalies=[Anomaly('rw2', 'dry', round(duration / 3), delta_dry=2.0e-4),
+                   Anomaly('rw3', 'viscous', round(2 * duration / 3), delta_viscous=1.0e-6)])
+    ch = tele.wheels['rw2']
+    events = detect_batch(tele.time, ch.speed, ch.friction, component='rw2')
+    assert {e.index for e in events} == {events[0].index}
+    assert any(e.kind == 'both' for e in events[:-1])   # the live re-checks' answer
+    final = events[-1]
+    assert final.details[keys.FINAL] and final.kind == 'dry'
+    assert final.details[keys.KIND_CONFIRMED]
+    assert final.details[keys.FINAL_SAMPLES] == ch.speed.size - final.index
+
+
+def test_a_closed_change_whose_answer_stands_gets_no_final_event():
+    # Golden-like records keep their events: a closed change gets a final event only when
+    # the answer on the whole record differs from the last one given. 12,000 samples,
+    # change at 1,500 (re-checks over by ~7,500); every declaration's events are its own.
+    for seed in range(3640, 3650):
+        t, w, f = paper_file(seed, n=12_000)
+        events = detect_batch(t, w, f, **PAPER)
+        last = events[-1]
+        if keys.FINAL in last.details:
+            before = max((e for e in events[:-1] if e.index == last.index),
+                         key=lambda e: e.revision)
+            assert (before.kind, before.details[keys.KIND_GUESS],
+                    before.details[keys.KIND_CONFIRMED]) != \
+                (last.kind, last.details[keys.KIND_GUESS], last.details[keys.KIND_CONFIRMED])
+        det = LLRDetector('rw1', **PAPER)
+        streamed = [e for a, b, c in zip(t.tolist(), w.tolist(), f.tolist())
+                    for e in det.update(a, b, c)]
+        assert streamed + det.finish() == events and det.finish() == []
+
+
+def test_no_confirmed_wrong_kind_at_the_end_of_fresh_long_paper_files():
+    # Fresh seeds 3600-3619, Fig. 3 profile, 12,000 samples, a dry +0.5 or a viscous
+    # +0.025 step at 1,500: the re-checks end near 7,500 and the change is closed; its
+    # answer at the end is the final evaluation's (an earlier kind kept only where those
+    # tests support it). A wrong confirmed kind needs, in that evaluation: (a) a false
+    # rejection of the absent component (probability 1e-3), or (b) the growth tests naming
+    # the other kind: for a step neither growth exists, and the other kind's growth beside
+    # this kind's is compared, at its best of the m time shapes, with the chi2_1 quantile
+    # at 1e-3 / m (docs/llr.md "Kinds on ramps", one rule for the time shapes), so (b) has
+    # probability <= 1e-3 whatever the correlation of the shapes (on this longer segment
+    # the growth columns are not nearly one, as on the 4,000-sample files above).
+    # P(a wrong kind in 40 runs) <= 40 (1e-3 + 1e-3) = 0.08.
+    z_star = llr_stats.z_threshold(1e-3)
+    assert llr_growth.ramp_limits(1, z_star, 13)[0] == pytest.approx(
+        stats.chi2.isf(1e-3 / 13, 1))
+    wrong = []
+    for seed in range(3600, 3620):
+        for dry, viscous, kind in ((0.5, 0.0, 'dry'), (0.0, 0.025, 'viscous')):
+            t, w, f = paper_file(seed, n=12_000, dry=dry, viscous=viscous)
+            events = detect_batch(t, w, f, **PAPER)
+            first = events[0]
+            final = max((e for e in events if e.index == first.index),
+                        key=lambda e: e.revision)
+            if final.details[keys.KIND_CONFIRMED] and final.kind != kind:
+                wrong.append((seed, kind, final.kind))
+    assert wrong == []
+
+
+def test_the_end_of_a_closed_change_never_adds_a_component(monkeypatch):
+    # A closed change confirmed `dry` by its re-checks (seed 3660, 12,000 samples): if the
+    # whole record's evaluation says `both` (found on the bus, calibrated seed 3102 rw2:
+    # `dry` at z 32.1 / 0.3, then on all 18,407 samples z 239.8 / 3.66, a viscous share of
+    # 1.5 % of the dry torque that grows with the samples), the answer stands (no event);
+    # another single kind is given; an unconfirmed evaluation that still supports `dry`
+    # (z_dry beyond z*) keeps it (no event). `both` -> `dry`: the demo test above.
+    t, w, f = paper_file(3660, n=12_000)
+    det = LLRDetector('rw1', **PAPER)
+    events = det.process_arrays(t, w, f)
+    assert events[-1].kind == 'dry' and events[-1].details[keys.KIND_CONFIRMED]
+    assert det._cat.closed
+    real = llr_kinds.categorise
+
+    def saying(kind, confirmed):
+        def fake(*args, **kwargs):
+            out = real(*args, **kwargs)
+            return out._replace(kind=kind, guess=kind if confirmed else 'dry',
+                                confirmed=confirmed, z=(240.0, 3.7))
+        return fake
+
+    for kind, confirmed, given in (('both', True, False), ('viscous', True, True),
+                                   ('undecided', False, False)):
+        again = LLRDetector('rw1', **PAPER)
+        again.process_arrays(t, w, f)
+        monkeypatch.setattr(llr_kinds, 'categorise', saying(kind, confirmed))
+        final = again.finish()
+        monkeypatch.setattr(llr_kinds, 'categorise', real)
+        assert bool(final) == given, (kind, final)
+    assert llr_kinds.adds_component('dry', 'both') and llr_kinds.adds_component(
+        'viscous', 'both')
+    assert not any(llr_kinds.adds_component(a, b) for a, b in (
+        ('both', 'dry'), ('dry', 'viscous'), ('undecided', 'both'), ('both', 'both')))

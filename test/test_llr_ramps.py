@@ -254,7 +254,7 @@ def test_detector_names_ramps_declares_them_once_and_streaming_equals_batch():
                 streamed = []
                 for a, b, c in zip(t.tolist(), w.tolist(), f.tolist()):
                     streamed.extend(det.update(a, b, c))
-                assert streamed == events
+                assert streamed + det.finish() == events
         assert right >= least, (kind, right)
         assert wrong == 0, (kind, wrong)
 
@@ -272,3 +272,40 @@ def test_a_second_change_during_a_ramp_is_still_declared(second):
         t, w, f = _ramp_run(seed, 6.0, 0.0, second=second)
         firsts = [e.index for e in detect_batch(t, w, f) if e.revision == 0]
         assert any(abs(i - second[0]) <= 500 for i in firsts), firsts
+
+
+def test_a_viscous_ramp_is_not_confirmed_both_by_its_step_fit():
+    # Seed 3319 (development): the first declaration of a viscous ramp was confirmed `both`
+    # at its 8 L0 re-check (z_dry -3.50, z_viscous 15.02): the step fit of a level still
+    # rising shares the rise with the dry direction; the step check did not reject (13.78
+    # against 18.95 at 13 time shapes), the growth tests named nothing. Beside a growing
+    # viscous change the dry step explains chi 2.37 (straight ramp): not significant, so
+    # the `both` is withdrawn (docs/llr.md "Kinds that survive collinearity").
+    t, w, f = _ramp_run(3319, 0.0, 0.06)
+    events = detect_batch(t, w, f)
+    first = [e for e in events if e.revision == 0 and e.index >= 5500][0]
+    mine = [e for e in events if e.index == first.index]
+    assert not any(e.kind == 'both' for e in mine)
+    assert mine[-1].details[keys.KIND_GUESS] == 'viscous'
+
+
+def test_no_confirmed_wrong_kind_on_fresh_ramps():
+    # Fresh seeds 3620-3639 (development: 0-29, 100-109, 3200-3219, 3300-3319; scored on
+    # 3500-3519 before this test): the final kind of the first declaration of a dry and a
+    # viscous ramp. A confirmed wrong kind needs a false significance at the category
+    # level in one of its evaluations (the declaration, three re-checks, the end of
+    # record; each growth test Bonferroni-corrected over its time shapes, and a `both`
+    # needs each step component beside the other kind's growth), taking the true ramp as
+    # one of the candidate shapes: P(any in 40 runs) <= 40 x 5 x 1e-3 = 0.2 (a union
+    # bound; measured 0 of 80 on 3200-3219, 3300-3319).
+    wrong = []
+    for seed in range(3620, 3640):
+        for dry, visc, kind in ((6.0, 0.0, 'dry'), (0.0, 0.06, 'viscous')):
+            t, w, f = _ramp_run(seed, dry, visc)
+            events = detect_batch(t, w, f)
+            first = [e for e in events if e.revision == 0 and e.index >= 5500][0]
+            final = max((e for e in events if e.index == first.index),
+                        key=lambda e: e.revision)
+            if final.details[keys.KIND_CONFIRMED] and final.kind != kind:
+                wrong.append((seed, kind, final.kind))
+    assert wrong == []

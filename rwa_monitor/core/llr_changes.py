@@ -36,7 +36,10 @@ class DeclaredChange:
     positions where the kind is re-checked (:func:`llr_common.checkpoints`), ``points``:
     the remaining positions where the ramp sums take in samples
     (:func:`llr_common.ramp_points`), ``ramp``: :func:`llr_growth.ramp_sums` blocks of
-    ``[tau, ramp_end]`` (times since ``time``).
+    ``[tau, ramp_end]`` (times since ``time``). ``closed``: the re-checks are over (no
+    continuation test, :meth:`ChangeRules._continues`); the ramp sums still take in the
+    samples every ``window`` samples, into one last block (``tail``), for the end of
+    record. ``finished``: :meth:`ChangeRules.finish` has run.
     """
 
     before: np.ndarray
@@ -54,6 +57,9 @@ class DeclaredChange:
     ramp: list[np.ndarray]
     ramp_end: int
     tau: int = -1   # position of the change
+    closed: bool = False
+    tail: bool = False
+    finished: bool = False
 
 
 class Rings(NamedTuple):
@@ -169,7 +175,8 @@ class ChangeRules:
             before=prefix[tau - first].copy(), n_before=tau - base, kind=cat.kind,
             guess=cat.guess, confirmed=cat.confirmed, revision=0, rows=rows, time=times[0],
             log_p=log_p, gap=prefix[start - first] - prefix[tau - first],
-            checks=tuple(checks), points=points, ramp=[ramps[tau]], ramp_end=n, tau=tau)
+            checks=tuple(checks), points=points, ramp=[ramps[tau]], ramp_end=n, tau=tau,
+            closed=not checks)
         return [event] + self._restart_and_test(start, n)
 
     def _restart_and_test(self, start: int, n: int) -> list[AnomalyEvent]:
@@ -220,7 +227,7 @@ class ChangeRules:
         the samples ``[tau, n]``. If so, its ramp sums take in the samples up to ``n``.
         """
         prev = self._cat
-        if prev is None or self._ints[kern.I_CHECKPOINT] < 0:
+        if prev is None or prev.closed or prev.finished:
             return False
         blocks = list(prev.ramp)
         if prev.ramp_end < n:
@@ -256,44 +263,71 @@ class ChangeRules:
         """Take the new samples into the ramp sums; re-check the kind at a checkpoint.
 
         ``j`` is a point of :func:`llr_common.ramp_points`; the kind is re-checked only at
-        the points of :func:`llr_common.checkpoints`.
+        the points of :func:`llr_common.checkpoints`. After the last re-check the change is
+        closed and its sums keep taking in samples every ``window`` samples, merged into
+        one block (so the time shapes stay those of the re-checks plus the straight ramp
+        to the end), for :meth:`finish`.
         """
         cat = self._cat
-        self._ints[kern.I_CHECKPOINT] = cat.points.pop(0) if cat.points else -1
-        cat.ramp.append(self._ramp_block(cat.ramp_end + 1, j, cat.time))
-        cat.ramp_end = j
+        self._ints[kern.I_CHECKPOINT] = cat.points.pop(0) if cat.points else j + self._w
+        self._take_ramp(j)
         if j not in cat.checks:
             return []
+        cat.closed = cat.closed or j == cat.checks[-1]
         return self._recheck(j, cat.gap + self._prefix_now())
 
-    def finish(self) -> list[AnomalyEvent]:
-        """End of record: the final categorisation of the open declaration, if any.
+    def _take_ramp(self, j: int) -> None:
+        """Add the samples ``(ramp_end, j]`` to the ramp sums of the last change."""
+        cat = self._cat
+        if j <= cat.ramp_end:
+            return
+        block = self._ramp_block(cat.ramp_end + 1, j, cat.time)
+        if cat.tail:
+            # Merge into the block after the last re-check: sums add, the knot moves.
+            block = np.concatenate([block[:1], cat.ramp[-1][1:] + block[1:]])
+            cat.ramp[-1] = block
+        else:
+            cat.ramp.append(block)
+        cat.tail = cat.closed
+        cat.ramp_end = j
 
-        Not in the paper (docs/llr.md "End of record"). A declared change whose kind still
-        has re-checks to come gets one more categorisation on every sample after it that
-        the record holds (the same tests and levels as a re-check), as an event with
-        ``final`` True and the samples it used, whether the kind changed or not; the
-        change is then closed. A kind confirmed earlier is kept, when this evaluation does
-        not confirm one, only if its tests still find each of its components at the
-        category level (:func:`llr_kinds.supports`): the record as a whole, not its
-        shorter prefix, bears the answer. The batch path calls it after the last row; a live
+    def finish(self) -> list[AnomalyEvent]:
+        """End of record: the final categorisation of the last declared change, if any.
+
+        Not in the paper (docs/llr.md "End of record"). The last declared change gets one
+        more categorisation on every sample after it that the record holds (the same
+        tests and levels as a re-check), as an event with ``final`` True and the samples
+        it used: always while its re-checks are not all done (open), and, once they are
+        (closed), only when the answer differs from the last one given (kind, guess or
+        confirmation) and does not add a component to a confirmed single kind (one the
+        re-checks did not find and the longer record does: a misfit of the model growing
+        with the samples, or a later change). A kind confirmed earlier is kept, when this
+        evaluation does not confirm one, only if its tests still find each of its
+        components at the category level (:func:`llr_kinds.supports`): the record as a
+        whole, not its shorter prefix, bears the answer. The change is then finished (a
+        second call gives nothing). The batch path calls it after the last row; a live
         detector keeps its re-check schedule and calls it only when its input ends.
-        Returns [] when no declaration is open.
+        Returns [] when no change was declared, or with ``category_revisions`` 0 (no
+        re-checks, no sums kept).
         """
         cat = self._cat
-        if cat is None or self._ints[kern.I_CHECKPOINT] < 0:
+        if cat is None or cat.finished or not cat.checks:
             return []
         j = int(self._ints[kern.I_POS]) - 1
-        if j > cat.ramp_end:
-            cat.ramp.append(self._ramp_block(cat.ramp_end + 1, j, cat.time))
-            cat.ramp_end = j
+        self._take_ramp(j)
         self._ints[kern.I_CHECKPOINT] = -1
         cat.points = []
-        return self._recheck(j, cat.gap + self._prefix_now(), final=True)
+        cat.finished = True
+        return self._recheck(j, cat.gap + self._prefix_now(), final=True,
+                             quiet=cat.closed)
 
-    def _recheck(self, j: int, after: np.ndarray, final: bool = False
+    def _recheck(self, j: int, after: np.ndarray, final: bool = False, quiet: bool = False
                  ) -> list[AnomalyEvent]:
-        """Re-check the kind of the last declared change on its after segment up to ``j``."""
+        """Re-check the kind of the last declared change on its after segment up to ``j``.
+
+        ``final``: the end of record (:meth:`finish`); ``quiet``: then an event only if
+        the answer differs from the last one given.
+        """
         cat = self._cat
         new = llr_kinds.categorise(cat.before, cat.n_before, after, self._p,
                                    self._noise_var, self._z_thr, np.asarray(cat.ramp))
@@ -302,6 +336,10 @@ class ChangeRules:
         if final and cat.confirmed and not new.confirmed and \
                 llr_kinds.supports(new, cat.kind, self._z_thr):
             new = new._replace(kind=cat.kind, guess=cat.guess, confirmed=True)
+        answer = (new.kind, new.guess, new.confirmed)
+        if quiet and (answer == (cat.kind, cat.guess, cat.confirmed) or cat.confirmed
+                      and llr_kinds.adds_component(cat.kind, new.kind)):
+            return []
         cat.kind, cat.guess, cat.confirmed = new.kind, new.guess, new.confirmed
         cat.revision += 1
         ring = self._rings()

@@ -108,13 +108,17 @@ def ramp_fits(before: np.ndarray, after: np.ndarray, ramp: np.ndarray, p: int
     return explained
 
 
-def ramp_limits(dof: int, z_threshold: float) -> tuple[float, float]:
+def ramp_limits(dof: int, z_threshold: float, shapes: int = 1) -> tuple[float, float]:
     """Return the chi-square limits ``(reject, absent)`` with ``dof`` degrees of freedom.
 
     ``reject``: the upper quantile at the category level (the level whose two-sided
-    normal quantile is ``z_threshold``); ``absent``: at :data:`RAMP_ABSENT_LEVEL`.
+    normal quantile is ``z_threshold``) divided by ``shapes``, the number of candidate
+    time shapes whose best statistic is compared (Bonferroni; docs/llr.md "Kinds on
+    ramps", *one rule for the time shapes*); ``absent``: at :data:`RAMP_ABSENT_LEVEL`,
+    one shape (a condition for naming a kind: the stricter limit).
     """
-    return chi2_upper(dof, level_of(z_threshold)), chi2_upper(dof, RAMP_ABSENT_LEVEL)
+    return (chi2_upper(dof, level_of(z_threshold) / shapes),
+            chi2_upper(dof, RAMP_ABSENT_LEVEL))
 
 
 def ramp_statistics(explained: np.ndarray, noise_var: float) -> tuple[float, float]:
@@ -123,21 +127,58 @@ def ramp_statistics(explained: np.ndarray, noise_var: float) -> tuple[float, flo
             max(float(explained[0] - explained[2]), 0.0) / noise_var)
 
 
-def ramp_kind(explained: np.ndarray, noise_var: float, z_threshold: float) -> int | None:
+def ramp_kind(explained: np.ndarray, noise_var: float, z_threshold: float, shapes: int = 1
+              ) -> int | None:
     """Return the kind (0 dry, 1 viscous) the growth tests name, or None.
 
     Not in the paper (docs/llr.md "Kinds on ramps"). Nested likelihood-ratio tests of
     each single-kind growth model against the full one (:func:`ramp_fits`), one degree of
     freedom each (the other kind's growth column): a kind is named when the other kind's
     growth is not significant even at :data:`RAMP_ABSENT_LEVEL` and its own growth is,
-    at the category level (:func:`ramp_limits`); None otherwise.
+    at the category level over the ``shapes`` candidate time shapes whose best fits
+    ``explained`` holds (:func:`ramp_limits`); None otherwise.
     """
     chi = ramp_statistics(explained, noise_var)
-    reject, absent = ramp_limits(1, z_threshold)
+    reject, absent = ramp_limits(1, z_threshold, shapes)
     for h in (0, 1):
         if chi[h] <= absent and chi[1 - h] > reject:
             return h
     return None
+
+
+def steps_beside_growth(before: np.ndarray, after: np.ndarray, shapes: np.ndarray, p: int
+                        ) -> tuple[float, float]:
+    """Return ``(E_dry, E_viscous)``: each step component beside the other kind growing.
+
+    Not in the paper (docs/llr.md "Kinds that survive collinearity", *A `both` needs both
+    components*). The joint fit of :func:`llr_stats.change_fits` (``x`` before, ``x +
+    dx`` after) with, besides, a growth ``r(u) h_o`` of the other kind ``o`` (time shape
+    ``r``, rows of :func:`ramp_shapes`): ``E_dry`` = what the dry step explains beside
+    the viscous step and the viscous growth, at the shape where that growing viscous
+    change fits best (the most favourable shape for the explanation without a dry
+    component); ``E_viscous`` likewise. Divided by ``sigma^2``: the step test of
+    :func:`llr_kinds.categorise` with the other kind allowed to grow.
+    """
+    pi_b, q_b, _ = unpack(before, p)
+    gram, rhs = after_gram(after, np.atleast_2d(shapes), p)
+    m = gram.shape[0]
+    # Columns: x (p), then the after-only columns dx (p), r h_dry, r h_viscous.
+    joint = np.empty((m, 2 * p + 2, 2 * p + 2))
+    joint[:, p:, p:] = gram
+    joint[:, :p, p:] = gram[:, :p, :]
+    joint[:, p:, :p] = gram[:, :, :p]
+    joint[:, :p, :p] = gram[:, :p, :p] + pi_b
+    v = np.concatenate([rhs[:, :p] + q_b, rhs], axis=-1)
+    out = []
+    for h in (0, 1):
+        other = 1 - h
+        null = list(range(p)) + [p + other, 2 * p + other]
+        fit = explained_sum(submatrix(joint, null), v[:, null])
+        best = int(np.argmax(fit))
+        cols = null + [p + h]
+        full = float(explained_sum(submatrix(joint[best], cols), v[best, cols]))
+        out.append(max(full - float(fit[best]), 0.0))
+    return out[0], out[1]
 
 
 def growth_separation(gram: np.ndarray, p: int) -> tuple[float, float]:
@@ -192,7 +233,7 @@ def grows(after: np.ndarray, shapes: np.ndarray, noise_var: float, p: int,
     ``|w|`` trends, so its single-kind or ``both`` verdict is not confirmed.
     """
     shapes = np.atleast_2d(shapes)
-    limit = chi2_upper(2, level_of(z_threshold) / shapes.shape[0])
+    limit = ramp_limits(2, z_threshold, shapes.shape[0])[0]
     return growth_statistic(after, shapes, noise_var, p) > limit
 
 

@@ -17,10 +17,10 @@ from typing import NamedTuple
 import numpy as np
 
 from rwa_monitor.core.llr_growth import (after_gram, grows, growth_separation,
-                                         MIN_SEPARATION, ramp_fits, ramp_kind, ramp_shapes,
-                                         ramp_statistics)
-from rwa_monitor.core.llr_stats import (before_noise_var, change_fits, chi2_upper, KINDS,
-                                        level_of, solve_scaled, unpack)
+                                         MIN_SEPARATION, ramp_fits, ramp_kind, ramp_limits,
+                                         ramp_shapes, ramp_statistics, steps_beside_growth)
+from rwa_monitor.core.llr_stats import (before_noise_var, change_fits, KINDS, solve_scaled,
+                                        unpack)
 
 # The data cannot tell dry from viscous (docs/llr.md "Categorisation"): an event kind.
 UNDECIDED = 'undecided'
@@ -145,12 +145,16 @@ def categorise(before: np.ndarray, n_before: int, after: np.ndarray, p: int,
     replaces it, with ``shape`` ``ramp`` and the step estimate ``dx`` of that kind; a
     confirmed single step kind refuted by a significant growth of the other kind is
     withdrawn to ``undecided`` (:func:`refuted`; never ``both``, which only the step tests
-    confirm). When the growth columns cannot be told from the step offsets and each other
-    (:func:`growth_separation` below :data:`MIN_SEPARATION`) the growth tests are not
-    used and the step outcome stands. A step verdict that stands is not
-    confirmed when the after segment grows (:func:`grows`): the step model it rests on is
-    rejected, and a step fit of a growing level shares the rise between the directions
-    (``undecided``, guess the better single kind). A step has no growth: a true single
+    confirm), and so is a confirmed ``both`` one of whose step components is not
+    significant beside the other kind's step and growth (:func:`unsupported_both`). Each
+    growth test compares the best of the ``m`` time shapes with its limit at
+    ``category_level / m`` (:func:`ramp_limits`). When the growth columns cannot be told
+    from the step offsets and each other (:func:`growth_separation` below
+    :data:`MIN_SEPARATION`) the growth tests are not used and the step outcome stands. A
+    step verdict that stands is not confirmed when the after segment grows
+    (:func:`grows`): the step model it rests on is rejected, and a step fit of a growing
+    level shares the rise between the directions (``undecided``, guess the better single
+    kind). A step has no growth: a true single
     step is named the other kind, or loses its confirmation, only through a false
     significance at the category level.
     """
@@ -198,7 +202,8 @@ def categorise(before: np.ndarray, n_before: int, after: np.ndarray, p: int,
         # step outcome, stands (undecided: with its own reason); a confirmed step verdict
         # cannot be checked for growth.
         return step
-    named = ramp_kind(best, s2, z_threshold)
+    m = shapes.shape[0]
+    named = ramp_kind(best, s2, z_threshold, m)
     if named is not None and step.kind == KINDS[named]:
         return step
     if named is not None and separable(dx, named, detectable, mean_speed):
@@ -206,9 +211,13 @@ def categorise(before: np.ndarray, n_before: int, after: np.ndarray, p: int,
                         detectable, SHAPES[1])
     if named is None:
         # The statistics are the best of the candidate time shapes: Bonferroni over them,
-        # as the step check (grows) does.
-        level = level_of(z_threshold) / shapes.shape[0]
-        step = refuted(step, ramp_statistics(best, s2), chi2_upper(1, level), dx)
+        # as every growth test (ramp_limits).
+        step = refuted(step, ramp_statistics(best, s2), ramp_limits(1, z_threshold, m)[0],
+                       dx)
+    if step.confirmed and step.kind == KINDS[2]:
+        beside = steps_beside_growth(before, after, shapes, p)
+        step = unsupported_both(step, (beside[0] / s2, beside[1] / s2), limit, dx,
+                                explained)
     growing = step.confirmed and step.shape == SHAPES[0] and grows(
         after, shapes, s2, p, z_threshold)
     if growing:
@@ -245,6 +254,29 @@ def refuted(step: Category, chi: tuple[float, float], reject: float, dx: np.ndar
                          guess=KINDS[guess], shape=SHAPES[1], reason='grows')
 
 
+def unsupported_both(step: Category, chi: tuple[float, float], limit: float,
+                     dx: np.ndarray, explained: np.ndarray) -> Category:
+    """Return the step category, unless a component of its ``both`` is a growth's share.
+
+    Not in the paper (docs/llr.md "Kinds that survive collinearity", *A `both` needs both
+    components*). ``chi[i]``: the significance of step component ``i`` beside the other
+    kind's step and growth (:func:`steps_beside_growth` / sigma^2). A confirmed ``both``
+    states that each component is non-zero; when one of them is not significant at the
+    category level (``chi <= limit = z*^2``) once the other kind may grow, the data are
+    explained by a single growing kind (a step fit of a growing level shares the rise
+    between the directions): withdrawn to ``undecided`` (reason ``grows``), guess the
+    kind that explains them alone (the better single step kind if either could).
+    """
+    if not step.confirmed or step.kind != KINDS[2] or min(chi) > limit:
+        return step
+    if (chi[0] > limit) != (chi[1] > limit):
+        h = 0 if chi[0] > limit else 1
+    else:
+        h = 0 if explained[0] >= explained[1] else 1
+    return step._replace(kind=UNDECIDED, dx=dx[h].copy(), confirmed=False,
+                         guess=KINDS[h], shape=SHAPES[1], reason='grows')
+
+
 def supports(category: Category, kind: str, z_threshold: float) -> bool:
     """Return True if the step tests of ``category`` find each component of ``kind``.
 
@@ -256,3 +288,12 @@ def supports(category: Category, kind: str, z_threshold: float) -> bool:
     """
     components = {KINDS[0]: (0,), KINDS[1]: (1,), KINDS[2]: (0, 1)}[kind]
     return all(abs(category.z[i]) > z_threshold for i in components)
+
+
+def adds_component(kind: str, new: str) -> bool:
+    """Return True if the kind ``new`` claims a component that the kind ``kind`` does not.
+
+    ``both`` after ``dry`` or ``viscous``. The end of record of a closed change (docs/llr.md
+    "End of record", *Closed changes*) does not add one to a confirmed kind.
+    """
+    return new == KINDS[2] and kind in KINDS[:2]
