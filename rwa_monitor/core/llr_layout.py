@@ -11,7 +11,7 @@ writes them by these names; the kernels read the values only Python changes once
 The kernels are compiled with ``cache=True`` and numba takes these constants and the
 inlined :func:`setup` / :func:`ring_row` into their machine code, but its cache only sees
 edits of the kernel's own file: after editing this one, delete the cached kernels
-(``rwa_monitor/core/__pycache__/llr_*.nb[ic]``) so they are compiled again.
+(``rwa_monitor/core/__pycache__/*.nbi``, ``*.nbc``) so they are compiled again.
 """
 
 from __future__ import annotations
