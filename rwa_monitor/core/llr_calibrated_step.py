@@ -88,5 +88,5 @@ def nominal_residual(table, t, w, f):
 
 @njit('int64(float64[::1], int64[::1], float64[::1], float64, float64, float64)', cache=True)
 def step_calibrated(fs, ints, table, t, w, f):
-    """:func:`step` of ``(t, w, nominal_residual(table, t, w, f))``: one call per sample."""
+    """``llr_kernel.step`` of ``(t, w, nominal_residual(table, t, w, f))``: one call per sample."""
     return sample(fs, ints, setup(fs, ints), t, w, nominal_residual(table, t, w, f))

@@ -68,10 +68,10 @@ I_NON_FINITE = 21      # rejected samples by the first check they fail
 I_OUT_OF_RANGE = 22
 I_NON_INCREASING = 23
 I_SPEED_MODEL = 24    # 1: samples divided by the modelled noise level before the sums
-I_FLAGS = 25          # flags of the sample where :func:`run` stopped
+I_FLAGS = 25          # flags of the sample where llr_kernel.run stopped
 I_SCALARS = 26
 
-# Flags returned by step / ingest / test (0: nothing to do, the usual case).
+# Flags returned by llr_kernel's step / ingest / test (0: nothing to do, the usual case).
 REVISE = 2    # the position is a revision point of the last declared change
 EXACT = 4     # the exact tail is needed at candidate ints[I_K] (y, tr, dm in fs)
 DECLARE = 8   # Algorithm 1 line 18: declare
@@ -102,7 +102,7 @@ def allocate(length: int, width: int, term_width: int, ar_max: int
 class Setup(NamedTuple):
     """The values of the state arrays that only Python changes, read once per call.
 
-    Between two returns of :func:`run` (or within one :func:`step`) the kernel never
+    Between two returns of ``llr_kernel.run`` (or within one ``step``) the kernel never
     writes them: read once before the loop, they stay in registers instead of being read
     again after every store into the arrays.
     """
