@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from rwa_monitor.core.llr_common import candidate_log_p2
-from rwa_monitor.core.llr_kernel import lower_bound
+from rwa_monitor.core.llr_skip import lower_bound
 
 
 @pytest.mark.parametrize('dof', [None, 30.0, 1000.0, 1e6])

@@ -27,7 +27,7 @@ import numpy as np
 import pytest
 from test_llr_equivalence import streams
 
-from rwa_monitor.core import llr_cstep, llr_detector, llr_kernel as kern
+from rwa_monitor.core import llr_cstep, llr_detector, llr_layout as layout
 from rwa_monitor.core.llr import detect_batch_with_counters, LLRDetector
 from rwa_monitor.core.schema import llr_kwargs
 from rwa_monitor.pipelines import llr as llr_pipeline
@@ -157,8 +157,8 @@ def test_golden_file_gives_the_same_events_on_both_paths_and_in_batch(config):
 
 def _zero_noise_level(det):
     """Make the next accepted sample divide by a zero noise level (state set by hand)."""
-    det._ints[kern.I_SPEED_MODEL] = 1
-    det._fs[kern.F_SPEED_A:kern.F_SPEED_FLOOR + 1] = 0.0
+    det._ints[layout.I_SPEED_MODEL] = 1
+    det._fs[layout.F_SPEED_A:layout.F_SPEED_FLOOR + 1] = 0.0
 
 
 def test_a_step_that_raises_raises_on_both_paths_with_the_same_state():

@@ -1,6 +1,6 @@
 """The LLR friction-anomaly detector of one wheel (llr-realtime paper, Algorithm 1 and 2).
 
-:class:`LLRDetector` owns the state: the compiled kernel's two arrays (core/llr_kernel.py:
+:class:`LLRDetector` owns the state: the compiled kernel's two arrays (core/llr_layout.py:
 positions, prefix sums, rings of the last samples, counters), the noise model and
 :class:`rwa_monitor.core.llr_changes.DeclaredChange`. Its per-sample logic is written
 once: the kernel for the paper's model (eq. (1)), :mod:`rwa_monitor.core.llr_general`
@@ -16,7 +16,8 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from rwa_monitor.core import llr_cstep, llr_kernel as kern, llr_stats
+from rwa_monitor.core import llr_calibrated_step as calibrated, llr_cstep
+from rwa_monitor.core import llr_kernel as kern, llr_layout as layout, llr_stats
 from rwa_monitor.core.events import AnomalyEvent
 from rwa_monitor.core.friction import RegressorSet
 from rwa_monitor.core.llr_changes import ChangeRules, DeclaredChange
@@ -25,11 +26,11 @@ from rwa_monitor.core.llr_general import GeneralModel
 from rwa_monitor.core.llr_noise import NoiseFitting, NoiseModel
 from rwa_monitor.core.params import AUTO
 
-_KERNEL_COUNTERS = (('non_finite', kern.I_NON_FINITE), ('out_of_range', kern.I_OUT_OF_RANGE),
-                    ('non_increasing_time', kern.I_NON_INCREASING),
-                    ('ill_conditioned', kern.I_ILL))
+_KERNEL_COUNTERS = (('non_finite', layout.I_NON_FINITE), ('out_of_range', layout.I_OUT_OF_RANGE),
+                    ('non_increasing_time', layout.I_NON_INCREASING),
+                    ('ill_conditioned', layout.I_ILL))
 _step = kern.step
-_step_calibrated = kern.step_calibrated
+_step_calibrated = calibrated.step_calibrated
 _C_CALL = llr_cstep.available()
 
 
@@ -156,12 +157,12 @@ class LLRDetector(ChangeRules, GeneralModel, NoiseFitting, llr_cstep.StepOwner):
     @property
     def n_samples(self) -> int:
         """Number of ``update`` calls since construction or reset (accepted or not)."""
-        return int(self._ints[kern.I_ROWS])
+        return int(self._ints[layout.I_ROWS])
 
     @property
     def n_accepted(self) -> int:
         """Accepted samples: in the sums, or waiting for the noise fit."""
-        return int(self._ints[kern.I_POS]) + len(self._buffer)
+        return int(self._ints[layout.I_POS]) + len(self._buffer)
 
     @property
     def counters(self) -> dict[str, int]:
@@ -179,7 +180,7 @@ class LLRDetector(ChangeRules, GeneralModel, NoiseFitting, llr_cstep.StepOwner):
     @property
     def log_p_min(self) -> float:
         """Natural logarithm of :attr:`p_min` (never underflows)."""
-        return float(self._fs[kern.F_LOGPMIN])
+        return float(self._fs[layout.F_LOGPMIN])
 
     @property
     def last_statistic(self) -> float:
@@ -200,7 +201,7 @@ class LLRDetector(ChangeRules, GeneralModel, NoiseFitting, llr_cstep.StepOwner):
     @property
     def reference_start_index(self) -> int:
         """Row index where the current reference segment starts (-1 if no sample yet)."""
-        return int(self._ints[kern.I_C_ROW])
+        return int(self._ints[layout.I_C_ROW])
 
     @property
     def noise_model(self) -> NoiseModel | None:
@@ -233,40 +234,40 @@ class LLRDetector(ChangeRules, GeneralModel, NoiseFitting, llr_cstep.StepOwner):
 
     def _latest_k(self) -> int:
         """Return the candidate k of the latest test of the current reference, or -1."""
-        k = int(self._ints[kern.I_POS]) - self._w
-        return k if k > int(self._ints[kern.I_C]) + self._w else -1
+        k = int(self._ints[layout.I_POS]) - self._w
+        return k if k > int(self._ints[layout.I_C]) + self._w else -1
 
     def _reference_row(self) -> tuple[np.ndarray, int]:
         k = self._latest_k()
-        if k > int(self._ints[kern.I_C]):
+        if k > int(self._ints[layout.I_C]):
             base, n_p = self._base(k)
             return self._rings().pref[k % self._L] - base, n_p
-        return self._prefix_now(), int(self._ints[kern.I_POS]) - int(self._ints[kern.I_C])
+        return self._prefix_now(), int(self._ints[layout.I_POS]) - int(self._ints[layout.I_C])
 
     # -- state changes ----------------------------------------------------------------
     def reset(self) -> None:
         """Forget all data, counters and the reference (back to the constructed state)."""
         p2 = self._p == 2
-        # Per-sample state (core/llr_kernel.py allocate): scalars, then rings of the last
+        # Per-sample state (core/llr_layout.py allocate): scalars, then rings of the last
         # L accepted samples: prefix rows, terms ((h1, h2, f) for p = 2), times, rows.
-        self._fs, self._ints = kern.allocate(self._L, llr_stats.width(self._p),
-                                             3 if p2 else llr_stats.width(self._p),
-                                             self._ar_max if p2 else 0)
+        self._fs, self._ints = layout.allocate(self._L, llr_stats.width(self._p),
+                                               3 if p2 else llr_stats.width(self._p),
+                                               self._ar_max if p2 else 0)
         fs, ints = self._fs, self._ints
-        fs[kern.F_LAST_T] = -math.inf
-        fs[kern.F_LOGR] = self._logr
-        fs[kern.F_MIN_EXC] = self._min_exc
-        fs[kern.F_NOISE_VAR] = math.nan if self._noise_var is None else self._noise_var
-        fs[kern.F_MAX_W] = self._cfg['max_abs_speed']
-        fs[kern.F_MAX_F] = self._cfg['max_abs_friction']
-        fs[kern.F_FLOOR_REL] = llr_stats.NOISE_FLOOR_REL
-        fs[kern.F_FLOOR_ABS] = llr_stats.NOISE_FLOOR_ABS
-        ints[kern.I_W] = self._w
-        ints[kern.I_KVERIF] = self._kverif
-        ints[kern.I_R] = -1 if self._R is None else self._R
-        ints[kern.I_ESTIMATED] = self._noise_var is None
-        ints[kern.I_C_ROW] = -1
-        ints[kern.I_CHECKPOINT] = -1
+        fs[layout.F_LAST_T] = -math.inf
+        fs[layout.F_LOGR] = self._logr
+        fs[layout.F_MIN_EXC] = self._min_exc
+        fs[layout.F_NOISE_VAR] = math.nan if self._noise_var is None else self._noise_var
+        fs[layout.F_MAX_W] = self._cfg['max_abs_speed']
+        fs[layout.F_MAX_F] = self._cfg['max_abs_friction']
+        fs[layout.F_FLOOR_REL] = llr_stats.NOISE_FLOOR_REL
+        fs[layout.F_FLOOR_ABS] = llr_stats.NOISE_FLOOR_ABS
+        ints[layout.I_W] = self._w
+        ints[layout.I_KVERIF] = self._kverif
+        ints[layout.I_R] = -1 if self._R is None else self._R
+        ints[layout.I_ESTIMATED] = self._noise_var is None
+        ints[layout.I_C_ROW] = -1
+        ints[layout.I_CHECKPOINT] = -1
         self._pref_general = None if p2 else np.zeros(llr_stats.width(self._p))
         self._last_y = math.nan
         self._counters = {name: 0 for name in COUNTER_NAMES}
@@ -337,7 +338,7 @@ class LLRDetector(ChangeRules, GeneralModel, NoiseFitting, llr_cstep.StepOwner):
             h = self._row(t, w, aux)
             if h is None:
                 return []
-        self._fs[kern.F_LAST_T] = t
+        self._fs[layout.F_LAST_T] = t
         return self.ingest_row(row, t, f, h, w)
 
     update = llr_cstep.compiled_update(update, '_after')
@@ -365,7 +366,7 @@ class LLRDetector(ChangeRules, GeneralModel, NoiseFitting, llr_cstep.StepOwner):
             if self._fast:
                 i = kern.run(self._fs, self._ints, t, w, f, i)
                 if i < n:
-                    events.extend(self._after(int(self._ints[kern.I_FLAGS])))
+                    events.extend(self._after(int(self._ints[layout.I_FLAGS])))
             elif self._default and self._fitting and not self._speed_model:
                 i = self._buffer_arrays(t, w, f, i)
                 if len(self._buffer) >= self._fit_n:
@@ -383,7 +384,7 @@ class LLRDetector(ChangeRules, GeneralModel, NoiseFitting, llr_cstep.StepOwner):
         ``table``: a wheel's nominal lookup (core/calibrate.py ``NominalWheel.table``, which
         counts the samples not tested; their residual is NaN, dropped and counted here as
         non-finite, as through ``NominalWheel.residual_one``). The lookup and the sample
-        are one compiled call (core/llr_kernel.py ``step_calibrated``); same events.
+        are one compiled call (core/llr_calibrated_step.py ``step_calibrated``); same events.
         """
         if self._fast:
             try:
@@ -393,7 +394,7 @@ class LLRDetector(ChangeRules, GeneralModel, NoiseFitting, llr_cstep.StepOwner):
             else:
                 return self._after(flags) if flags else []
         try:
-            residual = kern.nominal_residual(table, float(t), float(speed), float(friction))
+            residual = calibrated.nominal_residual(table, float(t), float(speed), float(friction))
         except (TypeError, ValueError):
             return self.update(t, speed, friction)
         return self.update(t, speed, residual)
@@ -411,7 +412,7 @@ class LLRDetector(ChangeRules, GeneralModel, NoiseFitting, llr_cstep.StepOwner):
         try:
             return float(t), float(speed), float(friction)
         except (TypeError, ValueError):
-            self._ints[kern.I_ROWS] += 1
+            self._ints[layout.I_ROWS] += 1
             self._counters['non_finite'] += 1
             return None
 

@@ -15,7 +15,7 @@ import math
 import numpy as np
 from scipy import linalg
 
-from rwa_monitor.core import llr_kernel as kern, llr_stats
+from rwa_monitor.core import llr_layout as layout, llr_stats
 from rwa_monitor.core.events import AnomalyEvent
 from rwa_monitor.core.gchi2 import gchi2_logsf_general, log_sf2, log_sf2_t
 
@@ -29,18 +29,18 @@ class GeneralModel:
         P = self._pref_general + term
         self._pref_general = P
         ints, ring = self._ints, self._rings()
-        j = int(ints[kern.I_POS])
-        ints[kern.I_POS] = j + 1
+        j = int(ints[layout.I_POS])
+        ints[layout.I_POS] = j + 1
         if j == 0:
-            ints[kern.I_C_ROW] = row
+            ints[layout.I_C_ROW] = row
         s = j % self._L
         ring.term[s] = term
         ring.row[s] = row
         ring.time[s] = t
         ring.pref[(j + 1) % self._L] = P
-        events = self._revise(j) if j == ints[kern.I_CHECKPOINT] else []
+        events = self._revise(j) if j == ints[layout.I_CHECKPOINT] else []
         k = j - self._w + 1
-        if k > int(ints[kern.I_C]) + self._w and self._test_general(k, P):
+        if k > int(ints[layout.I_C]) + self._w and self._test_general(k, P):
             events.extend(self._declare(j))
         return events
 
@@ -67,9 +67,9 @@ class GeneralModel:
             y = float(d @ pi_p @ d) / s2
             tr = float(np.trace(m[:, 1:]))
             self._last_y = y
-            logpmin = float(self._fs[kern.F_LOGPMIN])
+            logpmin = float(self._fs[layout.F_LOGPMIN])
             # lambda_max >= tr / p, so b = y / (2 lambda_max) <= p y / (2 tr).
-            if tr > 0.0 and y > 0.0 and not p * y / (2.0 * tr) < self._fs[kern.F_YSTAR]:
+            if tr > 0.0 and y > 0.0 and not p * y / (2.0 * tr) < self._fs[layout.F_YSTAR]:
                 lam = np.sort(np.clip(linalg.eigh(pi_w, pi_t, eigvals_only=True), 0.0, 1.0))
                 # Dropping all but the two largest terms gives a lower bound of the tail.
                 two = (log_sf2(y, lam[-1], lam[-2]) if dof is None

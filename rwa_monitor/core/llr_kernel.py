@@ -2,16 +2,16 @@
 
 One sample (:func:`sample`: acceptance, regressors, noise level growing with speed, AR
 prewhitening, prefix sums, ring, the test of Algorithm 1 lines 9-18 with eq. (5)) on the
-detector's state, held in two preallocated arrays (:func:`allocate`): ``fs`` (floats:
-named scalars ``F_*``, then the rings of prefix rows, terms and times, the AR coefficients
-and lags) and ``ints`` (named scalars ``I_*``: counters, positions, then the ring of row
-indices). Entry points: :func:`step` (one sample from Python, the streaming path),
-:func:`run` (the same over whole arrays, loop compiled, the batch path), :func:`accept_run`
-(the samples waiting for the noise fit), :func:`ingest_run` (their replay once it is
-fitted). The values only Python changes are read once per call (:class:`Setup`). They
-return flags at the rare samples that need Python: the exact tail of eq. (7) (a sample
-whose skip bound does not rule it out; ``y``, ``tr``, ``dm`` left in ``fs``), a
-declaration, a revision point; categorisation and declarations are core/llr_changes.py.
+detector's two state arrays (their layout: core/llr_layout.py). Entry points: :func:`step`
+(one sample from Python, the streaming path), :func:`run` (the same over whole arrays,
+loop compiled, the batch path), :func:`accept_run` (the samples waiting for the noise
+fit), :func:`ingest_run` (their replay once it is fitted), :func:`ingest` and
+:func:`test_row` (one replayed sample, one test of a restart's catch-up). The values only
+Python changes are read once per call (``llr_layout.Setup``). They return flags at the
+rare samples that need Python: the exact tail of eq. (7) (a sample whose skip bound does
+not rule it out; ``y``, ``tr``, ``dm`` left in ``fs``), a declaration, a revision point;
+categorisation and declarations are core/llr_changes.py. The calibrated path (nominal
+lookup, then :func:`sample`) is core/llr_calibrated_step.py.
 
 Compiled by :mod:`rwa_monitor.core.jit` (numba, no fast-math: the same IEEE operations in
 the same order whatever the caller; docs/architecture.md "Compiled kernels"), the
@@ -20,143 +20,22 @@ absent or disabled. The loops over arrays (:func:`run`, :func:`accept_run`,
 :func:`ingest_run`) are compiled without numba's reference counting (``_nrt=False``, an
 option of numba's own): they allocate nothing, and the atomic counts of the arrays handed
 to the inlined functions, which its pruning leaves in a loop with branches, were a third
-of the loop's time. Also here: the calibrated nominal lookup (:func:`nominal_residual`)
-and both in one call (:func:`step_calibrated`).
+of the loop's time.
 """
 
 from __future__ import annotations
 
 import math
-from typing import NamedTuple
-
-import numpy as np
 
 from rwa_monitor.core.jit import njit
+from rwa_monitor.core.llr_layout import (
+    DECLARE, EXACT, F_DM, F_LAST_T, F_LOGPMIN, F_LOGR, F_MAX_F, F_MAX_W, F_PREF, F_SPEED_A,
+    F_SPEED_B, F_SPEED_FLOOR, F_TR, F_Y, I_C_ROW, I_DOF, I_FLAGS, I_ILL, I_K,
+    I_KMIN, I_KVERIF, I_NLAGS, I_NON_FINITE, I_NON_INCREASING, I_O_AR, I_O_LAGS,
+    I_OUT_OF_RANGE, I_POS, I_ROWS, I_SCALARS, NON_NEGATIVE, REVISE, ring_row, setup)
+from rwa_monitor.core.llr_layout import (  # noqa: F401 (read as kern.* by llr_changes.py)
+    F_YSTAR, I_C, I_CHECKPOINT, I_L, I_O_RPREF, I_O_RTERM, I_O_RTIME)
 from rwa_monitor.core.llr_skip import below_skip, lower_bound, SKIP_REL
-
-# Float scalars of ``fs``.
-F_LAST_T = 0
-F_LOGPMIN = 1
-F_YSTAR = 2
-F_LOGR = 3
-F_MIN_EXC = 4
-F_NOISE_VAR = 5
-F_MAX_W = 6
-F_MAX_F = 7
-F_FLOOR_REL = 8
-F_FLOOR_ABS = 9
-F_Y = 10
-F_TR = 11
-F_DM = 12
-F_PREF = 13   # six prefix sums (A, B, C, U, V, E) of the reference
-F_SPEED_A = 19   # noise level a + b |w| floored (llr_common.speed_scale; I_SPEED_MODEL)
-F_SPEED_B = 20
-F_SPEED_FLOOR = 21
-F_SCALARS = 22
-
-# Int scalars of ``ints``.
-I_ROWS = 0
-I_POS = 1
-I_C = 2
-I_C_ROW = 3
-I_KMIN = 4
-I_CHECKPOINT = 5
-I_W = 6
-I_KVERIF = 7
-I_R = 8           # sliding reference length, -1: growing reference
-I_L = 9
-I_ESTIMATED = 10  # 1: noise variance estimated on the reference
-I_AR_ORDER = 11
-I_NLAGS = 12
-I_ILL = 13        # tests skipped for an ill-conditioned Pi_P
-I_K = 14          # candidate of the last EXACT flag
-I_DOF = 15        # its degrees of freedom (-1: known noise)
-I_O_RPREF = 16
-I_O_RTERM = 17
-I_O_RTIME = 18
-I_O_AR = 19
-I_O_LAGS = 20
-I_NON_FINITE = 21      # rejected samples by the first check they fail
-I_OUT_OF_RANGE = 22
-I_NON_INCREASING = 23
-I_SPEED_MODEL = 24    # 1: samples divided by the modelled noise level before the sums
-I_FLAGS = 25          # flags of the sample where :func:`run` stopped
-I_SCALARS = 26
-
-# Flags returned by step / ingest / test (0: nothing to do, the usual case).
-REVISE = 2    # the position is a revision point of the last declared change
-EXACT = 4     # the exact tail is needed at candidate ints[I_K] (y, tr, dm in fs)
-DECLARE = 8   # Algorithm 1 line 18: declare
-
-
-def allocate(length: int, width: int, term_width: int, ar_max: int
-             ) -> tuple[np.ndarray, np.ndarray]:
-    """Return zeroed ``(fs, ints)`` for a ring of ``length`` and AR order up to ``ar_max``.
-
-    ``width``: prefix-row width; ``term_width``: per-sample ring width (3 for p = 2).
-    """
-    o_rpref = F_SCALARS
-    o_rterm = o_rpref + length * width
-    o_rtime = o_rterm + length * term_width
-    o_ar = o_rtime + length
-    o_lags = o_ar + ar_max
-    fs = np.zeros(o_lags + 3 * ar_max)
-    ints = np.zeros(I_SCALARS + length, dtype=np.int64)
-    ints[I_L] = length
-    ints[I_O_RPREF] = o_rpref
-    ints[I_O_RTERM] = o_rterm
-    ints[I_O_RTIME] = o_rtime
-    ints[I_O_AR] = o_ar
-    ints[I_O_LAGS] = o_lags
-    return fs, ints
-
-
-class Setup(NamedTuple):
-    """The values of the state arrays that only Python changes, read once per call.
-
-    Between two returns of :func:`run` (or within one :func:`step`) the kernel never
-    writes them: read once before the loop, they stay in registers instead of being read
-    again after every store into the arrays.
-    """
-
-    mask: int          # ring length - 1
-    o_rpref: int
-    o_rterm: int
-    o_rtime: int
-    w: int
-    r: int
-    c: int
-    estimated: int
-    ar_order: int
-    speed_model: int
-    checkpoint: int
-    min_exc: float
-    ystar: float
-    floor_rel: float
-    floor_abs: float
-    noise_var: float
-
-
-@njit(cache=True, inline='always')
-def setup(fs, ints):
-    """Return the :class:`Setup` of the state arrays."""
-    return Setup(ints[I_L] - 1, ints[I_O_RPREF], ints[I_O_RTERM], ints[I_O_RTIME], ints[I_W],
-                 ints[I_R], ints[I_C], ints[I_ESTIMATED], ints[I_AR_ORDER],
-                 ints[I_SPEED_MODEL], ints[I_CHECKPOINT], fs[F_MIN_EXC], fs[F_YSTAR],
-                 fs[F_FLOOR_REL], fs[F_FLOOR_ABS], fs[F_NOISE_VAR])
-
-
-# Ring offsets and array positions are never negative; masking the sign bit tells the
-# compiler so, and spares each ring access numba's fix-up of negative indices (its
-# instructions were an eighth of the per-sample loop).
-NON_NEGATIVE = (1 << 63) - 1
-
-
-@njit(cache=True, inline='always')
-def ring_row(fs, o):
-    """Return the six floats of ``fs`` from offset ``o`` (a prefix row of the ring)."""
-    return (fs[(o + 0) & NON_NEGATIVE], fs[(o + 1) & NON_NEGATIVE], fs[(o + 2) & NON_NEGATIVE],
-            fs[(o + 3) & NON_NEGATIVE], fs[(o + 4) & NON_NEGATIVE], fs[(o + 5) & NON_NEGATIVE])
 
 
 @njit(cache=True, error_model='numpy', inline='always')
@@ -426,77 +305,3 @@ def ingest_run(fs, ints, rows, t, f, h1, h2, start):
             ints[I_FLAGS] = flags
             return i
     return t.size
-
-
-# Calibrated nominal lookup (core/calibrate.py NominalWheel): one table array per wheel.
-T_REASON = 0      # out: why the last sample was not tested (0: tested or no reason)
-T_BAND = 1
-T_LO = 2
-T_HI = 3
-T_AT_ZERO = 4
-T_SCALE = 5
-T_ABOVE = 6       # (offset of grid, its length, offset of bucket index) of w > 0
-T_BELOW = 9       # the same for w < 0
-T_COUNTS = 12     # samples not tested, by reason code 1 and 2 (T_COUNTS + code - 1)
-T_HEADER = 14
-LOW_SPEED_BAND = 1
-OUTSIDE_RANGE = 2
-
-
-def pack_table(band: float, speed_range: tuple[float, float], at_zero: float, scale: float,
-               above: tuple, below: tuple) -> np.ndarray:
-    """Return the table of :func:`nominal_residual`.
-
-    ``above`` / ``below``: ``(grid, values, slope, first)`` of each side of zero (``first``:
-    the bucket index of ``NominalWheel``); ``scale``: buckets per rad/s.
-    """
-    head = np.zeros(T_HEADER)
-    head[T_BAND:T_SCALE + 1] = (band, speed_range[0], speed_range[1], at_zero, scale)
-    parts = [head]
-    offset = T_HEADER
-    for at, (grid, values, slope, first) in ((T_ABOVE, above), (T_BELOW, below)):
-        head[at:at + 3] = (offset, len(grid), offset + 3 * len(grid))
-        parts.extend(np.asarray(a, dtype=float) for a in (grid, values, slope, first))
-        offset += 3 * len(grid) + len(first)
-    return np.concatenate(parts)
-
-
-@njit('float64(float64[::1], float64, float64, float64)', cache=True)
-def nominal_residual(table, t, w, f):
-    """Return ``f - nominal(w)`` from the table; NaN if not tested (reason counted).
-
-    Not tested: non-finite input, ``|w|`` inside the low-speed band (reason 1), ``w``
-    outside the calibrated range (reason 2), ``|w|`` off the side's grid. The interval of
-    ``|w|`` is found by ``numpy.searchsorted`` between its bucket's bounds, then
-    ``nominal_j + (|w| - grid_j) slope_j`` (the floats of ``NominalWheel.residual``).
-    """
-    table[T_REASON] = 0.0
-    if not (-math.inf < w < math.inf and -math.inf < f < math.inf
-            and -math.inf < t < math.inf):
-        return math.nan
-    mag = abs(w)
-    if mag < table[T_BAND]:
-        table[T_REASON] = LOW_SPEED_BAND
-    elif w < table[T_LO] or w > table[T_HI]:
-        table[T_REASON] = OUTSIDE_RANGE
-    if table[T_REASON] != 0.0:
-        table[T_COUNTS + int(table[T_REASON]) - 1] += 1.0
-        return math.nan
-    if w == 0.0:
-        return f - table[T_AT_ZERO]
-    head = T_ABOVE if w > 0.0 else T_BELOW
-    o = int(table[head])
-    n = int(table[head + 1])
-    grid = table[o:o + n]
-    if mag < grid[0] or mag > grid[n - 1]:
-        return math.nan
-    bucket = int(table[head + 2]) + int((mag - grid[0]) * table[T_SCALE])
-    lo = int(table[bucket])
-    j = lo + np.searchsorted(grid[lo:int(table[bucket + 3])], mag, side='right') - 1
-    return f - (table[o + n + j] + (mag - grid[j]) * table[o + 2 * n + j])
-
-
-@njit('int64(float64[::1], int64[::1], float64[::1], float64, float64, float64)', cache=True)
-def step_calibrated(fs, ints, table, t, w, f):
-    """:func:`step` of ``(t, w, nominal_residual(table, t, w, f))``: one call per sample."""
-    return sample(fs, ints, setup(fs, ints), t, w, nominal_residual(table, t, w, f))

@@ -16,7 +16,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from rwa_monitor.core import llr_kernel as kern, llr_stats
+from rwa_monitor.core import llr_kernel as kern, llr_layout as layout, llr_stats
 from rwa_monitor.core.events import AnomalyEvent
 
 # Largest autoregressive order of the noise model (docs/llr.md, "Noise beyond white").
@@ -278,7 +278,7 @@ class NoiseFitting:
         w, -w)`` formed with numpy: the same floats).
         """
         rows = np.full(self._fit_n - len(self._buffer), -1, dtype=np.int64)
-        row0 = int(self._ints[kern.I_ROWS])
+        row0 = int(self._ints[layout.I_ROWS])
         end = kern.accept_run(self._fs, self._ints, t, w, f, start, rows)
         rows = rows[rows >= 0]
         at = start + rows - row0
@@ -317,11 +317,11 @@ class NoiseFitting:
                 events.extend(self._ingest_fitted(row, t, f, h_row, w))
             return events
         fs, ints = self._fs, self._ints
-        ints[kern.I_AR_ORDER] = len(model.ar)
-        fs[ints[kern.I_O_AR]:ints[kern.I_O_AR] + len(model.ar)] = model.ar
+        ints[layout.I_AR_ORDER] = len(model.ar)
+        fs[ints[layout.I_O_AR]:ints[layout.I_O_AR] + len(model.ar)] = model.ar
         if model.speed_std is not None:
-            ints[kern.I_SPEED_MODEL] = 1
-            fs[kern.F_SPEED_A:kern.F_SPEED_FLOOR + 1] = model.speed_std
+            ints[layout.I_SPEED_MODEL] = 1
+            fs[layout.F_SPEED_A:layout.F_SPEED_FLOOR + 1] = model.speed_std
             level = speed_scale(np.abs(speed), model.speed_std)
             friction = friction / level
             h = h / level[:, None]
@@ -343,7 +343,7 @@ class NoiseFitting:
         while i < n:
             i = kern.ingest_run(self._fs, self._ints, rows, t, f, h1, h2, i)
             if i < n:
-                events.extend(self._after(int(self._ints[kern.I_FLAGS])))
+                events.extend(self._after(int(self._ints[layout.I_FLAGS])))
             i += 1
         return events
 

@@ -3,7 +3,7 @@
 :func:`nominal_prediction` evaluates a ``friction_model`` block of calibration.yaml (the
 identification's regressors times the block's weights); :class:`NominalWheel` is one
 wheel's calibration in force, tabled once so that the calibrated LLR path (batch and
-per sample, core/llr_kernel.py) subtracts the nominal in about a microsecond. Written by
+per sample, core/llr_calibrated_step.py) subtracts the nominal in about a microsecond. Written by
 core/calibrate.py (the commissioning), read by the pipelines and the detector nodes.
 """
 
@@ -13,14 +13,14 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from rwa_monitor.core import llr_kernel
+from rwa_monitor.core import llr_calibrated_step
 from rwa_monitor.exceptions import ConfigError
 
 # Speed step (rad/s) of the nominal model's table (NominalWheel); knots are added to it.
 TABLE_STEP_RAD_S = 0.01
-# Reasons of a sample not tested, by the code of llr_kernel.nominal_residual.
+# Reasons of a sample not tested, by the code of llr_calibrated_step.nominal_residual.
 _REASONS = (None, 'low_speed_band', 'outside_calibrated_range')
-_nominal_residual = llr_kernel.nominal_residual
+_nominal_residual = llr_calibrated_step.nominal_residual
 
 
 def nominal_prediction(friction_model: Mapping[str, Any], speed: np.ndarray,
@@ -74,7 +74,7 @@ class NominalWheel:
         self._tables = {side: self._table(side, knots) for side in (1.0, -1.0)}
         self.at_zero = float(nominal_prediction(self.friction_model, np.zeros(1))[0])
         # Both sides packed for the compiled lookup (also LLRDetector.update_nominal's).
-        self.table = llr_kernel.pack_table(
+        self.table = llr_calibrated_step.pack_table(
             self.band_rad_s, self.speed_range, self.at_zero, 1.0 / TABLE_STEP_RAD_S,
             _lookup(*self._tables[1.0]), _lookup(*self._tables[-1.0]))
 
@@ -154,7 +154,7 @@ class NominalWheel:
         """Return (friction - nominal, reason not tested or None) of one sample.
 
         The same arithmetic as :meth:`residual` on one sample (a node's per-sample call):
-        core/llr_kernel.py ``nominal_residual`` on :attr:`table`, which also counts the
+        core/llr_calibrated_step.py ``nominal_residual`` on :attr:`table`, which also counts the
         samples not tested by reason (:attr:`not_tested`).
         """
         table = self.table
@@ -168,7 +168,7 @@ class NominalWheel:
     @property
     def not_tested(self) -> dict[str, int]:
         """Samples not tested since construction, by reason, through :attr:`table`."""
-        return {name: int(self.table[llr_kernel.T_COUNTS + code - 1])
+        return {name: int(self.table[llr_calibrated_step.T_COUNTS + code - 1])
                 for code, name in enumerate(_REASONS) if code}
 
 
