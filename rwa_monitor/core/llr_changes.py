@@ -17,7 +17,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from rwa_monitor.core import llr_growth, llr_kernel as kern, llr_kinds, llr_stats
+from rwa_monitor.core import llr_growth, llr_kernel as kern, llr_kinds
+from rwa_monitor.core import llr_layout as layout, llr_stats
 from rwa_monitor.core.events import AnomalyEvent
 from rwa_monitor.core.gchi2 import skip_threshold
 from rwa_monitor.core.llr_common import (candidate_log_p2, checkpoints, declaration,
@@ -73,11 +74,11 @@ class Rings(NamedTuple):
 
 def rings(fs: np.ndarray, ints: np.ndarray, width: int) -> Rings:
     """Return the ring views of the kernel arrays (core/llr_kernel.py ``allocate``)."""
-    length = int(ints[kern.I_L])
-    pref = fs[ints[kern.I_O_RPREF]:ints[kern.I_O_RTERM]].reshape(length, width)
-    term = fs[ints[kern.I_O_RTERM]:ints[kern.I_O_RTIME]].reshape(length, -1)
-    return Rings(pref, term, fs[ints[kern.I_O_RTIME]:ints[kern.I_O_AR]],
-                 ints[kern.I_SCALARS:kern.I_SCALARS + length])
+    length = int(ints[layout.I_L])
+    pref = fs[ints[layout.I_O_RPREF]:ints[layout.I_O_RTERM]].reshape(length, width)
+    term = fs[ints[layout.I_O_RTERM]:ints[layout.I_O_RTIME]].reshape(length, -1)
+    return Rings(pref, term, fs[ints[layout.I_O_RTIME]:ints[layout.I_O_AR]],
+                 ints[layout.I_SCALARS:layout.I_SCALARS + length])
 
 
 class ChangeRules:
@@ -89,19 +90,19 @@ class ChangeRules:
     def _prefix_now(self) -> np.ndarray:
         """Return the prefix sums of the reference up to the last accepted sample."""
         if self._p == 2:
-            return self._fs[kern.F_PREF:kern.F_PREF + 6].copy()
+            return self._fs[layout.F_PREF:layout.F_PREF + 6].copy()
         return np.asarray(self._pref_general, dtype=float)
 
     def _base(self, k: int) -> tuple[np.ndarray, int]:
         """Return the prefix row where P_k starts and the length of P_k."""
-        c = int(self._ints[kern.I_C])
+        c = int(self._ints[layout.I_C])
         if self._R is not None and k - self._R > c:
             return self._rings().pref[(k - self._R) % self._L].copy(), self._R
         return np.zeros(llr_stats.width(self._p)), k - c
 
     def _after(self, flags: int) -> list[AnomalyEvent]:
         """Act on the flags of a kernel call: revise, finish the test, declare."""
-        j = int(self._ints[kern.I_POS]) - 1
+        j = int(self._ints[layout.I_POS]) - 1
         events = self._revise(j) if flags & kern.REVISE else []
         if flags & kern.DECLARE or flags & kern.EXACT and self._exact():
             events.extend(self._declare(j))
@@ -110,11 +111,11 @@ class ChangeRules:
     def _exact(self) -> bool:
         """Finish the test the kernel left at EXACT: eq. (7) tail, new minimum, decision."""
         fs, ints = self._fs, self._ints
-        k = int(ints[kern.I_K])
-        dof = int(ints[kern.I_DOF])
-        logpmin = float(fs[kern.F_LOGPMIN])
-        logp = candidate_log_p2(float(fs[kern.F_Y]), float(fs[kern.F_TR]),
-                                float(fs[kern.F_DM]), logpmin,
+        k = int(ints[layout.I_K])
+        dof = int(ints[layout.I_DOF])
+        logpmin = float(fs[layout.F_LOGPMIN])
+        logp = candidate_log_p2(float(fs[layout.F_Y]), float(fs[layout.F_TR]),
+                                float(fs[layout.F_DM]), logpmin,
                                 None if dof < 0 else float(dof))
         if logp is not None and logp < logpmin:
             self._record(k, logp)
@@ -122,14 +123,14 @@ class ChangeRules:
 
     def _declares(self, k: int) -> bool:
         """Algorithm 1 line 18: p_min at or below r and ``k`` past the verification."""
-        return (float(self._fs[kern.F_LOGPMIN]) <= self._logr
-                and k > int(self._ints[kern.I_KMIN]) + self._kverif)
+        return (float(self._fs[layout.F_LOGPMIN]) <= self._logr
+                and k > int(self._ints[layout.I_KMIN]) + self._kverif)
 
     def _record(self, k: int, logp: float) -> None:
         """Algorithm 1 lines 13-15: new smallest p_k."""
-        self._fs[kern.F_LOGPMIN] = logp
-        self._ints[kern.I_KMIN] = k
-        self._fs[kern.F_YSTAR] = skip_threshold(logp)
+        self._fs[layout.F_LOGPMIN] = logp
+        self._ints[layout.I_KMIN] = k
+        self._fs[layout.F_YSTAR] = skip_threshold(logp)
 
     def _declare(self, n: int) -> list[AnomalyEvent]:
         """Algorithm 1 lines 18-21: declare the change and restart the reference.
@@ -144,8 +145,8 @@ class ChangeRules:
         re-checked instead and the reference restarts as after any declaration.
         """
         L, ring = self._L, self._rings()
-        c, k_min = int(self._ints[kern.I_C]), int(self._ints[kern.I_KMIN])
-        log_p = float(self._fs[kern.F_LOGPMIN])
+        c, k_min = int(self._ints[layout.I_C]), int(self._ints[layout.I_KMIN])
+        log_p = float(self._fs[layout.F_LOGPMIN])
         first = max(c, k_min - self._w)
         base = reference_base(c, first, self._R)
         prefix = ring.pref[np.arange(first, n + 2) % L]
@@ -170,7 +171,7 @@ class ChangeRules:
         self._last_event = event
         checks = checkpoints(tau, n, self._cfg['category_revisions'], self._w)
         points = ramp_points(n, checks, self._w)
-        self._ints[kern.I_CHECKPOINT] = points.pop(0) if points else -1
+        self._ints[layout.I_CHECKPOINT] = points.pop(0) if points else -1
         self._cat = DeclaredChange(
             before=prefix[tau - first].copy(), n_before=tau - base, kind=cat.kind,
             guess=cat.guess, confirmed=cat.confirmed, revision=0, rows=rows, time=times[0],
@@ -199,8 +200,8 @@ class ChangeRules:
     def _restart(self, c: int, n: int) -> None:
         """Start the new reference at position ``c`` and rebuild its prefix sums."""
         L, ring = self._L, self._rings()
-        self._ints[kern.I_C] = c
-        self._ints[kern.I_C_ROW] = ring.row[c % L]
+        self._ints[layout.I_C] = c
+        self._ints[layout.I_C_ROW] = ring.row[c % L]
         P = (0.0,) * 6 if self._p == 2 else np.zeros(llr_stats.width(self._p))
         ring.pref[c % L] = P
         for j in range(c, n + 1):
@@ -212,12 +213,12 @@ class ChangeRules:
                 P = P + ring.term[j % L]
             ring.pref[(j + 1) % L] = P
         if self._p == 2:
-            self._fs[kern.F_PREF:kern.F_PREF + 6] = P
+            self._fs[layout.F_PREF:layout.F_PREF + 6] = P
         else:
             self._pref_general = P
-        self._fs[kern.F_LOGPMIN] = 0.0
-        self._ints[kern.I_KMIN] = c
-        self._fs[kern.F_YSTAR] = 0.0
+        self._fs[layout.F_LOGPMIN] = 0.0
+        self._ints[layout.I_KMIN] = c
+        self._fs[layout.F_YSTAR] = 0.0
 
     def _continues(self, tau: int, n: int) -> bool:
         """Return True if the change declared at ``n`` is the previous one still growing.
@@ -269,7 +270,7 @@ class ChangeRules:
         to the end), for :meth:`finish`.
         """
         cat = self._cat
-        self._ints[kern.I_CHECKPOINT] = cat.points.pop(0) if cat.points else j + self._w
+        self._ints[layout.I_CHECKPOINT] = cat.points.pop(0) if cat.points else j + self._w
         self._take_ramp(j)
         if j not in cat.checks:
             return []
@@ -313,9 +314,9 @@ class ChangeRules:
         cat = self._cat
         if cat is None or cat.finished or not cat.checks:
             return []
-        j = int(self._ints[kern.I_POS]) - 1
+        j = int(self._ints[layout.I_POS]) - 1
         self._take_ramp(j)
-        self._ints[kern.I_CHECKPOINT] = -1
+        self._ints[layout.I_CHECKPOINT] = -1
         cat.points = []
         cat.finished = True
         return self._recheck(j, cat.gap + self._prefix_now(), final=True,

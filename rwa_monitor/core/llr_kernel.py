@@ -33,8 +33,6 @@ from rwa_monitor.core.llr_layout import (
     F_SPEED_B, F_SPEED_FLOOR, F_TR, F_Y, I_C_ROW, I_DOF, I_FLAGS, I_ILL, I_K,
     I_KMIN, I_KVERIF, I_NLAGS, I_NON_FINITE, I_NON_INCREASING, I_O_AR, I_O_LAGS,
     I_OUT_OF_RANGE, I_POS, I_ROWS, I_SCALARS, NON_NEGATIVE, REVISE, ring_row, setup)
-from rwa_monitor.core.llr_layout import (  # noqa: F401 (read as kern.* by llr_changes.py)
-    F_YSTAR, I_C, I_CHECKPOINT, I_L, I_O_RPREF, I_O_RTERM, I_O_RTIME)
 from rwa_monitor.core.llr_skip import below_skip, lower_bound, SKIP_REL
 
 
