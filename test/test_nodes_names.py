@@ -82,3 +82,17 @@ def test_the_fss_node_drops_and_counts_invalid_wheel_ids():
         assert node.input_counters['invalid_name'] == 5 * len(INVALID)
         assert all(valid_name(c) or c == 'telemetry/wheels'
                    for c in node.diagnostics.components), node.diagnostics.components
+
+
+@pytest.mark.parametrize('node_class', [LLRDetectorNode, FssDiagnoserNode])
+def test_distinct_valid_wheel_ids_do_not_grow_what_a_node_remembers(node_class):
+    n = wheels_input.MAX_LOGGED + 500
+    with RosWorld() as world:
+        node = world.node(node_class, parameter_overrides=[
+            Parameter('use_sim_time', value=True), Parameter('wheels', value='rw1')])
+        for i in range(0, n, 100):
+            names = [f'w{j}' for j in range(i, i + 100)]
+            node.on_raw_wheels(serialize_message(
+                messages.joint_state(1.0, names, [5.0] * 100, [1e-4] * 100)))
+        assert node.input_counters['unknown_wheel'] == n
+        assert len(node._logged) <= wheels_input.MAX_LOGGED + 1

@@ -156,8 +156,7 @@ class FssDiagnoserNode(Node):
     # ---------------------------------------------------------------------- input
     def _count(self, reason: str, subject: str, text: str, count: int = 1) -> None:
         self.input_counters[reason] += count
-        if (reason, subject) not in self._logged:
-            self._logged.add((reason, subject))
+        if wheels_input.first_time(self._logged, reason, subject):
             self.get_logger().warning(f'{text} (further cases are only counted)')
 
     def on_raw_wheels(self, buffer: bytes) -> None:

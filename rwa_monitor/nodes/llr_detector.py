@@ -173,8 +173,7 @@ class LLRDetectorNode(Node):
 
     # ---------------------------------------------------------------------- input
     def _log_once(self, reason: str, subject: str, text: str) -> None:
-        if (reason, subject) not in self._logged:
-            self._logged.add((reason, subject))
+        if wheels_input.first_time(self._logged, reason, subject):
             self.get_logger().warning(f'{text} (further cases are only counted)')
 
     def _reject(self, reason: str, subject: str, text: str, count: int = 1) -> None:
@@ -268,8 +267,7 @@ class LLRDetectorNode(Node):
         wheel.failures += 1
         self.input_counters['detector_failures'] += 1
         wheel.last_failure = (self.diagnostics.now(), f'{type(err).__name__}: {err}')
-        if ('detector_failure', wheel_id) not in self._logged:
-            self._logged.add(('detector_failure', wheel_id))
+        if wheels_input.first_time(self._logged, 'detector_failure', wheel_id):
             self.get_logger().error(
                 f'{wheel_id}: detector failed: {type(err).__name__}: {err}; detector '
                 'restarted (further failures are only counted)')

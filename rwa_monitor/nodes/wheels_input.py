@@ -91,3 +91,19 @@ def wheel_refusal(wheel_id: str, allowed: set[str] | None, known: int,
     if known >= max_wheels:
         return Refusal('too_many_wheels', f'ignoring wheel {wheel_id!r}: max_wheels reached')
     return None
+
+
+MAX_LOGGED = 1000   # (reason, subject) pairs a node remembers having logged
+
+
+def first_time(logged: set[tuple[str, str]], reason: str, subject: str) -> bool:
+    """Return True (and remember it) the first time ``(reason, subject)`` is seen.
+
+    Subjects come from messages (wheel ids), so their number is unbounded: past
+    :data:`MAX_LOGGED` remembered pairs every new subject counts as one, per reason.
+    """
+    key = (reason, subject) if len(logged) < MAX_LOGGED else (reason, '')
+    if key in logged:
+        return False
+    logged.add(key)
+    return True
