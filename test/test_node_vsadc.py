@@ -59,6 +59,47 @@ def test_node_events_equal_detect_pipeline(tmp_path):
     assert all(e.detector == 'vsadc' for e in got)
 
 
+# Fields that cross a message boundary as a ROS time stamp (sec, nanosec): the node's
+# times are the stamps of the replayed messages, detect's the file's floats, so they agree
+# to the stamp's resolution (1 ns, plus the rounding of sec + nanosec / 1e9).
+STAMP_FIELDS = ('time', 'declared_time')
+STAMP_RESOLUTION = 1.0e-9
+
+
+def assert_same_json(got, expected):
+    """Assert the events' files (``to_json``, what detect writes) agree field for field."""
+    assert len(got) == len(expected)
+    for mine, theirs in zip(got, expected):
+        mine, theirs = mine.to_json(), theirs.to_json()
+        assert mine.keys() == theirs.keys()
+        for name in STAMP_FIELDS:
+            assert mine.pop(name) == pytest.approx(theirs.pop(name), abs=STAMP_RESOLUTION)
+        assert mine == theirs       # every other field exactly (floats travel as repr)
+
+
+def test_node_events_equal_detect_field_for_field(tmp_path):
+    tele = simulate_aocs(900.0, fault=named_fault('medium', 'x', 250.0), seed=3900)
+    path = tmp_path / 'gyro.csv'
+    write_telemetry(path, tele)
+    tele = read_telemetry(path)
+    expected = pipeline.run(tele, {**pipeline.DEFAULTS, **CONFIG})
+    assert expected and expected[0].component == 'gyro_x'
+    with RosWorld('events') as world:
+        detector = _detector(world)
+        sink = world.node(Node, 'sink')
+        anomalies = Collector(sink, DiagnosticArray, 'anomalies', EVENTS_QOS)
+        replay = world.node(TelemetryReplay, parameter_overrides=[
+            Parameter('file', value=str(path)), Parameter('rate', value=0.0),
+            Parameter('burst', value=20), Parameter('min_subscribers', value=1),
+            Parameter('exit_when_done', value=False)])
+        world.wait_until(lambda: replay.done and detector.samples == len(tele), 60.0,
+                         'every row through the detector')
+        world.wait_until(lambda: len(_events(anomalies)) >= len(expected), 10.0, 'events')
+        world.spin_for(0.2)     # nothing more may follow
+        got = _events(anomalies)
+    assert_same_json(got, expected)
+
+
 def _publish_rows(world, pubs, tele, rows, with_star=True):
     gyro_pub, star_pub = pubs
     for k in rows:
