@@ -89,8 +89,9 @@ def test_node_events_equal_detect_pipeline(tmp_path):
 def test_node_events_equal_detect_field_for_field(tmp_path):
     # The node cannot know the end of a record: the replay publishes rows and /clock, and
     # nothing on a topic says "the record ended" (a live stream has no end; a loop starts
-    # again). So the node has no finish path and never writes detect's end-of-record
-    # (``final``) categorisations; every event before them must match field for field.
+    # again). So the node has no finish path and never publishes detect's end-of-record
+    # (``final``) categorisations; every event before them must match field for field,
+    # and the node's detectors, finished by hand, give detect's final events.
     tele, _ = simulate_friction_with_truth(
         wheels=['rw1', 'rw2'], n_samples=3000, rate_hz=10.0, seed=3901,
         anomalies=[Anomaly('rw1', 'viscous', 120.0, delta_viscous=4e-5),
@@ -112,11 +113,15 @@ def test_node_events_equal_detect_field_for_field(tmp_path):
         world.wait_until(lambda: len(_events(anomalies)) >= len(expected), 10.0, 'events')
         world.spin_for(0.2)     # nothing more may follow
         got = _events(anomalies)
+        # What `rwa-monitor demo` does in-process once the replay is done: the wheels'
+        # detectors finish as detect does at the end of the file.
+        finals = [e for w in ('rw1', 'rw2') for e in detector.wheels[w].detector.finish()]
     # Per wheel in order (across wheels the order of a row's events is not a contract).
     for wheel in ('rw1', 'rw2'):
         assert_same_fields([e for e in got if e.component == wheel],
                            [e for e in expected if e.component == wheel])
     assert len(got) == len(expected)
+    assert_same_fields(finals, [e for e in every if e.details.get(keys.FINAL)])
 
 
 def _wheel_statuses(collector, wheel):
