@@ -11,6 +11,7 @@ from sensor_msgs.msg import Imu, JointState
 
 from rwa_monitor.exceptions import ConfigError
 from rwa_monitor.nodes import messages, subscriber_wait
+from rwa_monitor.nodes import replay as replay_module
 from rwa_monitor.nodes.common import CLOCK_QOS, telemetry_qos
 from rwa_monitor.nodes.replay import main, TelemetryReplay
 from rwa_monitor.telemetry import read_telemetry, Telemetry, Wheel, write_telemetry
@@ -185,6 +186,52 @@ def test_exit_when_done_shuts_the_context_down(tmp_path):
         replay = _replay(world, path, exit_when_done=True)
         world.wait_until(lambda: not world.context.ok(), 20.0, 'the replay to shut down')
         assert replay.done
+
+
+class _Log:
+    """Stand-in for the node's logger: keeps (level, text) of every line."""
+
+    def __init__(self):
+        self.lines = []
+
+    def info(self, text):
+        self.lines.append(('info', text))
+
+    def warning(self, text):
+        self.lines.append(('warning', text))
+
+
+def test_exit_when_done_warns_when_a_subscriber_had_not_acknowledged_every_row(tmp_path):
+    # The gyro subscriber has not acknowledged every row ACK_TIMEOUT s after the last one
+    # (stand-in for wait_for_all_acked, which would otherwise need a subscriber to stall
+    # for 5 s): one warning names that topic only; the replay still ends (the context is
+    # shut down, exit code 0: the rows went out; whether they were all taken is the
+    # subscriber's to say).
+    path = tmp_path / 'tele.csv'
+    write_telemetry(path, _telemetry(n=10))
+    with RosWorld() as world:
+        _Listener(world)
+        replay = _replay(world, path, exit_when_done=True)
+        waits = []
+
+        def acked(topic, answer):
+            def wait_for_all_acked(timeout):
+                waits.append((topic, timeout.nanoseconds * 1e-9))
+                return answer
+            return wait_for_all_acked
+        topics = [pub.topic_name for pub in replay._data_pubs]
+        for pub in replay._data_pubs:
+            pub.wait_for_all_acked = acked(pub.topic_name, pub is not replay._gyro_pub)
+        log = _Log()
+        replay.get_logger = lambda: log
+        world.wait_until(lambda: not world.context.ok(), 20.0, 'the replay to shut down')
+    assert replay.done and replay.exit_code == 0
+    assert len(topics) == 4
+    assert sorted(waits) == sorted((topic, replay_module.ACK_TIMEOUT) for topic in topics)
+    warnings = [text for level, text in log.lines if level == 'warning']
+    assert len(warnings) == 1
+    assert 'a subscriber of /telemetry/gyro had not acknowledged every row' in warnings[0]
+    assert '/telemetry/wheels' not in warnings[0]
 
 
 @pytest.mark.parametrize('params,fragment', [
