@@ -28,7 +28,8 @@ from typing import Any
 from rwa_monitor import pipelines
 from rwa_monitor.cli.main import EXIT_ANOMALY, EXIT_NOT_EXAMINED, EXIT_NOTHING_FOUND
 from rwa_monitor.cli.options import add_topics, INPUT_HELP
-from rwa_monitor.cli.output import check_output, quiet_broken_pipe, STDOUT, write_output
+from rwa_monitor.cli.output import (check_output, json_text, quiet_broken_pipe, STDOUT,
+                                    write_output)
 from rwa_monitor.core.coverage import EXAMINED, UNKNOWN
 from rwa_monitor.core.events import AnomalyEvent
 from rwa_monitor.core.schema import help_text, LLR, SCHEMAS, VSADC
@@ -145,7 +146,7 @@ def run(args: argparse.Namespace) -> int:
     with quiet_broken_pipe():
         if args.output is not None:
             document = {'events': [e.to_json() for e in events], 'summary': summary}
-            write_output(args.output, json.dumps(document, indent=2) + '\n')
+            write_output(args.output, json_text(document))
             if str(args.output) != STDOUT:
                 print(f'wrote {args.output}: {len(events)} events')
         else:

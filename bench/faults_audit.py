@@ -1,0 +1,166 @@
+"""Fault cases of issue 36 (an audit of main 91ca172), each through the real code.
+
+``CASES``: (name, function); each function is given a fresh temporary folder, builds its
+input there, runs the command in this process (:func:`rwa_monitor.cli.main.main`) or as
+its own process where the exit code, stderr or a signal matter, and returns a one-line
+outcome; it raises AssertionError when the behaviour is wrong. bench/bench_faults.py
+runs them beside the cases of issue 24 and test/test_audit_faults.py runs each as a
+test. The fleet's cases of the issue live with the fleet.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+import pathlib
+import subprocess
+import sys
+from typing import Callable
+
+import numpy as np
+
+from rwa_monitor.cli.main import main
+from rwa_monitor.telemetry import read_telemetry, write_telemetry
+
+
+def run(*argv: object) -> tuple[int, str, str]:
+    """Run ``rwa-monitor ARGV`` in this process; return (exit code, stdout, stderr)."""
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        code = main([str(a) for a in argv])
+    return code, out.getvalue(), err.getvalue()
+
+
+def run_process(*argv: object, timeout: float = 300.0) -> subprocess.CompletedProcess:
+    """Run the command line as its own process (exit code and stderr as a user sees them)."""
+    return subprocess.run([sys.executable, '-m', 'rwa_monitor.cli.main',
+                           *(str(a) for a in argv)], capture_output=True, text=True,
+                          timeout=timeout)
+
+
+def strict_json(path: pathlib.Path) -> dict:
+    """Return the JSON of ``path``; AssertionError on NaN, Infinity or -Infinity."""
+    def refuse(constant: str) -> None:
+        raise AssertionError(f'{path.name} holds {constant}: not strict JSON')
+    return json.loads(path.read_text(), parse_constant=refuse)
+
+
+def one_line_error(code: int, err: str, expected: str) -> str:
+    """Check exit 2 with one line naming ``expected`` and no traceback; return the line."""
+    assert code == 2, f'exit {code}: {err[-300:]}'
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and 'Traceback' not in err, err[-500:]
+    assert expected in err, err
+    assert 'unexpected error' not in err, err
+    return lines[0].split('error: ', 1)[-1]
+
+
+def wheels_file(folder: pathlib.Path, seconds: int = 600, name: str = 'wheels.csv'
+                ) -> pathlib.Path:
+    """Write a fault-free two-wheel friction file (10 Hz) and return its path."""
+    path = folder / name
+    code, _, err = run('simulate', 'friction', '--wheels', '2', '--seconds', seconds,
+                       '--rate', '10', '--seed', '36', '-o', path)
+    assert code == 0, err
+    return path
+
+
+def damaged(source: pathlib.Path, name: str, column: str, value: float,
+            share: float = 1.0) -> pathlib.Path:
+    """Write ``source`` with ``share`` of ``column``'s rows (seeded choice) set to ``value``."""
+    tele = read_telemetry(source)
+    wheel, kind = column.split('_')
+    values = getattr(tele.wheels[wheel], kind)
+    n = values.size
+    rows = (np.arange(n) if share >= 1.0 else
+            np.random.default_rng(36).choice(n, max(1, int(n * share)), replace=False))
+    values[rows] = value
+    out = source.with_name(name)
+    write_telemetry(out, tele)
+    return out
+
+
+# ---------------------------------------------------------------------------- journals
+def journal_pretty_json(folder: pathlib.Path) -> str:
+    """Name a pretty-printed JSON file (detect's own output) as a journal: refused."""
+    from rwa_monitor.exceptions import ConfigError
+    from rwa_monitor.telemetry.alarms import AlarmStore
+    path = folder / 'events.json'
+    code, _, err = run('detect', wheels_file(folder, 300), '-o', path)
+    assert code in (0, 3), err
+    before = path.read_bytes()
+    assert before.startswith(b'{\n')
+    try:
+        AlarmStore(path).load()
+    except ConfigError as error:
+        message = str(error)
+    else:
+        raise AssertionError('a pretty-printed JSON file was taken for a journal')
+    assert path.read_bytes() == before, 'the file was changed'
+    return f'JournalError: "{message.split(": ", 1)[-1][:110]}"; {len(before)} bytes untouched'
+
+
+def journal_node_pretty_json(folder: pathlib.Path) -> str:
+    """Start a node on a pretty-printed JSON events_file: exit 2, one line, untouched."""
+    path = folder / 'events.json'
+    path.write_text(json.dumps({'events': [], 'summary': {'samples': 3}}, indent=2))
+    before = path.read_bytes()
+    out = subprocess.run([sys.executable, '-m', 'rwa_monitor.nodes.fss_diagnoser',
+                          '--ros-args', '-p', f'events_file:={path}'],
+                         capture_output=True, text=True, timeout=120)
+    line = one_line_error(out.returncode, out.stderr, 'not an alarm journal')
+    assert path.read_bytes() == before
+    return f'fss_diagnoser exit 2: "{line[:120]}"; file untouched'
+
+
+# ---------------------------------------------------------------------------- diagnose
+def _diagnose(path: pathlib.Path, out: pathlib.Path) -> tuple[int, dict, str]:
+    code, _, err = run('diagnose', path, '-o', out)
+    assert 'unexpected error' not in err, err
+    return code, (strict_json(out) if out.exists() else {}), err
+
+
+def diagnose_friction_1e300(folder: pathlib.Path) -> str:
+    """Diagnose a friction column of 1e300 N m: not examined (out of range), exit 3."""
+    path = damaged(wheels_file(folder), 'f1e300.csv', 'rw1_friction', 1e300)
+    code, doc, err = _diagnose(path, folder / 'd.json')
+    assert code == 3, f'exit {code}: {err}'
+    rw1 = doc['wheels']['rw1']
+    assert not any(rw1['anomalies'].values()), rw1['anomalies']
+    assert rw1['rejected']['out_of_range'] == rw1['coverage']['samples']
+    assert 'rw1' in doc['not_examined'] and 'rw2' not in doc['not_examined']
+    return f'exit 3; rw1 not examined: {doc["not_examined"]["rw1"]}; strict JSON'
+
+
+def diagnose_friction_1pct_minus_1e300(folder: pathlib.Path) -> str:
+    """1 % of friction rows at -1e300: counted out of range, diagnosed on the rest."""
+    path = damaged(wheels_file(folder), 'f.csv', 'rw1_friction', -1e300, 0.01)
+    code, doc, err = _diagnose(path, folder / 'd.json')
+    assert code == 0, f'exit {code}: {err}'
+    rw1 = doc['wheels']['rw1']
+    assert rw1['rejected']['out_of_range'] == 60, rw1['rejected']
+    noise = rw1['estimates']['noise_std_nm']
+    assert 1e-5 < noise < 1e-3, noise
+    return (f'exit 0; rw1: {rw1["rejected"]["out_of_range"]} of 6000 samples out of range, '
+            f'noise_std_nm {noise:.3g}; strict JSON')
+
+
+def diagnose_speed_1pct_1e300(folder: pathlib.Path) -> str:
+    """1 % of speed rows at 1e300: a finite noise estimate, never ``Infinity``."""
+    path = damaged(wheels_file(folder), 's.csv', 'rw1_speed', 1e300, 0.01)
+    code, doc, err = _diagnose(path, folder / 'd.json')
+    assert code == 0, f'exit {code}: {err}'
+    rw1 = doc['wheels']['rw1']
+    noise = rw1['estimates']['noise_std_nm']
+    assert rw1['rejected']['out_of_range'] == 60 and 1e-5 < noise < 1e-3, rw1
+    return f'exit 0; rw1 noise_std_nm {noise:.3g} (60 samples out of range); strict JSON'
+
+
+CASES: list[tuple[str, Callable[[pathlib.Path], str]]] = [
+    ('36 events_file naming a pretty-printed JSON file', journal_pretty_json),
+    ('36 node: events_file naming a pretty-printed JSON file', journal_node_pretty_json),
+    ('36 diagnose: a friction column of 1e300', diagnose_friction_1e300),
+    ('36 diagnose: 1 % of friction rows at -1e300', diagnose_friction_1pct_minus_1e300),
+    ('36 diagnose: 1 % of speed rows at 1e300', diagnose_speed_1pct_1e300),
+]
