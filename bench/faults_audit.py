@@ -157,10 +157,106 @@ def diagnose_speed_1pct_1e300(folder: pathlib.Path) -> str:
     return f'exit 0; rw1 noise_std_nm {noise:.3g} (60 samples out of range); strict JSON'
 
 
+# ------------------------------------------------------------------------------- paths
+def output_symlink_loop(folder: pathlib.Path) -> str:
+    """Give every command an -o (and an input) that is a loop of symbolic links."""
+    source = wheels_file(folder, 300)
+    (folder / 'a').symlink_to('b')
+    (folder / 'b').symlink_to('a')
+    loop = folder / 'a'
+    lines = []
+    for argv in (('detect', source, '-o', loop), ('diagnose', source, '-o', loop),
+                 ('simulate', 'friction', '--seconds', '5', '-o', loop),
+                 ('calibrate', source, '-o', loop),
+                 ('identify', source, '--wheel', 'rw1', '-o', loop),
+                 ('detect', loop, '-o', folder / 'x.json')):
+        code, _, err = run(*argv)
+        lines.append(one_line_error(code, err, 'symbolic links form a loop'))
+    return f'6 commands, each exit 2 with one line: "{lines[0]}"'
+
+
+def dangling_link_missing_folder(folder: pathlib.Path) -> str:
+    """Write through a dangling -o link whose folder is missing: refused, nothing made."""
+    source = wheels_file(folder, 300)
+    missing = folder / 'gone' / 'deeper'
+    link = folder / 'events.json'
+    link.symlink_to(missing / 'events.json')
+    code, _, err = run('detect', source, '-o', link)
+    line = one_line_error(code, err, 'whose folder')
+    cal = folder / 'cal'
+    cal.symlink_to(missing / 'cal')
+    code, _, err = run('calibrate', source, '-o', cal)
+    one_line_error(code, err, 'whose folder')
+    assert not (folder / 'gone').exists(), 'the missing folder was created'
+    (folder / 'gone').mkdir()
+    code, _, err = run('detect', source, '-o', folder / 'elsewhere.json')
+    assert code in (0, 3), err
+    return f'detect and calibrate exit 2: "{line[:160]}"; nothing created'
+
+
+_KILLED = '''
+import os, signal, sys
+from rwa_monitor.telemetry.atomic import FolderOutput
+out = FolderOutput(sys.argv[1], ('calibration.yaml', 'report.md', '*_friction.png'))
+work = out.open()
+work.mkdir()
+(work / 'calibration.yaml').write_text('half')
+if sys.argv[2] == 'kill':
+    os.kill(os.getpid(), signal.SIGKILL)
+print('ready', flush=True)
+sys.stdin.read()
+'''
+
+
+def killed_calibrate_temporary(folder: pathlib.Path) -> str:
+    """Kill (SIGKILL) a run building -o cal: the next run removes its .cal.*.tmp/."""
+    source = wheels_file(folder, 300)
+    cal = folder / 'cal'
+    killed = subprocess.run([sys.executable, '-c', _KILLED, str(cal), 'kill'],
+                            capture_output=True, text=True, timeout=120)
+    assert killed.returncode == -9, killed.stderr
+    left = sorted(p.name for p in folder.glob('.cal.*.tmp'))
+    assert len(left) == 1, left
+    live = subprocess.Popen([sys.executable, '-c', _KILLED, str(cal), 'wait'],
+                            stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+    try:
+        assert live.stdout.readline().strip() == 'ready'
+        code, _, err = run('calibrate', source, '-o', cal)
+        assert code == 0, err
+        now = sorted(p.name for p in folder.glob('.cal.*.tmp'))
+    finally:
+        live.communicate('', timeout=60)
+    assert left[0] not in now, "the killed run's temporary is still there"
+    assert len(now) == 1, f"the live run's temporary should stay: {now}"
+    assert (cal / 'calibration.yaml').read_text().startswith('calibration:')
+    return ('a SIGKILLed run left 1 .cal.*.tmp/; the next calibrate removed it (exit 0) and '
+            'kept the one of a run still alive')
+
+
+def identify_column_1e300(folder: pathlib.Path) -> str:
+    """Identify a friction column of 1e300 (all rows; then 1 %): named, never singular."""
+    source = wheels_file(folder)
+    code, _, err = run('identify', damaged(source, 'all.csv', 'rw1_friction', 1e300),
+                       '--wheel', 'rw1', '-o', folder / 'id_all')
+    line = one_line_error(code, err, 'rw1_friction: every value is at or beyond 1000 N m')
+    assert 'Singular' not in err
+    code, out, err = run('identify', damaged(source, 'some.csv', 'rw1_friction', -1e300, 0.01),
+                         '--wheel', 'rw1', '-o', folder / 'id_some')
+    assert code == 0 and '60 of 6000 values' in err, err
+    report = strict_json(folder / 'id_some' / 'report.json')
+    assert 0.0 < report['rmse_after']['held_out'] < 1e-3, report['rmse_after']
+    return (f'all rows: exit 2, "{line[:110]}"; 1 % of rows: exit 0, 60 rows left out, '
+            f'held-out RMSE {report["rmse_after"]["held_out"]:.3g} N m')
+
+
 CASES: list[tuple[str, Callable[[pathlib.Path], str]]] = [
     ('36 events_file naming a pretty-printed JSON file', journal_pretty_json),
     ('36 node: events_file naming a pretty-printed JSON file', journal_node_pretty_json),
     ('36 diagnose: a friction column of 1e300', diagnose_friction_1e300),
     ('36 diagnose: 1 % of friction rows at -1e300', diagnose_friction_1pct_minus_1e300),
     ('36 diagnose: 1 % of speed rows at 1e300', diagnose_speed_1pct_1e300),
+    ('36 -o (and an input) through a loop of symbolic links', output_symlink_loop),
+    ('36 -o a dangling link whose folder is missing', dangling_link_missing_folder),
+    ('36 .cal.*.tmp/ left by a SIGKILLed calibrate', killed_calibrate_temporary),
+    ('36 identify on a friction column of 1e300', identify_column_1e300),
 ]

@@ -61,3 +61,45 @@ def test_json_text_is_strict():
     assert json.loads(text) == {'a': None, 'b': [None, None, 1.5], 'c': None}
     for word in ('NaN', 'Infinity'):
         assert word not in text
+
+
+def test_a_temporary_of_an_ended_process_is_removed_and_others_kept(tmp_path):
+    """Temporaries are named after their host and process (telemetry/temporaries.py)."""
+    import subprocess
+    import sys
+    from rwa_monitor.telemetry import temporaries
+    target = tmp_path / 'cal'
+    ended = subprocess.run([sys.executable, '-c', 'import os; print(os.getpid())'],
+                           capture_output=True, text=True, check=True)
+    pid = int(ended.stdout)
+    host = temporaries._host()
+    mine = temporaries.temporary_prefix(target) + 'abc.tmp'
+    names = {'ended': f'.cal.{host}-{pid}-12345.x1.tmp', 'mine': mine,
+             'other_host': f'.cal.elsewhere-{pid}-12345.x2.tmp',
+             'foreign_content': f'.cal.{host}-{pid}-12345.x3.tmp',
+             'not_ours': '.cal.abcdefgh.tmp'}
+    for key, name in names.items():
+        (tmp_path / name).mkdir()
+        (tmp_path / name / ('thesis.tex' if key == 'foreign_content' else 'cal')).mkdir()
+    swapped = tmp_path / f'.cal.{host}-{pid}-12345.x4.tmp'    # killed between two renames
+    (swapped / '.previous').mkdir(parents=True)
+    (swapped / '.previous' / 'calibration.yaml').write_text('previous')
+    removed = temporaries.remove_stale(target, ('cal',))
+    assert sorted(removed) == sorted([names['ended'], swapped.name])
+    assert (target / 'calibration.yaml').read_text() == 'previous'
+    left = {p.name for p in tmp_path.iterdir()}
+    assert left == {'cal', *(n for k, n in names.items() if k != 'ended')}
+
+
+def test_an_input_path_problem_is_named_plainly(tmp_path):
+    from rwa_monitor.telemetry.atomic import path_problem
+    (tmp_path / 'a').symlink_to('b')
+    (tmp_path / 'b').symlink_to('a')
+    (tmp_path / 'd').symlink_to(tmp_path / 'nowhere.csv')
+    (tmp_path / 'f').write_text('')
+    assert 'form a loop' in path_problem(tmp_path / 'a')
+    assert path_problem(tmp_path / 'd') == (f'a symbolic link to {tmp_path}/nowhere.csv, '
+                                            'which does not exist')
+    assert 'should be a folder is a file' in path_problem(tmp_path / 'f' / 'x.csv')
+    assert path_problem(tmp_path / 'no' / 'x.csv') == (
+        f'no such file (its folder {tmp_path}/no does not exist)')

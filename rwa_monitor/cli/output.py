@@ -23,7 +23,7 @@ import sys
 from typing import Any, Iterator
 
 from rwa_monitor.exceptions import OutputError
-from rwa_monitor.telemetry.atomic import write_text_atomic
+from rwa_monitor.telemetry.atomic import path_problem, write_text_atomic
 
 STDOUT = '-'
 
@@ -41,13 +41,16 @@ def check_output(output: str | os.PathLike | None, *inputs: str | os.PathLike | 
     if output is None or str(output) == STDOUT:
         return
     target = pathlib.Path(output)
+    problem = path_problem(target)
+    if 'loop' in problem:       # a link chain that never ends: nothing to write through
+        raise OutputError(f'{target}: {problem}')
     if target.is_dir():
         raise OutputError(f'{target}: is a folder; give a file name for the output')
     for source in inputs:
         if source is None:
             continue
         source = pathlib.Path(source)
-        if _same_file(target, source) or target.resolve() == source.resolve():
+        if _same_file(target, source) or os.path.realpath(target) == os.path.realpath(source):
             raise OutputError(f'{target}: is an input of this command; refusing to '
                               'overwrite it (choose another output file)')
 

@@ -53,7 +53,8 @@ def read_telemetry(path: str | os.PathLike,
     if rosbag_io.is_recording(path):
         return rosbag_io.read(path, topics)
     if not os.path.exists(path):
-        raise TelemetrySchemaError(os.fspath(path), 'no such file')
+        from rwa_monitor.telemetry.atomic import path_problem
+        raise TelemetrySchemaError(os.fspath(path), path_problem(path))
     if os.path.isdir(path):
         raise TelemetrySchemaError(os.fspath(path), 'a folder without metadata.yaml is not '
                                    'a rosbag2 recording')
