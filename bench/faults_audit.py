@@ -249,6 +249,43 @@ def identify_column_1e300(folder: pathlib.Path) -> str:
             f'held-out RMSE {report["rmse_after"]["held_out"]:.3g} N m')
 
 
+# ------------------------------------------------------------------------- wide files
+def wide_csv(path: pathlib.Path, columns: int, rows: int = 20) -> pathlib.Path:
+    """Write a CSV of ``time`` and ``columns`` wheel columns (speed, friction pairs)."""
+    wheels = columns // 2
+    rng = np.random.default_rng(36)
+    header = ['time'] + [f'rw{i}_{k}' for i in range(wheels) for k in ('speed', 'friction')]
+    table = np.column_stack([np.arange(rows) * 0.1, rng.normal(size=(rows, 2 * wheels))])
+    np.savetxt(path, table, delimiter=',', fmt='%.6g', header=','.join(header), comments='')
+    return path
+
+
+def _cpu_seconds(*argv: object) -> tuple[float, subprocess.CompletedProcess]:
+    """Run the command line as its own process; return (its CPU seconds, the result)."""
+    import resource
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    done = run_process(*argv, timeout=900)
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime), done
+
+
+def wide_file_scaling(folder: pathlib.Path) -> str:
+    """Detect on 25,000 and 100,000 columns x 20 rows: CPU time grows linearly, not faster."""
+    times = {}
+    for columns in (25_000, 100_000):
+        path = wide_csv(folder / f'wide_{columns}.csv', columns)
+        seconds, done = _cpu_seconds('detect', path, '-o', folder / f'wide_{columns}.json')
+        assert done.returncode == 3, done.stderr[-300:]        # 20 rows: not examined
+        times[columns] = seconds
+    baseline, _ = _cpu_seconds('detect', wide_csv(folder / 'narrow.csv', 2), '-o',
+                               folder / 'narrow.json')          # start-up and imports
+    ratio = (times[100_000] - baseline) / max(times[25_000] - baseline, 1e-3)
+    assert ratio < 6.0, f'4 x the columns took {ratio:.1f} x the time (linear: 4)'
+    return (f'CPU s: 25,000 columns {times[25_000]:.1f}, 100,000 columns '
+            f'{times[100_000]:.1f} (start-up {baseline:.1f}): {ratio:.1f} x the time for '
+            '4 x the columns')
+
+
 CASES: list[tuple[str, Callable[[pathlib.Path], str]]] = [
     ('36 events_file naming a pretty-printed JSON file', journal_pretty_json),
     ('36 node: events_file naming a pretty-printed JSON file', journal_node_pretty_json),
@@ -259,4 +296,9 @@ CASES: list[tuple[str, Callable[[pathlib.Path], str]]] = [
     ('36 -o a dangling link whose folder is missing', dangling_link_missing_folder),
     ('36 .cal.*.tmp/ left by a SIGKILLed calibrate', killed_calibrate_temporary),
     ('36 identify on a friction column of 1e300', identify_column_1e300),
+    ('36 detect on a CSV of 100,000 columns x 20 rows', wide_file_scaling),
 ]
+
+# Cases that measure time: run by the bench only, never as unit tests (docs: no timing
+# assertions in tests).
+TIMED = ('36 detect on a CSV of 100,000 columns x 20 rows',)
