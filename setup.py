@@ -47,7 +47,8 @@ EXTRAS_REQUIRE = {
     # the spacecraft simulation bus (rwa-monitor-bus, simulate basilisk)
     'bsk': ['bsk>=2.12,<3'],
     # the live view (rwa-monitor-foxglove): the SDK's server and the WebSocket front
-    'foxglove': ['foxglove-sdk>=0.30.3,<0.31', 'websockets>=17.4,<18'],
+    'foxglove': ['foxglove-sdk>=0.30.3,<0.31', 'websockets>=17.4,<18',
+                 'cryptography>=50.0,<51'],
     # the fleet engine
     'fleet': ['dask>=2026.8,<2027', 'distributed>=2026.8,<2027', 'pyarrow>=26.0,<27'],
     # tests, lint and benchmarks
