@@ -286,6 +286,131 @@ def wide_file_scaling(folder: pathlib.Path) -> str:
             '4 x the columns')
 
 
+# ------------------------------------------------------------------------ the bridge
+def _bridge_ports(**front_options: object):
+    """Return (front, SDK server) set up as the bridge does (TLS upstream, default origins)."""
+    import foxglove
+
+    from rwa_monitor.nodes.foxglove_front import loopback_certificate, trusting, WebSocketFront
+    certificate, key = loopback_certificate()
+    context = foxglove.Context()
+    channel = foxglove.Channel('/busy', schema={'type': 'object'}, context=context)
+    server = foxglove.start_server(host='127.0.0.1', port=0, context=context,
+                                   tls_cert=certificate, tls_key=key)
+    gate = WebSocketFront('127.0.0.1', 0, server.port, [], lambda text: None,
+                          upstream_tls=trusting(certificate), **front_options)
+    gate.sdk_context = context      # a context no one holds stops advertising its channels
+    return gate, server, channel
+
+
+def bridge_foreign_page(folder: pathlib.Path) -> str:
+    """Connect with Origin https://evil.example to the front and to the SDK's own port."""
+    import ssl
+
+    from websockets.exceptions import InvalidMessage, InvalidStatus
+    from websockets.sync.client import connect
+    gate, server, _ = _bridge_ports()
+    outcomes = []
+    try:
+        try:
+            connect(f'ws://127.0.0.1:{gate.port}', subprotocols=['foxglove.sdk.v1'],
+                    open_timeout=5, origin='https://evil.example').close()
+            outcomes.append('front open')
+        except InvalidStatus as err:
+            outcomes.append(f'front HTTP {err.response.status_code}')
+        for scheme in ('ws', 'wss'):
+            try:
+                connect(f'{scheme}://127.0.0.1:{server.port}', open_timeout=5,
+                        subprotocols=['foxglove.sdk.v1'], origin='https://evil.example').close()
+                outcomes.append(f'SDK {scheme} open')
+            except ssl.SSLCertVerificationError:
+                outcomes.append(f'SDK {scheme}: certificate not trusted')
+            except (InvalidMessage, OSError, EOFError) as err:
+                outcomes.append(f'SDK {scheme}: {type(err).__name__}')
+        with connect(f'ws://127.0.0.1:{gate.port}', subprotocols=['foxglove.sdk.v1'],
+                     open_timeout=5, origin='http://localhost:3000') as ws:
+            assert ws.recv(timeout=5)
+    finally:
+        gate.stop()
+        server.stop()
+    assert outcomes[0] == 'front HTTP 403' and not any('open' in o for o in outcomes), outcomes
+    return '; '.join(outcomes) + '; a page of http://localhost:3000 served'
+
+
+_IDLE_CLIENT = '''
+import json, sys, time
+from websockets.sync.client import connect
+ws = connect(sys.argv[1], subprotocols=['foxglove.sdk.v1'], ping_interval=None)
+while True:
+    frame = ws.recv()
+    if isinstance(frame, str) and json.loads(frame).get('op') == 'advertise':
+        channel = json.loads(frame)['channels'][0]['id']
+        ws.send(json.dumps({'op': 'subscribe', 'subscriptions': [
+            {'id': 1, 'channelId': channel}]}))
+        break
+print('subscribed', flush=True)
+time.sleep(600)
+'''
+
+
+def bridge_idle_clients(folder: pathlib.Path) -> str:
+    """Let 5 subscribed clients stop reading (SIGSTOP) under load, then kill them."""
+    import logging
+    import os
+    import signal
+    import threading
+    import time
+
+    def fds() -> int:
+        return len(os.listdir('/proc/self/fd'))
+    records: list[logging.LogRecord] = []
+    handler = logging.Handler()
+    handler.emit = records.append
+    logging.getLogger().addHandler(handler)
+    gate, server, channel = _bridge_ports(max_clients=32)      # default keepalive (20 s)
+    stop = threading.Event()
+
+    def pump() -> None:
+        payload = b'{"x": "' + b'y' * 2000 + b'"}'
+        while not stop.is_set():
+            channel.log(payload)
+            time.sleep(0.0005)
+    threading.Thread(target=pump, daemon=True).start()
+    before = fds()
+    clients = [subprocess.Popen([sys.executable, '-c', _IDLE_CLIENT,
+                                 f'ws://127.0.0.1:{gate.port}'], stdout=subprocess.PIPE,
+                                stderr=subprocess.DEVNULL, text=True) for _ in range(5)]
+    try:
+        for client in clients:
+            assert client.stdout.readline().strip() == 'subscribed'
+            client.stdout.close()
+        held = fds() - before
+        for client in clients:
+            client.send_signal(signal.SIGSTOP)
+        start = time.monotonic()
+        while gate.clients and time.monotonic() - start < 120:
+            time.sleep(0.2)
+        dropped_after = time.monotonic() - start
+    finally:
+        for client in clients:
+            client.kill()
+            client.wait()
+        stop.set()
+    end = time.monotonic() + 30
+    while fds() > before and time.monotonic() < end:
+        time.sleep(0.2)
+    left = fds() - before
+    gate.stop()
+    server.stop()
+    logging.getLogger().removeHandler(handler)
+    tracebacks = [r for r in records if r.exc_info]
+    assert not tracebacks, f'{len(tracebacks)} tracebacks: {tracebacks[0].getMessage()}'
+    assert held <= 15 and left <= 0, (held, left)
+    return (f'{held} descriptors for 5 clients, {max(left, 0)} left after; dropped '
+            f'{dropped_after:.0f} s after they stopped reading; 0 tracebacks logged '
+            f'({gate.disconnects} disconnects counted)')
+
+
 CASES: list[tuple[str, Callable[[pathlib.Path], str]]] = [
     ('36 events_file naming a pretty-printed JSON file', journal_pretty_json),
     ('36 node: events_file naming a pretty-printed JSON file', journal_node_pretty_json),
@@ -297,8 +422,12 @@ CASES: list[tuple[str, Callable[[pathlib.Path], str]]] = [
     ('36 .cal.*.tmp/ left by a SIGKILLed calibrate', killed_calibrate_temporary),
     ('36 identify on a friction column of 1e300', identify_column_1e300),
     ('36 detect on a CSV of 100,000 columns x 20 rows', wide_file_scaling),
+    ('36 bridge: a page of another origin, on the front and on the SDK port',
+     bridge_foreign_page),
+    ('36 bridge: 5 idle clients stop reading, then leave', bridge_idle_clients),
 ]
 
-# Cases that measure time: run by the bench only, never as unit tests (docs: no timing
-# assertions in tests).
-TIMED = ('36 detect on a CSV of 100,000 columns x 20 rows',)
+# Cases run by the bench only, never as unit tests: a timing (no timing assertions in
+# tests) and one that waits out the real keepalive (test_foxglove_bridge.py runs it short).
+BENCH_ONLY = ('36 detect on a CSV of 100,000 columns x 20 rows',   # a timing
+              '36 bridge: 5 idle clients stop reading, then leave')  # ~50 s: real keepalive

@@ -10,7 +10,7 @@ import math
 import numpy as np
 import pytest
 
-from bench.faults_audit import CASES, TIMED, wide_csv
+from bench.faults_audit import BENCH_ONLY, CASES, wide_csv
 from rwa_monitor.cli.output import json_text
 from rwa_monitor.core.fss.assign import assign_changepoints
 from rwa_monitor.core.fss.model import DEFAULT_SYSTEMS
@@ -18,7 +18,7 @@ from rwa_monitor.core.fss.pipeline import diagnose, FssConfig, plausible
 from rwa_monitor.core.schema import FSS, LLR
 
 
-UNTIMED = [(n, c) for n, c in CASES if n not in TIMED]
+UNTIMED = [(n, c) for n, c in CASES if n not in BENCH_ONLY]
 
 
 @pytest.mark.parametrize('case', [c for _, c in UNTIMED], ids=[n for n, _ in UNTIMED])

@@ -22,9 +22,10 @@ on main 91ca172 it accepted ``Origin: https://evil.example``).
 
 One event loop in one thread serves every client: a client costs three file descriptors
 (its socket, the relay's socket to the SDK, the SDK's end of it), released when it
-leaves; a client that stops answering keepalive pings is dropped after ``keepalive``
-seconds. Disconnects are ordinary events: they are counted (:attr:`disconnects`), never
-logged with a traceback (:class:`QuietDisconnects`).
+leaves; a client that stops answering keepalive pings, or stops reading so that a
+message to it waits the keepalive timeout, is dropped. Disconnects are ordinary events:
+they are counted (:attr:`disconnects`), never logged with a traceback
+(:class:`QuietDisconnects`).
 """
 
 from __future__ import annotations
@@ -163,6 +164,7 @@ class WebSocketFront:
         self.max_clients = max_clients
         self.refused = 0    # clients refused for their Origin
         self.busy = 0       # clients refused beyond max_clients
+        self.stalled = 0    # clients dropped for reading nothing for the keepalive timeout
         self.quiet = QuietDisconnects()
         self.logger = logging.getLogger(f'rwa_monitor.foxglove_front.{id(self):x}')
         self.logger.addFilter(self.quiet)
@@ -244,10 +246,12 @@ class WebSocketFront:
             self._warn(f'the Foxglove server behind the front is unreachable: {err}')
             await client.close(1011, 'server unavailable')
             return
+        stall = self._keepalive[1]
         async with upstream:
-            down = asyncio.ensure_future(_forward(upstream, client))
-            await _forward(client, upstream)
-            await down
+            down = asyncio.ensure_future(_forward(upstream, client, stall))
+            await _forward(client, upstream, stall)
+            if await down:
+                self.stalled += 1
 
     def stop(self) -> None:
         """Close the listening socket and every client (code 1001), end the thread."""
@@ -267,11 +271,21 @@ class WebSocketFront:
 
 
 async def _forward(source: ClientConnection | ServerConnection,
-                   sink: ClientConnection | ServerConnection) -> None:
-    """Send every message of ``source`` to ``sink``; close ``sink`` as ``source`` closed."""
+                   sink: ClientConnection | ServerConnection, stall: float | None) -> bool:
+    """Send every message of ``source`` to ``sink``; close ``sink`` as ``source`` closed.
+
+    A send that cannot progress for ``stall`` seconds (a peer that stopped reading: its
+    buffers full, so even a keepalive ping cannot be written and never times out) drops
+    ``sink`` at once (its transport aborted). Returns True when it did.
+    """
     try:
         async for message in source:
-            await sink.send(message)
+            try:
+                async with asyncio.timeout(stall):
+                    await sink.send(message)
+            except TimeoutError:
+                sink.transport.abort()
+                return True
     except _DISCONNECTS:  # either end went away: close the other below
         pass
     code = source.close_code
@@ -279,3 +293,4 @@ async def _forward(source: ClientConnection | ServerConnection,
         await sink.close(1000 if code in _UNSENDABLE else code, source.close_reason or '')
     except _DISCONNECTS:
         pass
+    return False
