@@ -30,7 +30,11 @@ def is_terminal(out: TextIO) -> bool:
 
 
 class Progress:
-    """Report ``done`` of ``total`` steps of ``what`` (see the module docstring)."""
+    """Report ``done`` of ``total`` steps of ``what`` (see the module docstring).
+
+    Between two steps a heartbeat repeats the last state every ``interval`` seconds (the
+    elapsed time moving on), so a slow step does not look like a hung command.
+    """
 
     def __init__(self, what: str, total: int | None = None, out: TextIO | None = None,
                  interval: float = INTERVAL_S) -> None:
@@ -42,6 +46,19 @@ class Progress:
         self.start = time.monotonic()
         self._last = self.start
         self.lines = 0
+        self._state = (0, '')
+        self._lock = threading.Lock()
+        self._stop = threading.Event()
+        self._beat = threading.Thread(target=self._heartbeat, daemon=True,
+                                      args=(max(interval, REDRAW_S),))
+        self._beat.start()
+
+    def _heartbeat(self, interval: float) -> None:
+        while not self._stop.wait(interval):
+            with self._lock:
+                if time.monotonic() - self._last >= interval:
+                    self._last = time.monotonic()
+                    self._write(self._text(*self._state))
 
     def _text(self, done: int, note: str) -> str:
         count = f'{done}/{self.total}' if self.total else f'{done}'
@@ -51,19 +68,22 @@ class Progress:
 
     def update(self, done: int, note: str = '') -> None:
         """Report progress; printed only when the last line is old enough."""
-        now = time.monotonic()
-        if now - self._last < self.interval:
-            return
-        self._last = now
-        self._write(self._text(done, note))
+        with self._lock:
+            self._state = (done, note)
+            now = time.monotonic()
+            if now - self._last < self.interval:
+                return
+            self._last = now
+            self._write(self._text(done, note))
 
     def finish(self, done: int | None = None, note: str = 'done') -> None:
-        """Print the final line (and end the redrawn line on a terminal)."""
-        text = self._text(self.total if done is None else done, note)
-        self._write(text)
-        if self.tty:
-            self.out.write('\n')
-            self.out.flush()
+        """Print the final line (and end the redrawn line on a terminal); stop the beat."""
+        self._stop.set()
+        with self._lock:
+            self._write(self._text(self.total if done is None else done, note))
+            if self.tty:
+                self.out.write('\n')
+                self.out.flush()
 
     def _write(self, text: str) -> None:
         if self.tty:

@@ -18,6 +18,7 @@ import json
 import math
 import os
 import pathlib
+from typing import Callable
 
 import numpy as np
 
@@ -234,10 +235,12 @@ def _fault(f: Fault, craft: Spacecraft, plan: FleetPlan) -> dict:
             'delta_dry_nm': f.delta_dry, 'delta_viscous_nms': f.delta_viscous}
 
 
-def write_fleet(out: str | os.PathLike, plan: FleetPlan) -> list[pathlib.Path]:
+def write_fleet(out: str | os.PathLike, plan: FleetPlan,
+                progress: Callable[[int], None] | None = None) -> list[pathlib.Path]:
     """Write every pass of every spacecraft and truth.json under ``out``; return the paths.
 
     Each file is written atomically; truth.json last, so a complete archive has it.
+    ``progress(passes written)`` is called after each pass.
     """
     root = pathlib.Path(out)
     written = []
@@ -246,6 +249,8 @@ def write_fleet(out: str | os.PathLike, plan: FleetPlan) -> list[pathlib.Path]:
             path = root / craft.name / f'{p.pass_id}.csv'
             write_telemetry(path, pass_telemetry(plan, craft, i))
             written.append(path)
+            if progress is not None:
+                progress(len(written))
     truth = root / 'truth.json'
     write_text_atomic(truth, json.dumps(truth_document(plan), indent=1) + '\n')
     return written + [truth]
