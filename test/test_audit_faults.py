@@ -6,6 +6,7 @@ wrong behaviour; the tests below pin the causes in the code that had them.
 
 import json
 import math
+import pathlib
 
 import numpy as np
 import pytest
@@ -126,3 +127,59 @@ def test_a_wide_file_is_read_whole_and_its_duplicates_found(tmp_path):
     path.write_text('\n'.join(lines) + '\n')
     with pytest.raises(TelemetrySchemaError, match="column 'rw7_friction': duplicate column"):
         read_telemetry(path)
+
+
+def test_detect_prints_a_table_a_person_reads(tmp_path, capsys):
+    """Issue 36: the table printed each component as raw JSON with 17-digit floats."""
+    import re
+    from rwa_monitor.cli.main import main
+    path = tmp_path / 'run.csv'
+    assert main(['simulate', 'friction', '--wheels', '2', '--seconds', '600', '--anomaly',
+                 'rw2:dry:300:+3e-4', '--seed', '36', '-o', str(path)]) == 0
+    capsys.readouterr()
+    assert main(['detect', str(path)]) == 1
+    out = capsys.readouterr().out
+    assert '{' not in out and not re.search(r'\d\.\d{8,}', out), out
+    assert 'rw2: examined; 6000 samples (6000 usable)' in out
+    rows = [line for line in out.splitlines() if ' rw2 ' in line and ' llr ' in line]
+    # the p-value column: '< 1e-300' where it underflowed (it printed 0)
+    assert rows and all(re.match(r'\s+[\d.]+ rw2\s+llr\s+\w+\s+\d+\s+(< 1e-300|\d\.?\d*e-\d+) ',
+                                 line) for line in rows), rows
+
+
+def test_p_values_and_numbers_as_printed():
+    from rwa_monitor.cli.readable import number_text, p_value_text
+    assert p_value_text(0.0) == '< 1e-300' and p_value_text(float('nan')) == 'n/a'
+    assert p_value_text(None) == 'n/a' and p_value_text(3.2e-9) == '3.2e-09'
+    assert number_text(0.00029876543210987) == '0.000299' and number_text(7) == '7'
+
+
+def test_a_recording_is_written_under_the_topics_given(tmp_path):
+    from rwa_monitor.exceptions import ConfigError, TelemetrySchemaError
+    from rwa_monitor.sim.aocs import simulate_aocs
+    from rwa_monitor.telemetry import read_telemetry, write_telemetry
+    tele = simulate_aocs(60.0, seed=1)
+    topics = 'gyro=/sc/imu,star_tracker=/sc/st/q'
+    write_telemetry(tmp_path / 'flight_bag', tele, topics)
+    with pytest.raises(TelemetrySchemaError, match='--topics'):
+        read_telemetry(tmp_path / 'flight_bag')
+    again = read_telemetry(tmp_path / 'flight_bag', topics)
+    assert np.array_equal(again.gyro, tele.gyro)
+    with pytest.raises(ConfigError, match='not of a CSV file'):
+        write_telemetry(tmp_path / 'x.csv', tele, topics)
+
+
+def test_a_missing_config_name_is_the_installed_copy(tmp_path, monkeypatch):
+    from rwa_monitor import paths
+    monkeypatch.chdir(tmp_path)
+    found = paths.installed_or_given('config/rwa_monitor.yaml')
+    assert found.is_file() and found.is_absolute()
+    argv, notes = paths.with_installed_params_files(
+        ['llr', '--ros-args', '--params-file', 'config/rwa_monitor.yaml'])
+    assert argv[-1] == str(found) and 'installed copy' in notes[0]
+    (tmp_path / 'config').mkdir()
+    (tmp_path / 'config' / 'rwa_monitor.yaml').write_text('{}\n')
+    assert paths.installed_or_given('config/rwa_monitor.yaml') == \
+        pathlib.Path('config/rwa_monitor.yaml')            # a file of this folder wins
+    assert paths.installed_or_given('mine/rwa_monitor.yaml') == \
+        pathlib.Path('mine/rwa_monitor.yaml')

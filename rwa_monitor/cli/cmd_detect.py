@@ -184,8 +184,8 @@ def print_table(events: list[AnomalyEvent], summary: dict[str, Any], out) -> Non
 def component_text(entry: Any) -> str:
     """Return one component's summary entry as a sentence (verdict, samples, rejections)."""
     if not isinstance(entry, dict):
-        return str(entry)
-    parts = [str(entry.get('verdict', 'examined')).replace('_', ' ')]
+        return _plain(entry)
+    parts = [str(entry['verdict']).replace('_', ' ')] if 'verdict' in entry else []
     if 'samples' in entry:
         usable = entry.get('usable_samples')
         parts.append(f'{entry["samples"]} samples'

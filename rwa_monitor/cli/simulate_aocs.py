@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from dataclasses import replace
 
-from rwa_monitor.cli.options import OUTPUT_HELP
+from rwa_monitor.cli.options import add_topics, OUTPUT_HELP
 from rwa_monitor.exceptions import ConfigError
 from rwa_monitor.sim.aocs import (AocsConfig, AXES, DEFAULT_LEVEL, DRIFT_SLOPES, FAULT_NAMES,
                                   GyroFault, named_fault, simulate_aocs)
@@ -47,6 +47,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help='probability that a star-tracker sample is output as -q')
     parser.add_argument('--seed', type=int, default=0, help='random seed (default 0)')
     parser.add_argument('-o', '--output', required=True, metavar='PATH', help=OUTPUT_HELP)
+    add_topics(parser)
     parser.set_defaults(func=run)
 
 
@@ -64,7 +65,7 @@ def run(args: argparse.Namespace) -> int:
         tele = simulate_aocs(args.seconds, fault=fault, config=config, seed=args.seed)
     except ValueError as err:
         raise ConfigError(str(err)) from None
-    write_telemetry(args.output, tele)
+    write_telemetry(args.output, tele, args.topics)
     print(f'wrote {args.output}: {len(tele)} samples at {config.rate_hz:g} Hz')
     if fault is not None:
         kind = 'bias step' if fault.slope == 0 else f'drift {fault.slope:g} rad/s per s'

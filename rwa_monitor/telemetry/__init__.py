@@ -14,7 +14,7 @@ import os
 import pathlib
 from typing import Mapping
 
-from rwa_monitor.exceptions import TelemetrySchemaError
+from rwa_monitor.exceptions import ConfigError, TelemetrySchemaError
 from rwa_monitor.telemetry.atomic import is_stream
 from rwa_monitor.telemetry.csv_io import read_csv, write_csv
 from rwa_monitor.telemetry.schema import STREAMS, Telemetry, Wheel
@@ -64,7 +64,8 @@ def read_telemetry(path: str | os.PathLike,
     return read_csv(path)
 
 
-def write_telemetry(path: str | os.PathLike, telemetry: Telemetry) -> None:
+def write_telemetry(path: str | os.PathLike, telemetry: Telemetry,
+                    topics: str | None = None) -> None:
     """Write a telemetry file or recording, the format chosen by the path (module doc).
 
     Parameters
@@ -74,6 +75,9 @@ def write_telemetry(path: str | os.PathLike, telemetry: Telemetry) -> None:
         folder): a rosbag2 folder; anything else: CSV.
     telemetry : Telemetry
         The record to write (atomically: a reader never sees half a file).
+    topics : str, optional
+        A recording's topic per stream, ``wheels=/a,gyro=/b`` (others keep the DESIGN.md
+        names), as another system would name them; ConfigError for a CSV file.
 
     Returns
     -------
@@ -90,9 +94,11 @@ def write_telemetry(path: str | os.PathLike, telemetry: Telemetry) -> None:
     """
     from rwa_monitor.telemetry import rosbag_io
     target = pathlib.Path(path)
-    if is_stream(target):
-        write_csv(target, telemetry)   # a FIFO or device (-o /dev/null): CSV, streamed
-    elif rosbag_io.is_recording(target) or not target.suffix:
-        rosbag_io.write(target, telemetry)
+    recording = not is_stream(target) and (rosbag_io.is_recording(target) or not target.suffix)
+    if topics and not recording:
+        raise ConfigError(f'{target}: --topics names the topics of a recording (a folder '
+                          'name without suffix, .mcap or .db3), not of a CSV file')
+    if recording:
+        rosbag_io.write(target, telemetry, topics)
     else:
-        write_csv(target, telemetry)
+        write_csv(target, telemetry)   # a FIFO or device (-o /dev/null) included: streamed
