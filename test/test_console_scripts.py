@@ -75,7 +75,10 @@ def test_dashboard_stops_cleanly_on_signals(sig):
             if proc.poll() is None:
                 proc.kill()
     assert proc.returncode == 0 and err == '', err
-    assert out.rstrip().endswith('anomalies: 0')   # the last view was drawn
+    from rwa_monitor.cli.readable import levels_legend
+    last = out.rstrip()
+    assert last.endswith(levels_legend())           # the last view was drawn whole
+    assert last[:-len(levels_legend())].rstrip().endswith('anomalies: 0')
 
 
 def _latched_shown(board):

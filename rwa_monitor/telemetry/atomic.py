@@ -380,10 +380,21 @@ class FolderOutput:
             self.abort()
 
     def abort(self) -> None:
-        """Remove the temporary folder (the target is left as it was)."""
+        """Remove the temporary folder (the target is left as it was).
+
+        Also one whose name was not yet known (an interrupt inside ``mkdtemp``): it carries
+        this process's prefix (telemetry/temporaries.py).
+        """
         if self.work is not None:
             shutil.rmtree(self.work, ignore_errors=True)
             self.work = None
+            return
+        with contextlib.suppress(OSError):
+            prefix = temporary_prefix(self.target)
+            for entry in os.scandir(self.target.parent):
+                if entry.name.startswith(prefix) and entry.name.endswith('.tmp') and \
+                        entry.is_dir(follow_symlinks=False):
+                    shutil.rmtree(entry.path, ignore_errors=True)
 
     def __enter__(self) -> pathlib.Path:
         """Open the temporary folder (created) and return it."""
