@@ -1,0 +1,361 @@
+"""CCSDS space packets in, telemetry schema columns out (docs/contracts.md).
+
+``read_packets(FILE.bin, DEF.xml, MAP.yaml)``: the XTCE definition (telemetry/xtce.py)
+says where each parameter sits; the map (telemetry/telemetry_map.py) which parameter is
+which schema column and what each container's time is. The file is walked in bounded
+memory (telemetry/ccsds_scan.py); the packets of each mapped container are decoded a batch
+at a time, vectorised when its layout is fixed (telemetry/xtce_layout.py), else by
+space-packet-parser packet by packet.
+
+Containers at different rates are joined as the rosbag2 reader joins topics: ``time`` is
+the union of every container's stamps, a stream whose rows are not all covered gets a
+``present`` mask (telemetry/schema.py), and a column is NaN on rows where its container has
+no packet. Within one container packets are put in time order; a packet repeating an
+earlier stamp with the same values is dropped and counted, with other values it is an
+error (which one holds is unknown).
+
+Counted, reported and skipped (:class:`PacketReport`): packets of APIDs the XTCE does not
+define, of containers the map does not use, idle packets, packets of another CCSDS
+version, packets whose length does not match their container, and a truncated last
+packet. Jumps of a mapped APID's sequence count are reported as data gaps.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+import os
+from typing import Any
+import warnings
+
+import numpy as np
+
+from rwa_monitor.exceptions import TelemetrySchemaError
+from rwa_monitor.telemetry import ccsds_scan as scan
+from rwa_monitor.telemetry import telemetry_map, xtce, xtce_layout
+from rwa_monitor.telemetry.schema import (ATTITUDE, GYRO, REFERENCE, Telemetry, TIME,
+                                          wheel_id_of)
+
+
+@dataclass
+class PacketReport:
+    """What a read of a packet file counted (module docstring); ``lines()`` for people."""
+
+    packets: int = 0
+    decoded: dict[str, int] = field(default_factory=dict)          # container -> packets
+    unknown_apids: dict[int, int] = field(default_factory=dict)    # not in the XTCE
+    unmapped_apids: dict[int, int] = field(default_factory=dict)   # in it, not mapped
+    idle: int = 0
+    bad_version: int = 0
+    length_mismatch: dict[str, int] = field(default_factory=dict)  # container -> packets
+    truncated_bytes: int = 0
+    gaps: dict[int, dict[str, int]] = field(default_factory=dict)  # apid -> gaps, missing
+    duplicates: dict[str, int] = field(default_factory=dict)       # container -> packets
+
+    def lines(self) -> list[str]:
+        """Return one line per thing that was skipped or missing (empty if none)."""
+        out = []
+        if self.unknown_apids:
+            out.append(f'{sum(self.unknown_apids.values())} packets of APIDs the XTCE does '
+                       f'not define skipped ({_apid_list(self.unknown_apids)})')
+        if self.unmapped_apids:
+            out.append(f'{sum(self.unmapped_apids.values())} packets of containers the map '
+                       f'does not use skipped ({_apid_list(self.unmapped_apids)})')
+        if self.bad_version:
+            out.append(f'{self.bad_version} packets of a CCSDS version other than 0 skipped')
+        for container, n in self.length_mismatch.items():
+            out.append(f'{n} {container} packets whose length does not match the container '
+                       'skipped')
+        if self.truncated_bytes:
+            out.append(f'truncated last packet: its {self.truncated_bytes} bytes dropped')
+        for apid, gap in self.gaps.items():
+            out.append(f'APID {apid}: {gap["gaps"]} data gaps in the sequence count, '
+                       f'{gap["missing"]} packets missing')
+        for container, n in self.duplicates.items():
+            out.append(f'{n} {container} packets repeating an earlier stamp dropped')
+        return out
+
+    def as_dict(self) -> dict[str, Any]:
+        """Return the report as plain JSON types."""
+        return {'packets': self.packets, 'decoded': dict(self.decoded),
+                'unknown_apids': {str(k): v for k, v in self.unknown_apids.items()},
+                'unmapped_apids': {str(k): v for k, v in self.unmapped_apids.items()},
+                'idle': self.idle, 'bad_version': self.bad_version,
+                'length_mismatch': dict(self.length_mismatch),
+                'truncated_bytes': self.truncated_bytes,
+                'gaps': {str(k): dict(v) for k, v in self.gaps.items()},
+                'duplicates': dict(self.duplicates)}
+
+
+def _apid_list(counts: dict[int, int], shown: int = 8) -> str:
+    items = sorted(counts.items(), key=lambda kv: -kv[1])
+    text = ', '.join(f'APID {a}: {n}' for a, n in items[:shown])
+    return text + (f', {len(items) - shown} more APIDs' if len(items) > shown else '')
+
+
+class _Container:
+    """One mapped container: its APID, layout, wanted parameters and decoded batches."""
+
+    def __init__(self, definition: xtce.Definition, name: str, apid: int,
+                 wanted: list[str]) -> None:
+        self.name, self.apid, self.wanted = name, apid, wanted
+        self.layout = xtce_layout.layout(definition, name, set(wanted))
+        self.root = definition.chain(name)[0].name
+        self.spp = definition.spp
+        self.batches: list[dict[str, np.ndarray]] = []
+        self.mismatch = 0
+        self.last_count: int | None = None
+        self.gaps = self.missing = 0
+
+    def take(self, buf: np.ndarray, offsets: np.ndarray, lengths: np.ndarray) -> None:
+        """Decode a batch of this container's packets (offsets into ``buf``)."""
+        self._sequence(scan.sequence_counts(buf, offsets))
+        if self.layout.fields:
+            good = lengths == self.layout.length
+            self.mismatch += int(len(good) - good.sum())
+            block = scan.gather(buf, offsets[good], self.layout.length)
+            self.batches.append(xtce_layout.decode(block, list(self.layout.fields.values())))
+        else:
+            self.batches.append(self._reference(buf, offsets, lengths))
+
+    def _reference(self, buf: np.ndarray, offsets: np.ndarray,
+                   lengths: np.ndarray) -> dict[str, np.ndarray]:
+        """Decode packet by packet with space-packet-parser (containers it alone reads)."""
+        rows: list[list[float]] = []
+        for offset, length in zip(offsets.tolist(), lengths.tolist()):
+            raw = buf[offset:offset + length].tobytes()
+            if self.layout.length is not None and length != self.layout.length:
+                self.mismatch += 1
+                continue
+            with warnings.catch_warnings():
+                warnings.simplefilter('error', UserWarning)   # bits left over: a mismatch
+                try:
+                    packet = self.spp.parse_bytes(raw, root_container_name=self.root)
+                    rows.append([float(packet[name]) for name in self.wanted])
+                except Exception:  # noqa: BLE001 - any packet the reference cannot read
+                    self.mismatch += 1
+        table = np.array(rows, dtype=np.float64).reshape(len(rows), len(self.wanted))
+        return {name: table[:, k] for k, name in enumerate(self.wanted)}
+
+    def _sequence(self, counts: np.ndarray) -> None:
+        if self.last_count is not None:
+            counts = np.concatenate([[self.last_count], counts])
+        step = np.diff(counts) % scan.SEQUENCE_MODULO
+        jumps = step != 1
+        self.gaps += int(jumps.sum())
+        self.missing += int(((step[jumps] - 1) % scan.SEQUENCE_MODULO).sum())
+        if len(counts):
+            self.last_count = int(counts[-1])
+
+    def values(self) -> dict[str, np.ndarray]:
+        """Return every wanted parameter over the packets decoded, in file order."""
+        return {name: np.concatenate([b[name] for b in self.batches])
+                if self.batches else np.empty(0) for name in self.wanted}
+
+
+def read_packets(path: str | os.PathLike, xtce_path: str | os.PathLike,
+                 map_path: str | os.PathLike, chunk_bytes: int = scan.CHUNK_BYTES
+                 ) -> tuple[Telemetry, PacketReport]:
+    """Read a packet file with its XTCE definition and telemetry map.
+
+    Parameters
+    ----------
+    path : str or path
+        Concatenated CCSDS space packets.
+    xtce_path, map_path : str or path
+        The XTCE definition and the telemetry map (docs/contracts.md).
+    chunk_bytes : int
+        Bytes read at a time (memory is this, the wanted values and a batch of offsets).
+
+    Returns
+    -------
+    (Telemetry, PacketReport)
+        The record (multi-rate as the module docstring says) and what was counted.
+
+    Raises
+    ------
+    TelemetrySchemaError or ConfigError
+        One line naming the file that is wrong and what is wrong with it.
+    """
+    definition = xtce.load(xtce_path)
+    tmap = telemetry_map.read_map(map_path)
+    columns_of = telemetry_map.check(tmap, definition)
+    decoded, report = decode_file(path, definition, tmap, columns_of, chunk_bytes)
+    return _join(os.fspath(path), tmap, columns_of, decoded, report), report
+
+
+def decode_file(path: str | os.PathLike, definition: xtce.Definition,
+                tmap: telemetry_map.TelemetryMap, columns_of: dict[str, list[str]],
+                chunk_bytes: int = scan.CHUNK_BYTES
+                ) -> tuple[dict[str, dict[str, np.ndarray]], PacketReport]:
+    """Return container -> parameter -> values (file order) and the report of the walk.
+
+    The parameters are each container's time parameters and mapped ones
+    (``columns_of``: :func:`telemetry_map.check`); packets whose length does not match
+    their container are left out.
+    """
+    name = os.fspath(path)
+    containers = _containers(definition, tmap, columns_of)
+    by_apid = {c.apid: c for c in containers}
+    wanted = np.zeros(scan.APIDS, dtype=bool)
+    wanted[list(by_apid)] = True
+
+    def take(buf: np.ndarray, offsets: np.ndarray, lengths: np.ndarray) -> None:
+        found = scan.apids(buf, offsets)
+        for apid in np.unique(found).tolist():
+            pick = found == apid
+            by_apid[apid].take(buf, offsets[pick], lengths[pick])
+
+    if not os.path.isfile(name):
+        raise TelemetrySchemaError(name, 'no such packet file')
+    try:
+        counts = scan.scan(name, wanted, take, chunk_bytes)
+    except OSError as err:
+        raise TelemetrySchemaError(name, f'cannot read: {err.strerror or err}') from None
+    report = _report(definition, counts, containers)
+    return {c.name: c.values() for c in containers}, report
+
+
+def _containers(definition: xtce.Definition, tmap: telemetry_map.TelemetryMap,
+                columns_of: dict[str, list[str]]) -> list[_Container]:
+    out: list[_Container] = []
+    for name, spec in tmap.time.items():
+        root = definition.chain(name)[0].name
+        apid_parameter = _apid_parameter(definition, root)
+        apid = definition.apid(name, apid_parameter)
+        wanted = list(dict.fromkeys([*spec.parameters(),
+                                     *(tmap.columns[c] for c in columns_of[name])]))
+        clash = next((c for c in out if c.apid == apid), None)
+        if clash is not None:
+            raise TelemetrySchemaError(definition.path, f'containers {clash.name!r} and '
+                                       f'{name!r} both select APID {apid}')
+        out.append(_Container(definition, name, apid, wanted))
+    return out
+
+
+def _apid_parameter(definition: xtce.Definition, root: str) -> str:
+    """Return the name of the 11-bit field at bit 5 of ``root`` (the CCSDS APID)."""
+    offset = 0
+    for parameter in definition.entries(root):
+        size = xtce_layout.size_of(parameter)
+        if offset == xtce.APID_BIT and size == xtce.APID_BITS:
+            return parameter.name
+        if size is None or offset > xtce.APID_BIT:
+            break
+        offset += size
+    raise TelemetrySchemaError(definition.path, f'container {root!r} has no 11-bit field at '
+                               'bit 5: not a CCSDS primary header (no APID)')
+
+
+def _report(definition: xtce.Definition, counts: scan.Counts,
+            containers: list[_Container]) -> PacketReport:
+    report = PacketReport(packets=counts.packets, truncated_bytes=counts.truncated_bytes,
+                          bad_version=counts.bad_version)
+    mapped = {c.apid for c in containers}
+    known = set()
+    for name in definition.containers:
+        try:
+            known.add(definition.apid(name, _apid_parameter(
+                definition, definition.chain(name)[0].name)))
+        except TelemetrySchemaError:
+            continue     # an abstract or unmatched container selects no APID
+    for apid in np.flatnonzero(counts.per_apid[:scan.APIDS]).tolist():
+        n = int(counts.per_apid[apid])
+        if apid == scan.IDLE_APID:
+            report.idle += n
+        elif apid not in mapped:
+            (report.unmapped_apids if apid in known else report.unknown_apids)[apid] = n
+    for c in containers:
+        report.decoded[c.name] = int(counts.per_apid[c.apid]) - c.mismatch
+        if c.mismatch:
+            report.length_mismatch[c.name] = c.mismatch
+        if c.gaps:
+            report.gaps[c.apid] = {'gaps': c.gaps, 'missing': c.missing}
+    return report
+
+
+def _join(path: str, tmap: telemetry_map.TelemetryMap, columns_of: dict[str, list[str]],
+          decoded: dict[str, dict[str, np.ndarray]], report: PacketReport) -> Telemetry:
+    """Put each container's packets on the union of the stamps (module docstring)."""
+    stamps: dict[str, np.ndarray] = {}
+    values: dict[str, dict[str, np.ndarray]] = {}
+    for name, spec in tmap.time.items():
+        stamps[name], values[name] = _ordered(path, name, _stamps(path, name, spec,
+                                                                  decoded[name]),
+                                              {c: decoded[name][tmap.columns[c]]
+                                               for c in columns_of[name]}, report)
+    if not any(len(s) for s in stamps.values()):
+        raise TelemetrySchemaError(path, 'no packet of the mapped containers ('
+                                   + '; '.join(report.lines() or ['the file is empty']) + ')')
+    grid = np.unique(np.concatenate(list(stamps.values())))
+    columns: dict[str, np.ndarray] = {TIME: grid}
+    rows_of: dict[str, np.ndarray] = {}
+    for name, table in values.items():
+        rows = np.searchsorted(grid, stamps[name])
+        for column, column_values in table.items():
+            out = np.full(len(grid), np.nan)
+            out[rows] = column_values
+            columns[column] = out
+            stream = _stream(column)
+            rows_of[stream] = np.union1d(rows_of.get(stream, rows), rows)
+    tele = Telemetry.from_columns(columns, source=path)
+    for stream, rows in rows_of.items():
+        if len(rows) < len(grid):
+            mask = np.zeros(len(grid), dtype=bool)
+            mask[rows] = True
+            tele.present[stream] = mask
+    return tele
+
+
+def _stamps(path: str, container: str, spec: telemetry_map.TimeSpec,
+            values: dict[str, np.ndarray]) -> np.ndarray:
+    seconds = values[spec.seconds]
+    if spec.subseconds is None:
+        return seconds
+    sub = values[spec.subseconds]
+    exact = (np.all(np.isfinite(seconds)) and np.all(np.isfinite(sub))
+             and np.all(seconds == np.floor(seconds)) and np.all(sub == np.floor(sub)))
+    if not exact or (len(seconds) and (np.max(np.abs(seconds)) >= 2.0 ** 62 / spec.scale
+                                       or np.max(np.abs(sub)) >= 2.0 ** 62)):
+        return seconds + sub / spec.scale
+    ticks = seconds.astype(np.int64) * spec.scale + sub.astype(np.int64)
+    return ticks / spec.scale
+
+
+def _ordered(path: str, container: str, stamps: np.ndarray, table: dict[str, np.ndarray],
+             report: PacketReport) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """Return the container's stamps and columns in time order, repeats dropped."""
+    bad = np.flatnonzero(~np.isfinite(stamps))
+    if bad.size:
+        raise TelemetrySchemaError(path, f'{container} packet {int(bad[0])} has no finite '
+                                   'time', column=container)
+    order = np.argsort(stamps, kind='stable')
+    stamps = stamps[order]
+    table = {c: v[order] for c, v in table.items()}
+    repeat = np.flatnonzero(np.diff(stamps) == 0) + 1
+    if repeat.size:
+        for column, v in table.items():
+            differ = ~((v[repeat] == v[repeat - 1]) | (np.isnan(v[repeat])
+                                                       & np.isnan(v[repeat - 1])))
+            if differ.any():
+                k = int(repeat[np.flatnonzero(differ)[0]])
+                raise TelemetrySchemaError(
+                    path, f'two {container} packets stamped {stamps[k]!r} s with different '
+                    f'values', column=column)
+        keep = np.ones(len(stamps), dtype=bool)
+        keep[repeat] = False
+        stamps, table = stamps[keep], {c: v[keep] for c, v in table.items()}
+        report.duplicates[container] = int(repeat.size)
+    return stamps, table
+
+
+def _stream(column: str) -> str:
+    """Return the stream of a schema column (telemetry/schema.py STREAMS)."""
+    if column in GYRO:
+        return 'gyro'
+    if column in ATTITUDE:
+        return 'star_tracker'
+    if column in REFERENCE:
+        return 'reference_rate'
+    if wheel_id_of(column) is not None:
+        return 'wheels'
+    return 'columns'

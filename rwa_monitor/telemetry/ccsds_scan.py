@@ -1,0 +1,137 @@
+"""Walking a file of concatenated CCSDS space packets in bounded memory.
+
+A packet is a 6-byte primary header (CCSDS 133.0-B-2: version 3 bits, type 1, secondary
+header flag 1, APID 11, sequence flags 2, sequence count 14, data length 16 = bytes after
+the header minus one) and its data field. The file is read in chunks of ``chunk_bytes``
+into one buffer that is reused; a compiled loop (:func:`walk`) follows the length fields
+and lists the offsets of the packets whose APID is wanted, counting the others, so memory
+is the buffer and the wanted packets' values, whatever the file size. A packet cut by the
+end of a chunk is carried into the next one; at the end of the file the bytes of a packet
+cut short are counted as a truncated tail and dropped.
+
+Counted and skipped, never decoded: packets of a version other than 0, idle packets
+(APID 2047), and packets of APIDs nobody asked for (:class:`Counts`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+import os
+from typing import Callable
+
+import numpy as np
+
+from rwa_monitor.core.jit import njit
+
+HEADER = 6
+MAX_PACKET = HEADER + 65536
+APIDS = 2048
+IDLE_APID = 2047
+SEQUENCE_MODULO = 1 << 14
+BAD_VERSION = APIDS          # slot of the per-APID counters for packets of version != 0
+CHUNK_BYTES = 16 * 1024 * 1024
+BATCH = 1 << 18              # wanted packets per compiled call (bounds the offset arrays)
+
+
+@njit(cache=True)
+def walk(buf, start, end, wanted, counts, offsets, lengths):  # pragma: no cover - compiled
+    """Follow packets from ``start`` while whole ones fit before ``end``.
+
+    Every complete packet is counted in ``counts`` (by APID, or in slot BAD_VERSION);
+    those whose APID is ``wanted`` have their offset and total length written into
+    ``offsets`` and ``lengths`` until they are full. Returns (wanted found, position of
+    the first packet not consumed).
+    """
+    pos = start
+    n = 0
+    capacity = offsets.shape[0]
+    while pos + 6 <= end and n < capacity:
+        length = (np.int64(buf[pos + 4]) << 8 | np.int64(buf[pos + 5])) + 7
+        if pos + length > end:
+            break
+        first = np.int64(buf[pos])
+        if first >> 5 != 0:
+            counts[2048] += 1
+        else:
+            apid = (first & 7) << 8 | np.int64(buf[pos + 1])
+            counts[apid] += 1
+            if wanted[apid]:
+                offsets[n] = pos
+                lengths[n] = length
+                n += 1
+        pos += length
+    return n, pos
+
+
+@njit(cache=True)
+def gather(buf, offsets, length):  # pragma: no cover - compiled
+    """Return the ``length`` bytes at each offset as an (n, length) array."""
+    out = np.empty((offsets.shape[0], length), dtype=np.uint8)
+    for i in range(offsets.shape[0]):
+        out[i, :] = buf[offsets[i]:offsets[i] + length]
+    return out
+
+
+@dataclass
+class Counts:
+    """What a walk found besides the wanted packets (the reader's report adds its own)."""
+
+    per_apid: np.ndarray = field(default_factory=lambda: np.zeros(APIDS + 1, np.int64))
+    truncated_bytes: int = 0
+
+    @property
+    def packets(self) -> int:
+        """Return the number of complete packets."""
+        return int(self.per_apid.sum())
+
+    @property
+    def bad_version(self) -> int:
+        """Return the number of packets whose version field is not 0."""
+        return int(self.per_apid[BAD_VERSION])
+
+
+def sequence_counts(buf: np.ndarray, offsets: np.ndarray) -> np.ndarray:
+    """Return the 14-bit sequence count of the packets at ``offsets``."""
+    high = buf[offsets + 2].astype(np.int64) & 0x3F
+    return high << 8 | buf[offsets + 3].astype(np.int64)
+
+
+def apids(buf: np.ndarray, offsets: np.ndarray) -> np.ndarray:
+    """Return the 11-bit APID of the packets at ``offsets``."""
+    return (buf[offsets].astype(np.int64) & 7) << 8 | buf[offsets + 1].astype(np.int64)
+
+
+Batch = Callable[[np.ndarray, np.ndarray, np.ndarray], None]
+
+
+def scan(path: str | os.PathLike, wanted: np.ndarray, take: Batch,
+         chunk_bytes: int = CHUNK_BYTES) -> Counts:
+    """Walk the file; call ``take(buf, offsets, lengths)`` for each batch of wanted packets.
+
+    ``wanted`` is a bool array over the 2048 APIDs. ``buf`` is only valid during the call
+    (it is reused). Returns the counters of the whole file.
+    """
+    counts = Counts()
+    size = max(int(chunk_bytes), MAX_PACKET)
+    buf = np.empty(size + MAX_PACKET, dtype=np.uint8)
+    offsets = np.empty(BATCH, dtype=np.int64)
+    lengths = np.empty(BATCH, dtype=np.int64)
+    table = np.ascontiguousarray(wanted, dtype=np.bool_)
+    carry = 0
+    with open(path, 'rb', buffering=0) as handle:
+        view = memoryview(buf)
+        while True:
+            read = handle.readinto(view[carry:carry + size]) or 0
+            end = carry + read
+            pos = 0
+            while True:
+                n, pos = walk(buf, pos, end, table, counts.per_apid, offsets, lengths)
+                if n:
+                    take(buf, offsets[:n], lengths[:n])
+                if n < BATCH:
+                    break
+            carry = end - pos
+            if read == 0:
+                counts.truncated_bytes = carry
+                return counts
+            buf[:carry] = buf[pos:end]
