@@ -47,6 +47,7 @@ class PacketReport:
     idle: int = 0
     bad_version: int = 0
     length_mismatch: dict[str, int] = field(default_factory=dict)  # container -> packets
+    undecodable: dict[str, str] = field(default_factory=dict)      # container -> count, why
     truncated_bytes: int = 0
     gaps: dict[int, dict[str, int]] = field(default_factory=dict)  # apid -> gaps, missing
     duplicates: dict[str, int] = field(default_factory=dict)       # container -> packets
@@ -65,6 +66,8 @@ class PacketReport:
         for container, n in self.length_mismatch.items():
             out.append(f'{n} {container} packets whose length does not match the container '
                        'skipped')
+        for container, why in self.undecodable.items():
+            out.append(f'{container} packets the XTCE decoder could not read skipped: {why}')
         if self.truncated_bytes:
             out.append(f'truncated last packet: its {self.truncated_bytes} bytes dropped')
         for apid, gap in self.gaps.items():
@@ -81,6 +84,7 @@ class PacketReport:
                 'unmapped_apids': {str(k): v for k, v in self.unmapped_apids.items()},
                 'idle': self.idle, 'bad_version': self.bad_version,
                 'length_mismatch': dict(self.length_mismatch),
+                'undecodable': dict(self.undecodable),
                 'truncated_bytes': self.truncated_bytes,
                 'gaps': {str(k): dict(v) for k, v in self.gaps.items()},
                 'duplicates': dict(self.duplicates)}
@@ -102,7 +106,8 @@ class _Container:
         self.root = definition.chain(name)[0].name
         self.spp = definition.spp
         self.batches: list[dict[str, np.ndarray]] = []
-        self.mismatch = 0
+        self.mismatch = self.undecodable = 0
+        self.first_error = ''
         self.last_count: int | None = None
         self.gaps = self.missing = 0
 
@@ -130,11 +135,24 @@ class _Container:
                 warnings.simplefilter('error', UserWarning)   # bits left over: a mismatch
                 try:
                     packet = self.spp.parse_bytes(raw, root_container_name=self.root)
-                    rows.append([float(packet[name]) for name in self.wanted])
-                except Exception:  # noqa: BLE001 - any packet the reference cannot read
+                except UserWarning:
                     self.mismatch += 1
+                    continue
+                except Exception as err:  # noqa: BLE001 - any packet the reference cannot read
+                    self._undecodable(err)
+                    continue
+            try:
+                rows.append([float(packet[name]) for name in self.wanted])
+            except (KeyError, TypeError, ValueError) as err:
+                self._undecodable(err)
         table = np.array(rows, dtype=np.float64).reshape(len(rows), len(self.wanted))
         return {name: table[:, k] for k, name in enumerate(self.wanted)}
+
+    def _undecodable(self, err: Exception) -> None:
+        self.undecodable += 1
+        if not self.first_error:
+            detail = str(err).splitlines()[0][:200] if str(err) else ''
+            self.first_error = f'{type(err).__name__}: {detail}'.rstrip(': ')
 
     def _sequence(self, counts: np.ndarray) -> None:
         if self.last_count is not None:
@@ -265,9 +283,11 @@ def _report(definition: xtce.Definition, counts: scan.Counts,
         elif apid not in mapped:
             (report.unmapped_apids if apid in known else report.unknown_apids)[apid] = n
     for c in containers:
-        report.decoded[c.name] = int(counts.per_apid[c.apid]) - c.mismatch
+        report.decoded[c.name] = int(counts.per_apid[c.apid]) - c.mismatch - c.undecodable
         if c.mismatch:
             report.length_mismatch[c.name] = c.mismatch
+        if c.undecodable:
+            report.undecodable[c.name] = f'{c.undecodable} ({c.first_error})'
         if c.gaps:
             report.gaps[c.apid] = {'gaps': c.gaps, 'missing': c.missing}
     return report
