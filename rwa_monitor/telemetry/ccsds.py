@@ -17,7 +17,8 @@ error (which one holds is unknown).
 Counted, reported and skipped (:class:`PacketReport`): packets of APIDs the XTCE does not
 define, of containers the map does not use, idle packets, packets of another CCSDS
 version, packets whose length does not match their container, and a truncated last
-packet. Jumps of a mapped APID's sequence count are reported as data gaps.
+packet. Jumps of a mapped APID's sequence count (any step but +1 modulo 2**14; the same
+count again is a repeat, not a gap) are reported as data gaps.
 """
 
 from __future__ import annotations
@@ -158,7 +159,7 @@ class _Container:
         if self.last_count is not None:
             counts = np.concatenate([[self.last_count], counts])
         step = np.diff(counts) % scan.SEQUENCE_MODULO
-        jumps = step != 1
+        jumps = step > 1          # 0: the same packet again (a repeat, not a gap)
         self.gaps += int(jumps.sum())
         self.missing += int(((step[jumps] - 1) % scan.SEQUENCE_MODULO).sum())
         if len(counts):
@@ -359,8 +360,8 @@ def _ordered(path: str, container: str, stamps: np.ndarray, table: dict[str, np.
             if differ.any():
                 k = int(repeat[np.flatnonzero(differ)[0]])
                 raise TelemetrySchemaError(
-                    path, f'two {container} packets stamped {stamps[k]!r} s with different '
-                    f'values', column=column)
+                    path, f'two {container} packets stamped {float(stamps[k])!r} s with '
+                    'different values', column=column)
         keep = np.ones(len(stamps), dtype=bool)
         keep[repeat] = False
         stamps, table = stamps[keep], {c: v[keep] for c, v in table.items()}

@@ -28,6 +28,7 @@ from rwa_monitor.exceptions import TelemetrySchemaError
 
 MAX_XTCE_BYTES = 64 * 1024 * 1024
 XINCLUDE_NS = 'http://www.w3.org/2001/XInclude'
+DOCTYPE = '<!DOCTYPE'
 APID_BIT, APID_BITS = 5, 11
 _EQUAL = ('==', 'eq')
 _ENTRY_TAGS = ('ParameterRefEntry', 'ContainerRefEntry')
@@ -148,14 +149,19 @@ def screen(path: str | os.PathLike) -> bytes:
     name = os.fspath(path)
     try:
         with open(name, 'rb') as handle:
-            data = handle.read(MAX_XTCE_BYTES + 1)
+            if os.fstat(handle.fileno()).st_size > MAX_XTCE_BYTES:
+                raise TelemetrySchemaError(name, f'XTCE file larger than {MAX_XTCE_BYTES} '
+                                           'bytes')
+            data = handle.read()
     except OSError as err:
         raise TelemetrySchemaError(name, f'cannot read the XTCE file: '
                                    f'{err.strerror or err}') from None
-    if len(data) > MAX_XTCE_BYTES:
-        raise TelemetrySchemaError(name, f'XTCE file larger than {MAX_XTCE_BYTES} bytes')
+    refused_dtd = TelemetrySchemaError(name, 'the XTCE file declares a DTD (<!DOCTYPE ...>): '
+                                       'refused, entities and external DTDs are never loaded')
+    if any(DOCTYPE.encode(codec) in data for codec in ('utf-8', 'utf-16-le', 'utf-16-be')):
+        raise refused_dtd      # before parsing: its entities are never even declared
     parser = etree.XMLParser(resolve_entities=False, no_network=True, load_dtd=False,
-                             dtd_validation=False, huge_tree=False, remove_comments=True)
+                             dtd_validation=False, huge_tree=False)
     try:
         root = etree.fromstring(data, parser)
     except etree.XMLSyntaxError as err:
@@ -163,8 +169,7 @@ def screen(path: str | os.PathLike) -> bytes:
     tree = root.getroottree()
     if tree.docinfo.doctype or tree.docinfo.internalDTD is not None \
             or tree.docinfo.externalDTD is not None:
-        raise TelemetrySchemaError(name, 'the XTCE file declares a DTD (<!DOCTYPE ...>): '
-                                   'refused, entities and external DTDs are never loaded')
+        raise refused_dtd      # a declaration in an encoding the byte check did not cover
     if next(root.iter(f'{{{XINCLUDE_NS}}}*'), None) is not None:
         raise TelemetrySchemaError(name, 'the XTCE file uses XInclude: refused, nothing '
                                    'outside the file is read')
