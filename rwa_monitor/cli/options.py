@@ -5,8 +5,9 @@ from __future__ import annotations
 import argparse
 import os
 import pathlib
+import sys
 
-from rwa_monitor.telemetry import read_telemetry, Telemetry, write_telemetry
+from rwa_monitor.telemetry import read_with_notes, Telemetry, write_telemetry
 from rwa_monitor.telemetry.rosbag_io import DEFAULT_TOPICS
 
 INPUT_HELP = ('telemetry: CSV or Parquet file, rosbag2 folder (metadata.yaml with .mcap or '
@@ -43,10 +44,16 @@ def add_packets(parser: argparse.ArgumentParser) -> None:
 
 
 def read_input(path: str | os.PathLike, args: argparse.Namespace) -> Telemetry:
-    """Read a command's input with its ``--topics``, ``--xtce`` and ``--telemetry-map``."""
-    return read_telemetry(path, getattr(args, 'topics', None) or None,
-                          xtce=getattr(args, 'xtce', None),
-                          telemetry_map=getattr(args, 'telemetry_map', None))
+    """Read a command's input with its ``--topics``, ``--xtce`` and ``--telemetry-map``.
+
+    What a packet reader counted and skipped is printed as warnings on standard error.
+    """
+    tele, notes = read_with_notes(path, getattr(args, 'topics', None) or None,
+                                  xtce=getattr(args, 'xtce', None),
+                                  telemetry_map=getattr(args, 'telemetry_map', None))
+    for note in notes:
+        print(f'rwa-monitor {getattr(args, "command", "")}: warning: {note}', file=sys.stderr)
+    return tele
 
 
 def add_format(parser: argparse.ArgumentParser) -> None:

@@ -90,11 +90,33 @@ def read_telemetry(path: str | os.PathLike,
     >>> len(tele), tele.wheels['rw1'].speed.tolist()
     (3, [1.0, 2.0, 3.0])
     """
+    tele, notes = read_with_notes(path, topics, xtce, telemetry_map)
+    for note in notes:
+        _LOG.warning('%s', note)
+    return tele
+
+
+def read_with_notes(path: str | os.PathLike,
+                    topics: str | Mapping[str, str] | None = None,
+                    xtce: str | os.PathLike | None = None,
+                    telemetry_map: str | os.PathLike | None = None
+                    ) -> tuple[Telemetry, list[str]]:
+    """Return :func:`read_telemetry`'s record and what the reader counted, one line each.
+
+    The lines (``FILE: what``) say what a packet file held that is not in the record
+    (ccsds.PacketReport); other formats have none. The command line prints them as
+    warnings, :func:`read_telemetry` logs them.
+    """
     from rwa_monitor.telemetry import rosbag_io
     if xtce or telemetry_map or is_packets(path):
         return read_packet_file(path, xtce, telemetry_map)
     if rosbag_io.is_recording(path):
-        return rosbag_io.read(path, topics)
+        return rosbag_io.read(path, topics), []
+    return _read_file(path), []
+
+
+def _read_file(path: str | os.PathLike) -> Telemetry:
+    """Read a CSV or Parquet file."""
     if not os.path.exists(path):
         raise TelemetrySchemaError(os.fspath(path), 'no such file')
     if os.path.isdir(path):
@@ -107,16 +129,15 @@ def read_telemetry(path: str | os.PathLike,
 
 
 def read_packet_file(path: str | os.PathLike, xtce: str | os.PathLike | None = None,
-                     telemetry_map: str | os.PathLike | None = None) -> Telemetry:
-    """Read a packet file (definitions as :func:`packet_definitions`); log its report."""
+                     telemetry_map: str | os.PathLike | None = None
+                     ) -> tuple[Telemetry, list[str]]:
+    """Read a packet file (definitions as :func:`packet_definitions`) and its report lines."""
     from rwa_monitor.telemetry.ccsds import read_packets
     if not os.path.isfile(path):
         raise TelemetrySchemaError(os.fspath(path), 'no such packet file')
     xml, yml = packet_definitions(path, xtce, telemetry_map)
     tele, report = read_packets(path, xml, yml)
-    for line in report.lines():
-        _LOG.warning('%s: %s', os.fspath(path), line)
-    return tele
+    return tele, [f'{os.fspath(path)}: {line}' for line in report.lines()]
 
 
 def write_telemetry(path: str | os.PathLike, telemetry: Telemetry) -> None:
