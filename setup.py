@@ -83,7 +83,10 @@ CONSOLE_SCRIPTS = ['rwa-monitor = rwa_monitor.cli.main:main'] + [
 # The one C call per streaming sample (docs/llr.md "Streaming call"); optional: without a C
 # compiler the package installs and the detector runs its compiled step from Python.
 EXT_MODULES = [Extension('rwa_monitor.core._stepcall', ['rwa_monitor/core/_stepcall.c'],
-                         optional=True)]
+                         optional=True),
+               # the packet walk (telemetry/_packetwalk.c); without it numba compiles it
+               Extension('rwa_monitor.telemetry._packetwalk',
+                         ['rwa_monitor/telemetry/_packetwalk.c'], optional=True)]
 
 setup(
     name=package_name,

@@ -118,7 +118,8 @@ class _Container:
         if self.layout.fields:
             good = lengths == self.layout.length
             self.mismatch += int(len(good) - good.sum())
-            block = scan.gather(buf, offsets[good], self.layout.length)
+            block = np.empty((int(good.sum()), self.layout.length), dtype=np.uint8)
+            scan.gather(buf, offsets[good], self.layout.length, block)
             self.batches.append(xtce_layout.decode(block, list(self.layout.fields.values())))
         else:
             self.batches.append(self._reference(buf, offsets, lengths))

@@ -3,9 +3,10 @@
 A packet is a 6-byte primary header (CCSDS 133.0-B-2: version 3 bits, type 1, secondary
 header flag 1, APID 11, sequence flags 2, sequence count 14, data length 16 = bytes after
 the header minus one) and its data field. The file is read in chunks of ``chunk_bytes``
-into one buffer that is reused; a compiled loop (:func:`walk`) follows the length fields
-and lists the offsets of the packets whose APID is wanted, counting the others, so memory
-is the buffer and the wanted packets' values, whatever the file size. A packet cut by the
+into one buffer that is reused; a compiled loop (:func:`walk_plain`, in C as
+``_packetwalk.walk``) follows the length fields and lists the offsets of the packets whose
+APID is wanted, counting the others, so memory is the buffer and the wanted packets'
+values, whatever the file size. A packet cut by the
 end of a chunk is carried into the next one; at the end of the file the bytes of a packet
 cut short are counted as a truncated tail and dropped.
 
@@ -21,8 +22,6 @@ from typing import Callable
 
 import numpy as np
 
-from rwa_monitor.core.jit import njit
-
 HEADER = 6
 MAX_PACKET = HEADER + 65536
 APIDS = 2048
@@ -33,8 +32,7 @@ CHUNK_BYTES = 16 * 1024 * 1024
 BATCH = 1 << 18              # wanted packets per compiled call (bounds the offset arrays)
 
 
-@njit(cache=True)
-def walk(buf, start, end, wanted, counts, offsets, lengths):  # pragma: no cover - compiled
+def walk_plain(buf, start, end, wanted, counts, offsets, lengths):  # noqa: ANN001 - numba
     """Follow packets from ``start`` while whole ones fit before ``end``.
 
     Every complete packet is counted in ``counts`` (by APID, or in slot BAD_VERSION);
@@ -63,13 +61,25 @@ def walk(buf, start, end, wanted, counts, offsets, lengths):  # pragma: no cover
     return n, pos
 
 
-@njit(cache=True)
-def gather(buf, offsets, length):  # pragma: no cover - compiled
-    """Return the ``length`` bytes at each offset as an (n, length) array."""
-    out = np.empty((offsets.shape[0], length), dtype=np.uint8)
-    for i in range(offsets.shape[0]):
-        out[i, :] = buf[offsets[i]:offsets[i] + length]
-    return out
+def gather_plain(buf: np.ndarray, offsets: np.ndarray, length: int, out: np.ndarray) -> None:
+    """Copy the ``length`` bytes at each offset into the rows of ``out`` (n, length)."""
+    if len(offsets):
+        rows = np.lib.stride_tricks.as_strided(buf, (len(buf) - length + 1, length), (1, 1),
+                                               writeable=False)
+        out[...] = rows[offsets]
+
+
+def _kernels() -> tuple[Callable[..., tuple[int, int]], Callable[..., None]]:
+    """Return (walk, gather): the C module's, else the plain walk compiled by numba."""
+    try:
+        from rwa_monitor.telemetry import _packetwalk
+    except ImportError:          # not built (no C compiler): the same loop, compiled
+        from rwa_monitor.core.jit import njit
+        return njit(cache=True)(walk_plain), gather_plain
+    return _packetwalk.walk, _packetwalk.gather
+
+
+walk, gather = _kernels()
 
 
 @dataclass

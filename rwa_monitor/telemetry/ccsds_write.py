@@ -22,11 +22,9 @@ from __future__ import annotations
 
 import os
 import pathlib
-from typing import Any
 
 import numpy as np
 
-from rwa_monitor.core.jit import njit
 from rwa_monitor.telemetry.atomic import atomic_write, write_text_atomic
 from rwa_monitor.telemetry.schema import ATTITUDE, GYRO, REFERENCE, Telemetry, TRUTH_PREFIX
 
@@ -162,10 +160,12 @@ def packet_bytes(tele: Telemetry, streams: dict[str, list[str]]) -> bytes:
     sizes = np.concatenate([np.full(len(p), p.shape[1], dtype=np.int64) for p in parts])
     starts = np.empty(len(sizes), dtype=np.int64)
     starts[sequence] = np.concatenate([[0], np.cumsum(sizes[sequence])[:-1]])
-    out = np.empty(int(sizes.sum()), dtype=np.uint8)
+    out = np.zeros(int(sizes.sum()), dtype=np.uint8)
     first = 0
-    for part in parts:
-        scatter(out, part, starts[first:first + len(part)])
+    for part in parts:    # each row to its start: a strided view over ``out``, written through
+        width = part.shape[1]
+        rows = np.lib.stride_tricks.as_strided(out, (len(out) - width + 1, width), (1, 1))
+        rows[starts[first:first + len(part)]] = part
         first += len(part)
     return out.tobytes()
 
@@ -188,11 +188,3 @@ def _records(apid: int, ticks: np.ndarray, values: list[np.ndarray]) -> np.ndarr
     for i, v in enumerate(values):
         records[f'v{i}'] = v
     return records
-
-
-@njit(cache=True)
-def scatter(out: Any, rows: Any, starts: Any) -> None:  # pragma: no cover - compiled
-    """Copy row ``i`` of ``rows`` to ``out[starts[i]:]``."""
-    width = rows.shape[1]
-    for i in range(rows.shape[0]):
-        out[starts[i]:starts[i] + width] = rows[i]
