@@ -16,8 +16,10 @@ def _run(walk, data, start, wanted_apids, capacity):
     counts = np.zeros(ccsds_scan.APIDS + 1, dtype=np.int64)
     offsets = np.full(capacity, -1, dtype=np.int64)
     lengths = np.full(capacity, -1, dtype=np.int64)
-    n, pos = walk(buf, start, len(buf), wanted, counts, offsets, lengths)
-    return n, pos, counts.tolist(), offsets[:n].tolist(), lengths[:n].tolist()
+    words = np.full(capacity, -1, dtype=np.int64)
+    n, pos = walk(buf, start, len(buf), wanted, counts, offsets, lengths, words)
+    return (n, pos, counts.tolist(), offsets[:n].tolist(), lengths[:n].tolist(),
+            words[:n].tolist())
 
 
 def _packets(draw_lengths, apids):
@@ -60,9 +62,30 @@ def test_bad_arguments_are_errors_not_crashes():
     counts = np.zeros(ccsds_scan.APIDS + 1, dtype=np.int64)
     with pytest.raises(ValueError, match='bad bounds'):
         _packetwalk.walk(buf, 0, 99, np.zeros(ccsds_scan.APIDS, bool), counts,
-                         np.zeros(4, np.int64), np.zeros(4, np.int64))
+                         np.zeros(4, np.int64), np.zeros(4, np.int64), np.zeros(4, np.int64))
     with pytest.raises(TypeError, match='items of 8 bytes'):
         _packetwalk.walk(buf, 0, 16, np.zeros(ccsds_scan.APIDS, bool), counts,
-                         np.zeros(4, np.int32), np.zeros(4, np.int64))
+                         np.zeros(4, np.int32), np.zeros(4, np.int64), np.zeros(4, np.int64))
     with pytest.raises(ValueError, match='out of bounds'):
         _packetwalk.gather(buf, np.array([10], np.int64), 8, np.zeros((1, 8), np.uint8))
+
+
+def test_without_the_c_module_numba_walks_the_same_file(tmp_path):
+    import subprocess
+    import sys
+
+    from rwa_monitor.telemetry import read_telemetry, Telemetry, Wheel, write_telemetry
+    n = 3000
+    write_telemetry(tmp_path / 'r.bin', Telemetry(time=np.arange(n) * 0.1, wheels={
+        'rw1': Wheel(np.sin(np.arange(n)), np.cos(np.arange(n)))}))
+    expected = read_telemetry(tmp_path / 'r.bin').wheels['rw1'].friction
+    script = (
+        "import sys, numpy as np\n"
+        "sys.modules['rwa_monitor.telemetry._packetwalk'] = None  # as if never built\n"
+        "from rwa_monitor.telemetry import ccsds_scan, read_telemetry\n"
+        "assert ccsds_scan.walk is not ccsds_scan.walk_plain and 'numba' in sys.modules\n"
+        f"np.save(sys.argv[1], read_telemetry({str(tmp_path / 'r.bin')!r})"
+        ".wheels['rw1'].friction)\n")
+    subprocess.run([sys.executable, '-c', script, str(tmp_path / 'f.npy')], check=True,
+                   timeout=300)
+    np.testing.assert_array_equal(np.load(tmp_path / 'f.npy'), expected)

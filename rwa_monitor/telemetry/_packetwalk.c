@@ -7,10 +7,10 @@
    results and checks as the plain version in ccsds_scan.py (test/test_ccsds_scan.py proves
    them equal); ccsds_scan uses the plain version when this module is not built.
 
-   - ``walk(buf, start, end, wanted, counts, offsets, lengths) -> (n, pos)``
+   - ``walk(buf, start, end, wanted, counts, offsets, lengths, words) -> (n, pos)``
    - ``gather(buf, offsets, length, out) -> None``
    Buffers: ``buf`` uint8, ``wanted`` bool (2048), ``counts`` int64 (2049), ``offsets``,
-   ``lengths`` int64, ``out`` uint8 (n * length), all C-contiguous; checked here.
+   ``lengths``, ``words`` int64, ``out`` uint8 (n * length), all C-contiguous; checked.
 */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
@@ -36,11 +36,11 @@ get(PyObject *obj, Py_buffer *view, Py_ssize_t itemsize, int writable, const cha
 static PyObject *
 walk(PyObject *self, PyObject *args)
 {
-    PyObject *objs[5];
+    PyObject *objs[6];
     Py_ssize_t start, end;
-    Py_buffer buf, wanted, counts, offsets, lengths;
-    if (!PyArg_ParseTuple(args, "OnnOOOO", &objs[0], &start, &end, &objs[1], &objs[2],
-                          &objs[3], &objs[4]))
+    Py_buffer buf, wanted, counts, offsets, lengths, words;
+    if (!PyArg_ParseTuple(args, "OnnOOOOO", &objs[0], &start, &end, &objs[1], &objs[2],
+                          &objs[3], &objs[4], &objs[5]))
         return NULL;
     if (get(objs[0], &buf, 1, 0, "buf") < 0)
         return NULL;
@@ -52,8 +52,11 @@ walk(PyObject *self, PyObject *args)
         goto release_counts;
     if (get(objs[4], &lengths, 8, 1, "lengths") < 0)
         goto release_offsets;
+    if (get(objs[5], &words, 8, 1, "words") < 0)
+        goto release_lengths;
     if (start < 0 || end < start || end > buf.len || wanted.len < APIDS
-            || counts.len < 8 * (APIDS + 1) || lengths.len < offsets.len) {
+            || counts.len < 8 * (APIDS + 1) || lengths.len < offsets.len
+            || words.len < offsets.len) {
         PyErr_SetString(PyExc_ValueError, "walk: bad bounds or buffer sizes");
         goto release_all;
     }
@@ -61,6 +64,7 @@ walk(PyObject *self, PyObject *args)
     const uint8_t *want = (const uint8_t *)wanted.buf;
     int64_t *count = (int64_t *)counts.buf;
     int64_t *off = (int64_t *)offsets.buf, *len = (int64_t *)lengths.buf;
+    int64_t *word = (int64_t *)words.buf;
     Py_ssize_t capacity = offsets.len / 8, n = 0, pos = start;
     Py_BEGIN_ALLOW_THREADS
     while (pos + 6 <= end && n < capacity) {
@@ -75,12 +79,15 @@ walk(PyObject *self, PyObject *args)
             if (want[apid]) {
                 off[n] = pos;
                 len[n] = length;
+                word[n] = (int64_t)b[pos] << 24 | (int64_t)b[pos + 1] << 16
+                    | (int64_t)b[pos + 2] << 8 | b[pos + 3];
                 n++;
             }
         }
         pos += length;
     }
     Py_END_ALLOW_THREADS
+    PyBuffer_Release(&words);
     PyBuffer_Release(&lengths);
     PyBuffer_Release(&offsets);
     PyBuffer_Release(&counts);
@@ -88,6 +95,8 @@ walk(PyObject *self, PyObject *args)
     PyBuffer_Release(&buf);
     return Py_BuildValue("nn", n, pos);
 release_all:
+    PyBuffer_Release(&words);
+release_lengths:
     PyBuffer_Release(&lengths);
 release_offsets:
     PyBuffer_Release(&offsets);

@@ -112,9 +112,10 @@ class _Container:
         self.last_count: int | None = None
         self.gaps = self.missing = 0
 
-    def take(self, buf: np.ndarray, offsets: np.ndarray, lengths: np.ndarray) -> None:
+    def take(self, buf: np.ndarray, offsets: np.ndarray, lengths: np.ndarray,
+             words: np.ndarray) -> None:
         """Decode a batch of this container's packets (offsets into ``buf``)."""
-        self._sequence(scan.sequence_counts(buf, offsets))
+        self._sequence(scan.sequence_counts(words))
         if self.layout.fields:
             good = lengths == self.layout.length
             self.mismatch += int(len(good) - good.sum())
@@ -219,11 +220,15 @@ def decode_file(path: str | os.PathLike, definition: xtce.Definition,
     wanted = np.zeros(scan.APIDS, dtype=bool)
     wanted[list(by_apid)] = True
 
-    def take(buf: np.ndarray, offsets: np.ndarray, lengths: np.ndarray) -> None:
-        found = scan.apids(buf, offsets)
-        for apid in np.unique(found).tolist():
+    def take(buf: np.ndarray, offsets: np.ndarray, lengths: np.ndarray,
+             words: np.ndarray) -> None:
+        found = scan.apids(words)
+        if len(by_apid) == 1:
+            next(iter(by_apid.values())).take(buf, offsets, lengths, words)
+            return
+        for apid in np.flatnonzero(np.bincount(found, minlength=scan.APIDS)).tolist():
             pick = found == apid
-            by_apid[apid].take(buf, offsets[pick], lengths[pick])
+            by_apid[apid].take(buf, offsets[pick], lengths[pick], words[pick])
 
     if not os.path.isfile(name):
         raise TelemetrySchemaError(name, 'no such packet file')
@@ -308,23 +313,20 @@ def _join(path: str, tmap: telemetry_map.TelemetryMap, columns_of: dict[str, lis
     if not any(len(s) for s in stamps.values()):
         raise TelemetrySchemaError(path, 'no packet of the mapped containers ('
                                    + '; '.join(report.lines() or ['the file is empty']) + ')')
-    grid = np.unique(np.concatenate(list(stamps.values())))
+    grid = np.sort(np.concatenate(list(stamps.values())))
+    grid = grid[np.concatenate([[True], np.diff(grid) != 0])]   # (np.unique hashes floats)
     columns: dict[str, np.ndarray] = {TIME: grid}
-    rows_of: dict[str, np.ndarray] = {}
+    present: dict[str, np.ndarray] = {}
     for name, table in values.items():
         rows = np.searchsorted(grid, stamps[name])
         for column, column_values in table.items():
             out = np.full(len(grid), np.nan)
             out[rows] = column_values
             columns[column] = out
-            stream = _stream(column)
-            rows_of[stream] = np.union1d(rows_of.get(stream, rows), rows)
-    tele = Telemetry.from_columns(columns, source=path)
-    for stream, rows in rows_of.items():
-        if len(rows) < len(grid):
-            mask = np.zeros(len(grid), dtype=bool)
+            mask = present.setdefault(_stream(column), np.zeros(len(grid), dtype=bool))
             mask[rows] = True
-            tele.present[stream] = mask
+    tele = Telemetry.from_columns(columns, source=path)
+    tele.present = {stream: mask for stream, mask in present.items() if not mask.all()}
     return tele
 
 

@@ -32,13 +32,14 @@ CHUNK_BYTES = 16 * 1024 * 1024
 BATCH = 1 << 18              # wanted packets per compiled call (bounds the offset arrays)
 
 
-def walk_plain(buf, start, end, wanted, counts, offsets, lengths):  # noqa: ANN001 - numba
+def walk_plain(buf, start, end, wanted, counts, offsets, lengths, words):  # noqa: ANN001
     """Follow packets from ``start`` while whole ones fit before ``end``.
 
     Every complete packet is counted in ``counts`` (by APID, or in slot BAD_VERSION);
-    those whose APID is ``wanted`` have their offset and total length written into
-    ``offsets`` and ``lengths`` until they are full. Returns (wanted found, position of
-    the first packet not consumed).
+    those whose APID is ``wanted`` have their offset, total length and first 4 header bytes
+    (big-endian: flags and APID, sequence flags and count) written into ``offsets``,
+    ``lengths`` and ``words`` until they are full. Returns (wanted found, position of the
+    first packet not consumed).
     """
     pos = start
     n = 0
@@ -56,6 +57,8 @@ def walk_plain(buf, start, end, wanted, counts, offsets, lengths):  # noqa: ANN0
             if wanted[apid]:
                 offsets[n] = pos
                 lengths[n] = length
+                words[n] = (first << 24 | np.int64(buf[pos + 1]) << 16
+                            | np.int64(buf[pos + 2]) << 8 | np.int64(buf[pos + 3]))
                 n += 1
         pos += length
     return n, pos
@@ -100,23 +103,22 @@ class Counts:
         return int(self.per_apid[BAD_VERSION])
 
 
-def sequence_counts(buf: np.ndarray, offsets: np.ndarray) -> np.ndarray:
-    """Return the 14-bit sequence count of the packets at ``offsets``."""
-    high = buf[offsets + 2].astype(np.int64) & 0x3F
-    return high << 8 | buf[offsets + 3].astype(np.int64)
+def sequence_counts(words: np.ndarray) -> np.ndarray:
+    """Return the 14-bit sequence counts of the header words of :func:`walk_plain`."""
+    return words & 0x3FFF
 
 
-def apids(buf: np.ndarray, offsets: np.ndarray) -> np.ndarray:
-    """Return the 11-bit APID of the packets at ``offsets``."""
-    return (buf[offsets].astype(np.int64) & 7) << 8 | buf[offsets + 1].astype(np.int64)
+def apids(words: np.ndarray) -> np.ndarray:
+    """Return the 11-bit APIDs of the header words of :func:`walk_plain`."""
+    return (words >> 16) & 0x7FF
 
 
-Batch = Callable[[np.ndarray, np.ndarray, np.ndarray], None]
+Batch = Callable[[np.ndarray, np.ndarray, np.ndarray, np.ndarray], None]
 
 
 def scan(path: str | os.PathLike, wanted: np.ndarray, take: Batch,
          chunk_bytes: int = CHUNK_BYTES) -> Counts:
-    """Walk the file; call ``take(buf, offsets, lengths)`` for each batch of wanted packets.
+    """Walk the file; call ``take(buf, offsets, lengths, words)`` per batch of wanted packets.
 
     ``wanted`` is a bool array over the 2048 APIDs. ``buf`` is only valid during the call
     (it is reused). Returns the counters of the whole file.
@@ -126,6 +128,7 @@ def scan(path: str | os.PathLike, wanted: np.ndarray, take: Batch,
     buf = np.empty(size + MAX_PACKET, dtype=np.uint8)
     offsets = np.empty(BATCH, dtype=np.int64)
     lengths = np.empty(BATCH, dtype=np.int64)
+    words = np.empty(BATCH, dtype=np.int64)
     table = np.ascontiguousarray(wanted, dtype=np.bool_)
     carry = 0
     with open(path, 'rb', buffering=0) as handle:
@@ -135,9 +138,9 @@ def scan(path: str | os.PathLike, wanted: np.ndarray, take: Batch,
             end = carry + read
             pos = 0
             while True:
-                n, pos = walk(buf, pos, end, table, counts.per_apid, offsets, lengths)
+                n, pos = walk(buf, pos, end, table, counts.per_apid, offsets, lengths, words)
                 if n:
-                    take(buf, offsets[:n], lengths[:n])
+                    take(buf, offsets[:n], lengths[:n], words[:n])
                 if n < BATCH:
                     break
             carry = end - pos
