@@ -29,7 +29,7 @@ from typing import Any, Callable
 import numpy as np
 
 from bench import report
-from rwa_monitor.telemetry import ccsds, read_telemetry, telemetry_map, Telemetry, Wheel
+from rwa_monitor.telemetry import ccsds, read_telemetry, Telemetry, telemetry_map, Wheel
 from rwa_monitor.telemetry import write_telemetry, xtce
 from rwa_monitor.telemetry.ccsds_write import sibling_paths
 

@@ -22,7 +22,7 @@ HEADER = [('CCSDS_VERSION', 3), ('CCSDS_TYPE', 1), ('CCSDS_SEC_HDR_FLAG', 1),
           ('CCSDS_APID', 11), ('CCSDS_SEQ_FLAGS', 2), ('CCSDS_SEQ_COUNT', 14),
           ('CCSDS_LENGTH', 16)]
 
-MAP = """\
+MAP = '''\
 time:
   WheelPacket: {seconds: SEC, subseconds: SUBSEC, subsecond_scale: 65536}
   GyroPacket: GYR_TIME
@@ -45,7 +45,7 @@ columns:
   ref_y: REF_Y
   ref_z: REF_Z
 epoch_utc: 2026-01-01T00:00:00Z
-"""
+'''
 
 
 def pymdb_xtce(path: pathlib.Path) -> pathlib.Path:
@@ -110,8 +110,10 @@ def pymdb_xtce(path: pathlib.Path) -> pathlib.Path:
 
 
 def packet(apid: int, count: int, fields: list[tuple[int, int]], tail: bytes = b'') -> bytes:
-    """Return one packet: the primary header, then ``fields`` as (raw value, bits), then
-    ``tail`` (bytes); the length field counts them all."""
+    """Return one packet: primary header, ``fields`` as (raw value, bits), ``tail`` bytes.
+
+    The length field counts the fields and the tail.
+    """
     value, bits = 0, 0
     for raw, size in fields:
         value = value << size | (raw & ((1 << size) - 1))

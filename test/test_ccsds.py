@@ -82,9 +82,10 @@ def test_pymdb_definition_decodes_fixed_containers_vectorised(mixed):
     tmap = telemetry_map.read_map(yml)
     columns = telemetry_map.check(tmap, definition)
     layouts = {c: layout(definition, c, {tmap.columns[k] for k in columns[c]}
-                         | set(tmap.time[c].parameters())) for c in tmap.time}
-    assert [c for c, lay in layouts.items() if lay.fields] == ['WheelPacket', 'GyroPacket',
-                                                                'StarPacket']
+                         | set(tmap.time[c].parameters()))
+               for c in tmap.time}
+    vectorised = [c for c, lay in layouts.items() if lay.fields]
+    assert vectorised == ['WheelPacket', 'GyroPacket', 'StarPacket']
     assert layouts['WheelPacket'].length == 32
     temp = layouts['WheelPacket'].fields['TEMP']
     assert (temp.offset, temp.size, temp.kind) == (195, 13, 'int')   # off byte boundaries

@@ -267,7 +267,7 @@ def test_a_container_neither_decoder_reads_is_counted(tmp_path):
     (tmp_path / 's.yaml').write_text('time: {P: T}\ncolumns: {aux_v: V}\n')
     (tmp_path / 's.bin').write_bytes(packet(7, 0, [f64(1.0), (2, 8)], b'ab' + struct.pack(
         '>d', 3.0)))
-    with pytest.raises(TelemetrySchemaError, match=r"P packets the XTCE decoder could not "
+    with pytest.raises(TelemetrySchemaError, match=r'P packets the XTCE decoder could not '
                        r"read skipped: 1 \(KeyError: '_yamcs_ignore'\)"):
         ccsds.read_packets(tmp_path / 's.bin', tmp_path / 's.xml', tmp_path / 's.yaml')
 
@@ -302,8 +302,8 @@ def test_a_2_gib_file_is_read_in_bounded_memory(tmp_path, definition):
     assert peak < bound, (peak, bound)
 
 
-@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow,
-                                                                  HealthCheck.function_scoped_fixture])
+@settings(max_examples=60, deadline=None,
+          suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
 @given(data=st.binary(max_size=400), cut=st.integers(0, 2000))
 def test_any_bytes_give_a_record_or_one_line(tmp_path, definition, data, cut):
     valid = b''.join(wheel(k) for k in range(20)) + b''.join(gyro(k) for k in range(10))

@@ -1,5 +1,6 @@
-"""Packets wherever a recording goes in: detect, diagnose, calibrate, identify, the fleet and
-the replay node; ``simulate ... --format ccsds``.
+"""Packets wherever a recording goes in, and ``simulate ... --format ccsds``.
+
+detect, diagnose, calibrate, identify, the fleet and the replay node.
 
 The reference is the same command on the CSV file the packets were made from (every value
 as the CSV holds it, float64 in the packets): the outputs must be equal, not close.

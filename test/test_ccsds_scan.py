@@ -79,13 +79,13 @@ def test_without_the_c_module_numba_walks_the_same_file(tmp_path):
     write_telemetry(tmp_path / 'r.bin', Telemetry(time=np.arange(n) * 0.1, wheels={
         'rw1': Wheel(np.sin(np.arange(n)), np.cos(np.arange(n)))}))
     expected = read_telemetry(tmp_path / 'r.bin').wheels['rw1'].friction
-    script = (
-        "import sys, numpy as np\n"
-        "sys.modules['rwa_monitor.telemetry._packetwalk'] = None  # as if never built\n"
-        "from rwa_monitor.telemetry import ccsds_scan, read_telemetry\n"
-        "assert ccsds_scan.walk is not ccsds_scan.walk_plain and 'numba' in sys.modules\n"
+    script = '\n'.join([
+        'import sys, numpy as np',
+        "sys.modules['rwa_monitor.telemetry._packetwalk'] = None  # as if never built",
+        'from rwa_monitor.telemetry import ccsds_scan, read_telemetry',
+        "assert ccsds_scan.walk is not ccsds_scan.walk_plain and 'numba' in sys.modules",
         f"np.save(sys.argv[1], read_telemetry({str(tmp_path / 'r.bin')!r})"
-        ".wheels['rw1'].friction)\n")
+        ".wheels['rw1'].friction)"])
     subprocess.run([sys.executable, '-c', script, str(tmp_path / 'f.npy')], check=True,
                    timeout=300)
     np.testing.assert_array_equal(np.load(tmp_path / 'f.npy'), expected)

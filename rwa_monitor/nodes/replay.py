@@ -5,8 +5,9 @@ Topics (DESIGN.md): ``telemetry/wheels`` (JointState), ``telemetry/gyro`` (Imu),
 (Vector3Stamped) for the channels the file has, every message stamped with the telemetry
 time; a recording's streams keep their own stamps and rates (parameter ``topics`` names
 the recording's topics), and so do the containers of a file of space packets (parameters
-``xtce_file`` and ``telemetry_map_file``); ``/clock`` (the telemetry time) for the sim-time detectors; progress on
-``/diagnostics``. Pacing uses the steady clock, never the sim time it publishes.
+``xtce_file`` and ``telemetry_map_file``); ``/clock`` (the telemetry time) for the
+sim-time detectors; progress on ``/diagnostics``. Pacing uses the steady clock, never the
+sim time it publishes.
 
 ``rate`` is the time factor (1.0 real time). At every rate the replay first waits for
 its subscribers (:mod:`rwa_monitor.nodes.subscriber_wait`: ``min_subscribers`` on

@@ -121,7 +121,8 @@ def xtce_text(tele: Telemetry, streams: dict[str, list[str]]) -> str:
     for stream, columns in streams.items():
         name, apid = APIDS[stream]
         values = [Parameter(c, pt.FloatParameterType(
-            c, encodings.FloatDataEncoding(64, encoding='IEEE754'), unit=_unit(c))) for c in columns]
+            c, encodings.FloatDataEncoding(64, encoding='IEEE754'), unit=_unit(c)))
+            for c in columns]
         made.append(containers.SequenceContainer(
             name, [*time, *values], base_container_name=root.name,
             restriction_criteria=[comparisons.Comparison(str(apid), 'CCSDS_APID', '==')]))

@@ -236,7 +236,7 @@ def load(path: str | os.PathLike) -> Definition:
             detail = str(err).splitlines()[0] if str(err) else type(err).__name__
             raise TelemetrySchemaError(name, f'not a usable XTCE packet definition: '
                                        f'{detail}') from None
-        except Exception as err:  # noqa: BLE001 - the library's own errors (InvalidParameterType...)
+        except Exception as err:  # noqa: BLE001 - the library's own error classes
             detail = str(err).splitlines()[0] if str(err) else type(err).__name__
             raise TelemetrySchemaError(name, f'not a usable XTCE packet definition: '
                                        f'{type(err).__name__}: {detail}') from None
