@@ -7,9 +7,10 @@ map asks for are decoded vectorised when they are integers (unsigned or two's co
 either byte order when byte-aligned, any bit offset up to 57 bits) or IEEE-754 floats
 (16, 32, 64 bits, byte-aligned), with no calibrator or a polynomial one. A numpy record
 type (one field per byte-aligned value) reads them from an ``(n, length)`` byte array;
-bit fields are shifted out of the bytes that hold them. Anything else (MIL-STD-1750A
-floats, spline or context calibrators, sizes that depend on the data, time and boolean
-types) is decoded by space-packet-parser, packet by packet.
+bit fields are shifted out of the bytes that hold them. A container with anything else
+(MIL-STD-1750A floats, spline or context calibrators, sizes that depend on the data, time
+and boolean types among the values asked for) is decoded by space-packet-parser, packet
+by packet, whole.
 
 The arithmetic follows space-packet-parser's so the two give the same float64 values
 (test/test_ccsds.py checks it on every test file): signed integers other than unsigned
