@@ -209,8 +209,9 @@ def markdown(results: dict[str, Any]) -> str:
         f'{t["ratio_median"]:.2f}, CPU {t["cpu_ratio_median"]:.2f} (goal <= '
         f'{GOALS["detect_ratio_packets_over_csv"]}: '
         f'{"met" if t["ratio_median"] <= GOALS["detect_ratio_packets_over_csv"] else "NOT met"}'
-        f' on wall time); same events: {t["same_events"]}. Each run a fresh process (imports, read, '
-        'detectors), the two commands in turn; the CSV and the packets hold the same values '
+        f' on wall time); same events: {t["same_events"]}. Each run a fresh process '
+        '(imports, read, detectors), the two commands in turn; the CSV and the packets hold '
+        'the same values '
         '(the CSV read back, then written as packets). Plot: bench/results/ccsds.png.']
     return '\n'.join(lines)
 
