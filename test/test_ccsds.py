@@ -210,6 +210,6 @@ def test_epoch_is_read_as_utc(mixed):
 
 def test_module_files_stay_short():
     folder = pathlib.Path(ccsds.__file__).parent
-    for name in ('ccsds.py', 'ccsds_report.py', 'ccsds_scan.py', 'ccsds_write.py', 'xtce.py', 'xtce_layout.py',
-                 'telemetry_map.py'):
+    for name in ('ccsds.py', 'ccsds_report.py', 'ccsds_scan.py', 'ccsds_write.py', 'xtce.py',
+                 'xtce_layout.py', 'telemetry_map.py'):
         assert len((folder / name).read_text().splitlines()) < 400, name
