@@ -198,6 +198,16 @@ class GroundStore:
         self._pending: list[tuple[str, dict[str, Any]]] = []
         self.sources: list[str] = []
 
+    def craft(self, name: str, *, live: bool = False) -> Spacecraft:
+        """Return a spacecraft of the tree, added if new."""
+        with self.lock:
+            key = safe_name(name)
+            sc = self.spacecraft.get(key)
+            if sc is None:
+                sc = self.spacecraft[key] = Spacecraft(key, str(name), live=live)
+                self.version += 1
+            return sc
+
     def point(self, craft: str, component: str, point: str, *, live: bool = False
               ) -> Series:
         """Return the series of a point, adding spacecraft, component and point as needed."""
@@ -205,10 +215,7 @@ class GroundStore:
             raise ValueError(f'unknown point {point!r}; known: {", ".join(POINTS)}')
         with self.lock:
             ckey = safe_name(craft)
-            sc = self.spacecraft.get(ckey)
-            if sc is None:
-                sc = self.spacecraft[ckey] = Spacecraft(ckey, str(craft), live=live)
-                self.version += 1
+            sc = self.craft(craft, live=live)
             kkey = safe_name(component)
             comp = sc.components.get(kkey)
             if comp is None:
