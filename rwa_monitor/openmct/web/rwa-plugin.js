@@ -509,6 +509,10 @@
 
   function plugin(d) {
     dictionary = d;
+    if (d.span_s) {   // the clock starts at the newest sample the server holds
+      const met = d.span_s[1];
+      telemetryClock.last = { met: met, utc: hasUtc() ? (d.epoch_unix_s + met) * 1000 : 0 };
+    }
     return function install(mct) {
       mct.types.addType(TELEMETRY_TYPE, {
         name: 'rwa_monitor telemetry point', cssClass: 'icon-telemetry', creatable: false
