@@ -332,8 +332,8 @@
 
   function fleetItems() {
     return dictionary.spacecraft.map((sc, i) => ({
-      key: sc.key + '.states', x: (i % 3) * 45, y: Math.floor(i / 3) * 21,
-      width: 44, height: 20
+      key: sc.key + '.states', x: (i % 3) * 36, y: Math.floor(i / 3) * 21,
+      width: 35, height: 20
     }));
   }
 
