@@ -21,8 +21,8 @@ from typing import Any
 def register(subparsers: Any) -> None:
     """Add the ``openmct`` sub-command."""
     parser = subparsers.add_parser(
-        'openmct', help="the operator's view: Open MCT with fleet history, recordings and "
-        'live wheels', description=__doc__.split('\n\n')[1] if __doc__ else None,
+        'openmct', help='the view for operators: Open MCT with fleet history, recordings '
+        'and live wheels', description=__doc__.split('\n\n')[1] if __doc__ else None,
         formatter_class=argparse.RawDescriptionHelpFormatter,
         epilog='examples:\n  rwa-monitor openmct --fleet fleet-out\n'
                '  rwa-monitor openmct --recording run.mcap --calibration cal/calibration.yaml\n'
@@ -34,19 +34,19 @@ def register(subparsers: Any) -> None:
                         metavar='FILE', help='a telemetry file or recording (CSV, MCAP, '
                         'rosbag2 folder, Parquet); repeatable')
     parser.add_argument('--events', type=pathlib.Path, action='append', default=[],
-                        metavar='JSON', help="events of the n-th --recording (rwa-monitor "
-                        "detect -o); default: detect them at start")
+                        metavar='JSON', help='events of the n-th --recording (rwa-monitor '
+                        'detect -o); default: detect them at start')
     parser.add_argument('--calibration', type=pathlib.Path, metavar='YAML',
                         help='commissioning calibration of the recordings and the live '
                         'wheels: the residual is taken against its nominal models')
     parser.add_argument('--config', type=pathlib.Path, metavar='YAML',
-                        help='parameters file for detecting a recording\'s events '
-                        '(default: the installed config/rwa_monitor.yaml)')
+                        help='parameters file for detecting the events of a '
+                        'recording (default: the installed config/rwa_monitor.yaml)')
     parser.add_argument('--epoch', metavar='TIME',
                         help='UTC time of telemetry time 0 (ISO 8601, e.g. '
                         '2026-03-01T00:00:00Z, or Unix seconds; "unix": stamps are Unix '
-                        'time); default: the fleet summary\'s epoch, else none (times shown '
-                        'as T+ from the start)')
+                        'time); default: the epoch in the fleet summary, else none (times '
+                        'shown as T+ from the start)')
     parser.add_argument('--live', action='store_true',
                         help='subscribe to the ROS topics (telemetry/wheels, telemetry/gyro, '
                         'anomalies of every namespace, /diagnostics) and push them live')
@@ -59,7 +59,7 @@ def register(subparsers: Any) -> None:
                         help='TCP port (default 8090; 0: any free port)')
     parser.add_argument('--allow-origin', action='append', default=[], metavar='ORIGIN',
                         help='another page origin (scheme://host:port) allowed to open the '
-                        'live WebSocket; default: only the page\'s own')
+                        'live WebSocket; default: only the origin of the page itself')
     parser.add_argument('--install', action='store_true',
                         help='install the pinned Open MCT bundle with npm (for a pip '
                         'install) and exit')

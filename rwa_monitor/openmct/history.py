@@ -209,7 +209,8 @@ def wheel_residual(wheel: str, t: np.ndarray, speed: np.ndarray, friction: np.nd
     if reference is None:
         return None, 'no reference fit'
     dry, viscous = reference
-    return friction - model_one(speed, dry, viscous), f'model (1) fit on the first {REFERENCE_S:g} s'
+    basis = f'model (1) fit on the first {REFERENCE_S:g} s'
+    return friction - model_one(speed, dry, viscous), basis
 
 
 def reference_levels(t: np.ndarray, speed: np.ndarray, friction: np.ndarray,
@@ -277,4 +278,3 @@ def _json(path: pathlib.Path) -> dict[str, Any]:
 
 def _number(value: Any) -> float:
     return float(value) if isinstance(value, (int, float)) else math.nan
-

@@ -56,22 +56,27 @@ class _Wheel:
         self.first: list[tuple[float, float, float]] = []
 
     def residuals(self, t: float, speed: float, friction: float
-                  ) -> tuple[list[float], list[float]]:
-        """Return (times, residuals) this sample makes known (several once fitted)."""
+                  ) -> tuple[list[float], list[float], bool]:
+        """Return (times, residuals, back-filled) this sample makes known.
+
+        Once the reference is fitted, the residuals of the samples it was fitted on come
+        back together (back-filled: history only, so that a live plot never draws
+        backwards).
+        """
         if self.nominal is not None:
             value, _ = self.nominal.residual_one(t, speed, friction)
-            return [t], [value]
+            return [t], [value], False
         if self.reference is not None:
-            return [t], [friction - float(history.model_one(speed, *self.reference))]
+            return [t], [friction - float(history.model_one(speed, *self.reference))], False
         self.first.append((t, speed, friction))
         if t - self.first[0][0] < history.REFERENCE_S:
-            return [], []
+            return [], [], False
         ts, ws, fs = (np.array(c) for c in zip(*self.first))
         self.first = []
         self.reference = history.reference_levels(ts, ws, fs)
         if self.reference is None:      # not excited enough: try the next REFERENCE_S
-            return [], []
-        return list(ts), list(fs - history.model_one(ws, *self.reference))
+            return [], [], False
+        return list(ts), list(fs - history.model_one(ws, *self.reference)), True
 
 
 class LiveFeed:
@@ -83,6 +88,7 @@ class LiveFeed:
         self.calibration = calibration or {}
         self._lock = threading.Lock()
         self._buffers: dict[tuple[str, str, str], tuple[list, list, list]] = {}
+        self._backfill: list[tuple[str, str, list, list]] = []
         self._wheels: dict[tuple[str, str], _Wheel] = {}
         self._latched: dict[tuple[str, str, str], tuple[int, str, float]] = {}
         self._state: dict[tuple[str, str], int] = {}
@@ -112,8 +118,12 @@ class LiveFeed:
                 if wheel is None:
                     block = (self.calibration.get('wheels') or {}).get(name)
                     wheel = self._wheels[(craft, name)] = _Wheel(block)
-                for rt, rv in zip(*wheel.residuals(t, float(speeds[i]), friction)):
-                    self._put(craft, name, 'residual', rt, rv)
+                times, values, backfill = wheel.residuals(t, float(speeds[i]), friction)
+                if backfill:
+                    self._backfill.append((craft, name, times, values))
+                else:
+                    for rt, rv in zip(times, values):
+                        self._put(craft, name, 'residual', rt, rv)
 
     def gyro(self, namespace: str, t: float, rates: Sequence[float]) -> None:
         """Take one gyro message (Imu angular velocity, rad/s)."""
@@ -124,7 +134,7 @@ class LiveFeed:
                 self._put(craft, 'gyro', f'rate_{axis}', t, float(rate))
 
     def event(self, namespace: str, node: str, record: Mapping[str, Any]) -> None:
-        """Take one anomaly event (an events-file record) published by ``node``."""
+        """Take one anomaly event, an events-file record that ``node`` published."""
         craft = craft_of_namespace(namespace)
         component = str(record.get('component'))
         declared = float(record.get('declared_time', math.nan))
@@ -141,7 +151,7 @@ class LiveFeed:
 
     def status(self, stamp: float, name: str, hardware_id: str,
                fields: Mapping[str, Any]) -> None:
-        """Take one /diagnostics status (its array's stamp, name, hardware id, values)."""
+        """Take one status of /diagnostics: its array stamp, name, hardware id, values."""
         craft, node = craft_of_status(name)
         key = (craft, node, hardware_id)
         with self._lock:
@@ -173,6 +183,7 @@ class LiveFeed:
         """Move the gathered samples into the store (queued there for the WebSocket)."""
         with self._lock:
             buffers, self._buffers = self._buffers, {}
+            backfill, self._backfill = self._backfill, []
             new_states = {}
             for (craft, component, point), (times, _, _) in buffers.items():
                 if point != 'state' and (craft, owner(component)) not in self._state:
@@ -182,5 +193,8 @@ class LiveFeed:
         for (craft, component), t in new_states.items():
             self.store.add(craft, component, 'state', [t], [0.0], [{'kind': 'none'}],
                            live=True)
+        for craft, wheel, times, values in backfill:
+            self.store.craft(craft, live=True)
+            self.store.add(craft, wheel, 'residual', times, values)
         for (craft, component, point), (times, values, extras) in buffers.items():
             self.store.add(craft, component, point, times, values, extras, live=True)

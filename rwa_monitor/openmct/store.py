@@ -230,7 +230,8 @@ class GroundStore:
             key = f'{ckey}.{kkey}.{point}'
             series = self.series.get(key)
             if series is None:
-                series = self.series[key] = Series(LIVE_CAPACITY if live else None)
+                series = self.series[key] = Series(LIVE_CAPACITY if live or sc.live
+                                                   else None)
             return series
 
     def add(self, craft: str, component: str, point: str, times: Any, values: Any,
