@@ -4,7 +4,8 @@ VENV ?= .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test bench lint venv clean test-bsk demo-bus bench-bus interop openmct browser
+.PHONY: demo test bench lint venv clean test-bsk demo-bus bench-bus interop openmct browser \
+	screenshots
 
 venv: $(STAMP)
 
@@ -60,6 +61,10 @@ browser:
 	  DEBIAN_FRONTEND=noninteractive apt-get -o DPkg::Lock::Timeout=600 install -y -qq \
 	    chromium >/dev/null || echo 'chromium could not be installed: browser tests skip'; \
 	else echo 'chromium not found and not installable here: the browser tests will skip'; fi
+
+# The screenshots in docs/images: the browser tests, photographing into docs/.
+screenshots: $(STAMP) openmct browser
+	RWA_MONITOR_SCREENSHOTS=docs/images $(PY) -m pytest test/test_openmct_browser.py -q
 
 bench: $(STAMP)
 	$(PY) -m bench

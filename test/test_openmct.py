@@ -46,6 +46,9 @@ def test_minmax_decimation_keeps_each_runs_extremes_and_latest_is_the_last_befor
     assert [d['met'] for d in got] == sorted(d['met'] for d in got)
     assert series.query(0, 500.7, latest=True) == [{'met': 500.5, 'value': 1.0}]
     assert len(series.query(10, 20)) == 11
+    series.extend([2000.0], [7.0], [{'kind': 'dry'}])    # the first sample with extras
+    assert series.query(1999, 2001) == [{'met': 2000.0, 'value': 7.0, 'kind': 'dry'}]
+    assert series.query(0, 0) == [{'met': 0.0, 'value': 0.0}]
 
 
 def test_the_anomaly_state_counts_each_change_with_its_latest_kind():

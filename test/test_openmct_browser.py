@@ -193,5 +193,5 @@ def test_a_live_replay_reaches_the_plot_and_its_fault_raises_the_anomaly(tmp_pat
     assert received > 0, 'no live friction of rw2 reached the page'
     assert before != after, 'the rw2 plot did not change while the replay ran'
     assert state == 'anomaly (warning)' and others == ['nominal'] * 3, (state, others)
-    assert not watch.errors, watch.errors
+    assert not watch.errors, (watch.errors, log[-3000:])
     assert not watch.outside, (watch.outside, log)

@@ -104,6 +104,8 @@ class Series:
             self._v = np.concatenate([self._v[:self._n], np.empty(size - self._n)])
         self._t[self._n:need] = times
         self._v[self._n:need] = values
+        if extra is not None and not self.extra and self._n:
+            self.extra = [{} for _ in range(self._n)]    # extras start: align the earlier
         if extra is not None or self.extra:
             self.extra.extend(extra if extra is not None else [{}] * times.size)
         ordered = self._n == 0 or times[0] >= self._t[self._n - 1]
