@@ -288,6 +288,15 @@
     return { values: values };
   }
 
+  // Per-pass levels are points (a line between passes would invent values); trend lines
+  // and samples are lines.
+  function seriesStyle(key) {
+    const point = key.split('.')[2];
+    const level = point === 'dry' || point === 'viscous';
+    return { identifier: id(key), interpolate: level ? 'none' : 'linear', markers: level,
+      markerShape: 'circle', markerSize: level ? 5 : 2 };
+  }
+
   function folder(key, name, location) {
     return {
       identifier: id(key), name: name, type: 'folder', location: location,
@@ -379,7 +388,8 @@
     if (PLOTS[parts[2]]) {
       return { identifier: id(key), name: sc.name + ' ' + component.name + ' ' +
         PLOTS[parts[2]].name, type: 'telemetry.plot.overlay', location: location,
-        composition: childKeys(key).map(id), configuration: { series: [] } };
+        composition: childKeys(key).map(id),
+        configuration: { series: childKeys(key).map(seriesStyle) } };
     }
     const point = parts[2];
     if (!component.points.includes(point)) {
