@@ -169,7 +169,7 @@ def test_a_recording_is_written_under_the_topics_given(tmp_path):
         assert plain.gyro is None and plain.attitude is None
     again = read_telemetry(tmp_path / 'flight_bag', topics)
     assert np.array_equal(again.gyro, tele.gyro)
-    with pytest.raises(ConfigError, match='not of a CSV file'):
+    with pytest.raises(ConfigError, match='not of another file'):
         write_telemetry(tmp_path / 'x.csv', tele, topics)
 
 

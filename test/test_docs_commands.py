@@ -146,11 +146,12 @@ def _run_every_command(folder, env):
             continue
         _run(command, folder, env)
         ran.append(command)
-    assert len(ran) == 16, ran
+    assert len(ran) == 19, ran
     assert (folder / 'run_bag' / 'metadata.yaml').is_file()
     assert (folder / 'id' / 'report.json').is_file()
     assert (folder / 'events_bag.json').is_file()
     assert (folder / 'flight_bag' / 'metadata.yaml').is_file()
+    assert (folder / 'pass.xml').is_file() and (folder / 'events_pass.json').is_file()
 
 
 @pytest.mark.slow

@@ -235,19 +235,21 @@ def _fault(f: Fault, craft: Spacecraft, plan: FleetPlan) -> dict:
             'delta_dry_nm': f.delta_dry, 'delta_viscous_nms': f.delta_viscous}
 
 
-def write_fleet(out: str | os.PathLike, plan: FleetPlan,
+def write_fleet(out: str | os.PathLike, plan: FleetPlan, suffix: str = '.csv',
+                writer: Callable[[pathlib.Path, Telemetry], None] | None = None,
                 progress: Callable[[int], None] | None = None) -> list[pathlib.Path]:
     """Write every pass of every spacecraft and truth.json under ``out``; return the paths.
 
-    Each file is written atomically; truth.json last, so a complete archive has it.
-    ``progress(passes written)`` is called after each pass.
+    Each pass is ``<pass id><suffix>`` written by ``writer`` (default: write_telemetry,
+    the format by the suffix); each file atomically; truth.json last, so a complete archive
+    has it. ``progress(passes written)`` is called after each pass.
     """
     root = pathlib.Path(out)
     written = []
     for craft in plan.spacecraft:
         for i, p in enumerate(craft.passes):
-            path = root / craft.name / f'{p.pass_id}.csv'
-            write_telemetry(path, pass_telemetry(plan, craft, i))
+            path = root / craft.name / f'{p.pass_id}{suffix}'
+            (writer or write_telemetry)(path, pass_telemetry(plan, craft, i))
             written.append(path)
             if progress is not None:
                 progress(len(written))
