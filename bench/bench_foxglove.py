@@ -5,7 +5,8 @@ a foxglove-sdk server and counts the messages it receives while this process log
 samples (the bridge's ``/rwa_monitor/wheels`` payload, 4 wheels) at a fixed rate: once
 straight to the SDK's port (the client offers ``foxglove.sdk.v1``), once through
 :class:`~rwa_monitor.nodes.foxglove_front.WebSocketFront` (the client offers
-``foxglove.websocket.v1``; the SDK's server behind TLS, as the bridge runs it), alternated ``repeats`` times in the same run. Reported: the
+``foxglove.websocket.v1``; the SDK's server behind TLS, as the bridge runs
+it), alternated ``repeats`` times in the same run. Reported: the
 messages delivered and this process's CPU time per message (producer, SDK and relay
 threads together; the producer's share is the same in both arms). Results:
 bench/results/foxglove.json and the ``foxglove`` section of docs/results.md.
