@@ -484,8 +484,12 @@ def _limit(level: str, unit: str) -> Param:
                  unit=unit, scope='file')
 
 
-FLEET = Schema('fleet', (_limit('dry', 'N m'), _limit('viscous', 'N m s/rad')),
-               'Friction trend of `rwa-monitor fleet` (`--config`); docs/fleet.md.')
+FLEET = Schema('fleet', (
+    _limit('dry', 'N m'), _limit('viscous', 'N m s/rad'),
+    Param('epoch_utc', '', 'What time 0 of the archive is, as ISO 8601 UTC (e.g. '
+          '2026-01-01T00:00:00Z): the outputs give calendar times; empty = the epoch_utc of '
+          "the archive's archive.yaml, if any.", scope='file'),
+), 'Friction trend and times of `rwa-monitor fleet` (`--config`); docs/fleet.md.')
 
 # ------------------------------------------------------------------------------- replay
 

@@ -95,6 +95,7 @@ class WheelRunner:
         self._nominal = nominal
         self._needed = llr_samples_needed(values)
         self._not_tested = dict.fromkeys(NOT_TESTED, 0) if nominal is not None else {}
+        self.last_input: np.ndarray | None = None
         self.setup = ('calibrated' if nominal is not None else
                       'refined' if regressors is not None else 'plain')
 
@@ -125,12 +126,15 @@ class WheelRunner:
         """Give whole arrays (rows after the last one fed); return the events.
 
         ``aux``: the auxiliary channels a refined model reads (arrays of the rows).
+        :attr:`last_input` is then what the detector was given (the residual against the
+        nominal with a calibration, NaN where not tested).
         """
         t, w, f = (np.ascontiguousarray(a, dtype=float) for a in (time, speed, friction))
         if self._nominal is not None:
             f, skipped = self._nominal.residual(t, w, f)
             for reason, count in skipped.items():
                 self._not_tested[reason] = self._not_tested.get(reason, 0) + count
+        self.last_input = f
         if self.setup == 'refined':
             return self._detector.process_arrays(t, w, f, aux)
         return self._detector.process_arrays(t, w, f)

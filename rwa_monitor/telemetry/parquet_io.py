@@ -70,7 +70,11 @@ def first_stamp(path: str | os.PathLike) -> tuple[float, list[str]]:
         raise TelemetrySchemaError(path, f'not a readable Parquet file: {err}') from None
     if len(times) == 0:
         raise TelemetrySchemaError(path, 'no rows')
-    return float(times[0].as_py()), names
+    first = times[0].as_py()
+    if not isinstance(first, (int, float)):
+        raise TelemetrySchemaError(path, f'the first time is {first!r}, not a number',
+                                   column=TIME)
+    return float(first), names
 
 
 def write_parquet(path: str | os.PathLike, telemetry: Telemetry) -> None:
