@@ -17,7 +17,7 @@ per axis the residual ``e = (g_{k-1} + g_k)/2 - w_st,k``
 - Drift or bias (lines 27-34): instead of the spread of ``d`` against self-adapted sigma
   limits, a likelihood comparison on the half-block means of the last ``decide_blocks``
   blocks of a step (bias) and a ramp (drift), each with its onset fitted, whitened with
-  the calibrated noise model (:meth:`ResidualAxis._whitener`): the kind is declared when
+  the calibrated noise model (:func:`rwa_monitor.core.gyro_decision.whitener`): the kind is declared when
   one model explains the data better by ``decide_chi2`` (in block variances), or after
   ``max_wait_blocks`` by the better one. The fitted onset is the event's change time.
 - While faulty: drift becomes bias when the least-squares slope over the last
@@ -42,6 +42,7 @@ from typing import Any, Mapping
 import numpy as np
 
 from rwa_monitor.core import gyro_calibration as gc
+from rwa_monitor.core.gyro_decision import step_or_ramp, whitener
 from rwa_monitor.core.gyro_state import (
     check_counts, check_finite, check_label, check_stamps, check_type, require,
     ResidualAxisState, ResidualThresholds, stamp_list, stamps_record)
@@ -294,76 +295,23 @@ class ResidualAxis:
         t = t - t.mean()
         return float(np.dot(t, y - y.mean()) / np.dot(t, t))
 
-    def _whitener(self, k: int) -> np.ndarray:
-        """Return ``W`` (k, k) with ``W C W^T = I``, C the covariance of k half-block means.
-
-        Noise model (docs/vsadc.md): a mean over a span is white gyro noise plus the
-        difference of the star-tracker angle noise at its two ends divided by the span. In
-        block variances, with ``rho`` the calibrated lag-1 correlation of block means
-        (clipped to [MIN_LAG1, 0]), ``s_a = -rho`` and ``s_g = 1 + 2 rho``; halving the
-        span doubles the gyro part and quadruples the star-tracker part:
-        ``C = 2 s_g I + 4 s_a (2 I - offdiag)``. A step or a ramp lives at low
-        frequencies, where the telescoping star-tracker noise is small: whitened, they
-        stand out earlier than under a white-noise model.
-        """
-        w = self._whiteners.get(k)
-        if w is None:
-            s_a = -self.lag1_correlation
-            s_g = 1.0 - 2.0 * s_a
-            off = np.eye(k, k=1) + np.eye(k, k=-1)
-            cov = 2.0 * s_g * np.eye(k) + 4.0 * s_a * (2.0 * np.eye(k) - off)
-            w = np.linalg.inv(np.linalg.cholesky(cov))
-            self._whiteners[k] = w
-        return w
-
     def _decide(self, force: bool) -> tuple[int | None, Any]:
-        """Step or ramp: the better fit of the recent distances, and its onset stamp.
+        """Return the kind and onset stamp of the last ``decide_blocks`` blocks, or None.
 
-        On the half-block means of the last ``decide_blocks`` blocks (half blocks: twice
-        the time resolution of the level test), per onset candidate (every quarter
-        block) the regressor of a step is the share of each half block's samples after
-        the onset, that of a ramp the half-block mean of ``max(0, t - onset)``. Data and
-        regressors are whitened (:meth:`_whitener`); the explained sum of squares
-        ``(x.d)^2 / x.x`` of the best onset of each model is compared in block variances.
+        Step or ramp: :func:`~rwa_monitor.core.gyro_decision.step_or_ramp`, on the
+        half-block means, whitened (the whiteners cached per size).
         """
         blocks = list(self._blocks)[-self.decide_blocks:]
-        d = np.array([h for b in blocks for h in b[3]]) - self.nominal
-        times = np.stack([b[1] for b in blocks])            # (K, block)
-        half = self.block // 2
-        step = max(self.block // 4, 1)
-        candidates = times.ravel()[::step]
-
-        def regressors(t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-            rel = t[None, :, :] - candidates[:, None, None]
-            return (rel >= 0).mean(axis=2), np.maximum(rel, 0.0).mean(axis=2)
-
-        s1, r1 = regressors(times[:, :half])
-        s2, r2 = regressors(times[:, half:])
-        x_step = np.stack([s1, s2], axis=2).reshape(len(candidates), -1)
-        x_ramp = np.stack([r1, r2], axis=2).reshape(len(candidates), -1)
-        whiten = self._whitener(len(d))
-        d = whiten @ d
-
-        def best(x: np.ndarray) -> tuple[float, int]:
-            x = x @ whiten.T
-            xx = np.einsum('ck,ck->c', x, x)
-            xd = x @ d
-            with np.errstate(invalid='ignore', divide='ignore'):
-                explained = np.where(xx > 0, xd * xd / np.where(xx > 0, xx, 1.0), 0.0)
-            i = int(np.argmax(explained))
-            return float(explained[i]), i
-
-        step_fit, i_step = best(x_step)
-        ramp_fit, i_ramp = best(x_ramp)
-        margin = (ramp_fit - step_fit) / self.block_std ** 2
-        if margin > self.decide_chi2 or (force and margin > 0):
-            kind, i = DRIFT, i_ramp
-        elif margin < -self.decide_chi2 or force:
-            kind, i = BIAS, i_step
-        else:
+        k = 2 * len(blocks)                                 # half-block means
+        whiten = self._whiteners.get(k)
+        if whiten is None:
+            whiten = self._whiteners[k] = whitener(k, self.lag1_correlation)
+        kind, i = step_or_ramp(np.array([h for b in blocks for h in b[3]]) - self.nominal,
+                               np.stack([b[1] for b in blocks]), whiten,
+                               self.block_std, self.decide_chi2, force)
+        if kind is None:
             return None, None
-        stamps = [s for b in blocks for s in b[2]]
-        return kind, stamps[i * step]
+        return kind, [s for b in blocks for s in b[2]][i]
 
     def record(self) -> ResidualAxisState:
         """Return the axis's state (core/gyro_state.py); stamps must be ``(time, row)``."""
