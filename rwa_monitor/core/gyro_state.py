@@ -178,7 +178,7 @@ class ResidualAxisState:
 class VsadcState:
     """The state of a ``VsadcDetector``: its parameters, its axes, its row filter."""
 
-    VERSION: ClassVar[int]
+    VERSION: ClassVar[int] = 1
     parameters: dict[str, Scalar]
     axes: dict[str, VsadcAxisState]
     rows: GyroRowsState
@@ -193,7 +193,7 @@ class GyroDiagnosisState:
     previous gyro sample with its stamp (the trapezoid's other end).
     """
 
-    VERSION: ClassVar[int]
+    VERSION: ClassVar[int] = 1
     parameters: dict[str, Scalar]
     axes: dict[str, ResidualAxisState]
     rows: GyroRowsState
@@ -238,13 +238,16 @@ def check_label(value: Any, path: str) -> None:
 
 def check_parameters(saved: Mapping[str, Scalar], own: Mapping[str, Scalar],
                      path: str) -> None:
-    """Refuse a state made with other parameters (names the first that differs)."""
+    """Refuse a state made with other parameters (names every one that differs)."""
+    differ = []
     for name in sorted(set(saved) | set(own)):
         a, b = saved.get(name, _MISSING), own.get(name, _MISSING)
         if type(a) is not type(b) or a != b:
             shown = ['none' if v is _MISSING else repr(v) for v in (a, b)]
-            raise RecordError(f'{path}.parameters.{name}: {shown[0]} in the state, '
-                              f'{shown[1]} in this detector')
+            differ.append(f'{path}.parameters.{name}: {shown[0]} in the state, {shown[1]} '
+                          'in this detector')
+    if differ:
+        raise RecordError('; '.join(differ))
 
 
 def check_keys(saved: Mapping[str, Any], axes: Sequence[str], path: str) -> None:

@@ -319,6 +319,8 @@ class VsadcAxis:
         check_finite(f'{path}.nominal_centre', record.nominal_centre)
         check_finite(f'{path}.healthy_distance_mean', record.healthy_distance_mean,
                      record.healthy_distance_variance)
+        require(record.healthy_distance_variance >= 0.0, f'{path}.healthy_distance_variance',
+                'negative')
         for name in ('reference', 'regime'):
             window = getattr(record, name)
             self._ref.check_record(window, f'{path}.{name}')
