@@ -60,7 +60,7 @@ def _rows() -> list[tuple]:
 
 @pytest.fixture(scope='module')
 def stream():
-    """The rows ``(t, gyro, q, ref)`` of the module docstring."""
+    """Return the rows ``(t, gyro, q, ref)`` of the module docstring."""
     return _rows()
 
 
@@ -219,8 +219,8 @@ def _replace(record, path, **values):
     head, *rest = path
     if isinstance(record, dict):
         return {**record, head: _replace(record[head], rest, **values)}
-    return dataclasses.replace(record, **{head: _replace(getattr(record, head), rest,
-                                                          **values)})
+    inner = _replace(getattr(record, head), rest, **values)
+    return dataclasses.replace(record, **{head: inner})
 
 
 def _paper_edits(s):

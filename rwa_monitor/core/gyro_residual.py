@@ -17,9 +17,10 @@ per axis the residual ``e = (g_{k-1} + g_k)/2 - w_st,k``
 - Drift or bias (lines 27-34): instead of the spread of ``d`` against self-adapted sigma
   limits, a likelihood comparison on the half-block means of the last ``decide_blocks``
   blocks of a step (bias) and a ramp (drift), each with its onset fitted, whitened with
-  the calibrated noise model (:func:`rwa_monitor.core.gyro_decision.whitener`): the kind is declared when
-  one model explains the data better by ``decide_chi2`` (in block variances), or after
-  ``max_wait_blocks`` by the better one. The fitted onset is the event's change time.
+  the calibrated noise model (:mod:`rwa_monitor.core.gyro_decision`): the kind is
+  declared when one model explains the data better by ``decide_chi2`` (in block
+  variances), or after ``max_wait_blocks`` by the better one. The fitted onset is the
+  event's change time.
 - While faulty: drift becomes bias when the least-squares slope over the last
   ``fit_blocks`` blocks falls below half the slope threshold; bias becomes drift only
   when the level has also moved from the held bias level by the level threshold and the

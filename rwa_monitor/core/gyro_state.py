@@ -16,7 +16,6 @@ naming the field.
 from __future__ import annotations
 
 from dataclasses import dataclass
-import math
 from typing import Any, ClassVar, Mapping, Sequence
 
 import numpy as np
@@ -87,7 +86,7 @@ class GyroRowsState:
 
 @dataclass(frozen=True)
 class VsadcAxisState:
-    """One VSADC axis (core/vsadc.py ``VsadcAxis``).
+    """One VSADC axis (core/vsadc_axis.py ``VsadcAxis``).
 
     ``features`` (k, 2) are the last ``min(samples, window)`` ``(res_sst, res_gyr)`` with
     their ``stamps``; ``distances`` the last ``sigma_window`` distances (fewer at

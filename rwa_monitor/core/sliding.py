@@ -1,4 +1,4 @@
-"""Sliding windows of floats for VSADC's sigma limits (core/vsadc.py), with their records.
+"""Sliding windows of floats for VSADC's sigma limits (core/vsadc_axis.py), with records.
 
 :class:`SlidingWindow` keeps running sums (mean, standard deviation), :class:`SlidingMax`
 the maximum (monotonic deque). ``record()`` returns their state as a typed record
