@@ -343,7 +343,7 @@ class LLRDetector(llr_cstep.StepOwner):
             if self._fast:
                 i = kern.run(live.floats, live.ints, t, w, f, i)
                 if i < n:
-                    events.extend(self._after(int(live.ints[layout.I_FLAGS])))
+                    events.extend(self._after(layout.take_flags(live.ints)))
             elif live.fit is not None and not config.noise_speed_model:
                 i = samples.buffer_arrays(live, config, t, w, f, i)
                 if len(live.fit) >= config.noise_fit_samples:

@@ -44,7 +44,6 @@ _FLOAT_SLOTS = ('F_LOGR', 'F_MIN_EXC', 'F_NOISE_VAR', 'F_MAX_W', 'F_MAX_F', 'F_F
 # math library (log r, y*) may differ in the last bits between machines.
 _ULPS = 1e-12
 _KINDS = llr_stats.KINDS + (llr_kinds.UNDECIDED,)
-_FLAGS = layout.REVISE | layout.EXACT | layout.DECLARE
 
 
 def checked(state: LLRState, config: LLRConfig) -> Live:
@@ -59,10 +58,10 @@ def checked(state: LLRState, config: LLRConfig) -> Live:
     for name in _FLOAT_SLOTS:   # the detector's own values (equal within _ULPS)
         slot = getattr(layout, name)
         live.floats[slot] = new.floats[slot]
-    _positions(live, config)
     _noise(live, config)
     _fit(state, live, config)
     _general(live, config)
+    _positions(live, config)
     _change(live, config)
     event = live.last_event
     if event is not None and (event.detector != 'llr' or event.component != config.component):
@@ -121,19 +120,26 @@ def _positions(live: Live, config: LLRConfig) -> None:
     if seen != n['I_ROWS']:
         _fail('ints[I_ROWS]', f'{n["I_ROWS"]} rows, but accepted and rejected samples add '
               f'up to {seen}')
-    if not 0 <= n['I_C'] <= n['I_KMIN'] <= max(n['I_C'], n['I_POS']):
-        _fail('ints[I_KMIN]', f'reference start {n["I_C"]}, minimum at {n["I_KMIN"]}, '
-              f'{n["I_POS"]} samples: expected start <= minimum <= samples')
+    if not 0 <= n['I_C'] <= n['I_POS']:
+        _fail('ints[I_C]', f'reference start {n["I_C"]} is not a position of the '
+              f'{n["I_POS"]} samples')
+    if not (n['I_KMIN'] == n['I_C']
+            or n['I_C'] + config.window < n['I_KMIN'] <= n['I_POS'] - config.window):
+        _fail('ints[I_KMIN]', f'{n["I_KMIN"]} is not a candidate tested since the reference '
+              f'start {n["I_C"]}')
     if not (n['I_C_ROW'] == -1 if n['I_POS'] == 0 else 0 <= n['I_C_ROW'] < n['I_ROWS']):
         _fail('ints[I_C_ROW]', f'{n["I_C_ROW"]} is not a row seen (of {n["I_ROWS"]})')
-    if n['I_K'] > n['I_POS'] or n['I_DOF'] < -1 or n['I_FLAGS'] & ~_FLAGS or n['I_FLAGS'] < 0:
-        _fail('ints[I_K]', 'the scratch slots of the last exact test (k, dof, flags) are '
-              'out of range')
+    for name, ok in (('I_K', n['I_K'] <= n['I_POS']), ('I_DOF', n['I_DOF'] >= -1),
+                     ('I_FLAGS', n['I_FLAGS'] == 0)):
+        if not ok:
+            _fail(f'ints[{name}]', f'{n[name]} is out of range')
     ar_order = len(live.noise.ar) if live.noise is not None and config.p == 2 else 0
     speed = int(config.p == 2 and live.noise is not None and live.noise.speed_std is not None)
-    if n['I_AR_ORDER'] != ar_order or n['I_NLAGS'] > ar_order or n['I_SPEED_MODEL'] != speed:
-        _fail('ints[I_AR_ORDER]', 'the AR order, lags and speed model of the kernel differ '
-              "from the record's noise model")
+    for name, ok in (('I_AR_ORDER', n['I_AR_ORDER'] == ar_order),
+                     ('I_NLAGS', n['I_NLAGS'] <= ar_order),
+                     ('I_SPEED_MODEL', n['I_SPEED_MODEL'] == speed)):
+        if not ok:
+            _fail(f'ints[{name}]', f"{n[name]} does not fit the record's noise model")
     rows = live.ring.row
     if rows.size and (rows.min() < 0 or rows.max() >= max(n['I_ROWS'], 1)):
         _fail('ints', 'a row index in the ring is not a row seen')

@@ -153,7 +153,7 @@ def replay(live: Live, config: LLRConfig, rows: np.ndarray, t: np.ndarray, f: np
     while i < n:
         i = kern.ingest_run(live.floats, live.ints, rows, t, f, h1, h2, i)
         if i < n:
-            events.extend(llr_changes.after(live, config, int(live.ints[layout.I_FLAGS])))
+            events.extend(llr_changes.after(live, config, layout.take_flags(live.ints)))
         i += 1
     return events
 
