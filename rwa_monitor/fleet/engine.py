@@ -25,7 +25,7 @@ from typing import Any, Iterator, Mapping, TextIO
 
 from rwa_monitor.core.schema import FLEET, LLR, VSADC
 from rwa_monitor.exceptions import ConfigError
-from rwa_monitor.fleet import archive as arc, history, state
+from rwa_monitor.fleet import archive as arc, state
 from rwa_monitor.fleet.chain import step
 from rwa_monitor.fleet.plan import plan, SpacecraftPlan
 from rwa_monitor.fleet.records import Chain, PassRecord, SpacecraftRecord, WorkFacts
@@ -125,8 +125,8 @@ def run_archive(archive: str | pathlib.Path, *, client: Any = None, workers: int
     wall = _time.perf_counter() - start_wall
     run = (loaded.generation + 1) if loaded else (1 if state_dir is not None else 0)
     crafts = [_result(p, chains.get(p.id), run) for p in plans]
-    prior_history = history.from_parquet(loaded.history) if loaded else []
-    prior_trend = _trend_rows(loaded.trend) if loaded else []
+    prior_history = loaded.history if loaded else []
+    prior_trend = loaded.trend if loaded else []
     return FleetResult.assemble(
         crafts, blocks, engine, run=run, epoch=epoch, state_dir=state_dir, loaded=loaded,
         saved=saved, prior_history=prior_history, prior_trend=prior_trend,
@@ -192,15 +192,6 @@ def _result(p: SpacecraftPlan, chain: Chain | None, run: int) -> SpacecraftResul
                                   (p.prior.passes if p.prior else ()) + done,
                                   dict(chain.states))
     return SpacecraftResult(p, chain, record, run)
-
-
-def _trend_rows(data: bytes) -> list[Any]:
-    from rwa_monitor.fleet.records import TrendRow
-    import io
-    import pyarrow.parquet as pq
-    if not data:
-        return []
-    return [TrendRow.from_fields(r) for r in pq.read_table(io.BytesIO(data)).to_pylist()]
 
 
 def _timings(chains: Mapping[str, Chain], wall: float, client_cpu: float) -> dict[str, Any]:

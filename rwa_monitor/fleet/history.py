@@ -102,7 +102,8 @@ def to_parquet(history: Sequence[Entry]) -> bytes:
     for row, h in zip(table, history):
         tree, _ = encode(h.event)
         row['event_json'] = json.dumps(tree, allow_nan=False, sort_keys=True)
-    return parquet(table, {'spacecraft': 'string', 'event_json': 'string'})
+    return parquet(table, {'spacecraft': 'string', 'event_json': 'string', 'run': 'int64',
+                           'end_of_run': 'bool_', 'superseded': 'bool_'})
 
 
 def from_parquet(data: bytes) -> list[Entry]:

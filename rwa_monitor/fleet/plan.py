@@ -5,8 +5,10 @@ pass's first stamp and columns (one ``scan`` task per spacecraft), and returns o
 :class:`SpacecraftPlan` per spacecraft: the passes to run in time order, those already
 processed (same name and size as in the state), those that cannot be read or run (with
 the reason: unreadable, other components than the spacecraft's, late) and the spec its
-runners are made from. A pass stamped at or before the last stamp the state processed is
-late: a run cannot go back in time, so it is reported, by name, as not examined.
+runners are made from. A pass that starts before the last pass the state processed is
+late: a full run would have fed it earlier, and a run cannot go back in time, so it is
+reported, by name, as not examined. A pass that starts after it is fed as a full run would
+feed it (its rows at or before the last stamp fed are dropped and counted).
 """
 
 from __future__ import annotations
@@ -97,14 +99,15 @@ def _complete(p: SpacecraftPlan, scans: Mapping[str, Any], blocks: Mapping[str, 
     readable.sort(key=lambda f: (f.first, f.name))
     already = tuple(pathlib.Path(c).name for c in p.craft.candidates if c not in scans)
     late: dict[str, str] = {}
-    if p.prior is not None:
+    if p.prior is not None and p.prior.passes:
+        last = p.prior.passes[-1]
         for f in list(readable):
-            if f.first <= p.prior.last_time:
+            if (f.first, f.name) < (last.first, last.name):
                 readable.remove(f)
-                late[f.name] = (f'late: stamped from {f.first:.3f} s, at or before the last '
-                                f'stamp already processed ({p.prior.last_time:.3f} s); a run '
-                                'does not go back in time (run the archive again with a new '
-                                '--state folder to include it)')
+                late[f.name] = (f'late: it starts at {f.first:.3f} s, before the last pass '
+                                f'already processed ({last.name}, from {last.first:.3f} s); '
+                                'a run does not go back in time (run the archive again with '
+                                'a new --state folder to include it)')
     names = (list(p.prior.components) if p.prior else
              arc.components(readable[0].columns) if readable else [])
     for f in list(readable):

@@ -151,6 +151,7 @@ class FleetResult:
                 trend += c.chain.trend
         past = history.supersede(prior_history, continued)
         full = history.order(past + found)
+        trend.sort(key=lambda r: (r.spacecraft, r.wheel, r.t_start, r.pass_name))
         result = cls(crafts, full, trend, {}, timings, run, epoch,
                      None if state_dir is None else pathlib.Path(state_dir), loaded, saved)
         result.summary = result._summary(blocks, engine, config)
@@ -172,7 +173,7 @@ class FleetResult:
 
     @property
     def anomaly(self) -> bool:
-        """Return True if this run found an anomaly (a new event that is not a recovery)."""
+        """Return True if this run found an anomaly: a new event that is not a recovery."""
         return any(h.event.kind != 'healthy' and h.run == self.run
                    for h in history.current(self.history))
 
@@ -182,7 +183,7 @@ class FleetResult:
         return any(c.not_examined() for c in self.crafts)
 
     def rows(self) -> list[dict[str, Any]]:
-        """Return the events table: the history, ``new`` marking this run's events."""
+        """Return the events table of the history, ``new`` marking this run's events."""
         return history.rows(self.history, self.run, self.epoch)
 
     def _summary(self, blocks: Mapping[str, Any], engine: dict[str, Any],
