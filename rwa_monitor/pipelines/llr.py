@@ -12,28 +12,18 @@ made by pipelines/runners.py) hold the rules of feeding, not-tested samples and 
 from __future__ import annotations
 
 import time as _time
-from typing import Any, Iterable, Mapping, NamedTuple
-
-import numpy as np
+from typing import Any, Mapping
 
 from rwa_monitor.core.events import AnomalyEvent
-from rwa_monitor.core.friction import RegressorSet
 from rwa_monitor.core.schema import LLR, llr_kwargs
-from rwa_monitor.exceptions import ConfigError
 from rwa_monitor.pipelines import Detection
-from rwa_monitor.pipelines.runners import CALIBRATION_KEY, MODEL_KEY, wheel_setup
+from rwa_monitor.pipelines.runners import (CALIBRATION_KEY, friction_model, MODEL_KEY,
+                                           refined_model, RefinedModel, wheel_setup)
 from rwa_monitor.telemetry import Telemetry
 
 SCHEMA = LLR
 NODE = LLR.name
 DEFAULTS = {name: LLR[name].default for name in LLR.names(('all',))}
-
-
-class RefinedModel(NamedTuple):
-    """A refined friction model: the wheel it names (None: every wheel) and its regressors."""
-
-    wheel: str | None
-    regressors: RegressorSet
 
 
 def applies(tele: Telemetry) -> bool:
@@ -44,44 +34,6 @@ def applies(tele: Telemetry) -> bool:
 def detector_kwargs(config: Mapping[str, Any]) -> dict[str, Any]:
     """Return the detector keywords for a parameter block (ConfigError names a bad one)."""
     return llr_kwargs(LLR.validate(config))
-
-
-def friction_model(path: str, tele: Telemetry) -> RefinedModel | None:
-    """Return the refined model of a file written by identify for a record, or None."""
-    return refined_model(path, tele.wheels, set(tele.aux))
-
-
-def refined_model(path: str, wheels: Iterable[str], aux: set[str]) -> RefinedModel | None:
-    """Return the refined model of a file written by identify, or None if unset.
-
-    ``wheels``: the record's wheels; ``aux``: its auxiliary channels. Raise ConfigError
-    if the file cannot be read or the record lacks a channel it reads.
-    """
-    if not path:
-        return None
-    from rwa_monitor.core.calibration_values import check_model_values, MALFORMED
-    from rwa_monitor.core.identify.model import aux_channels, regressors_from_config
-    from rwa_monitor.telemetry.yaml_file import read_yaml
-    cfg = read_yaml(path)
-    if not isinstance(cfg, Mapping) or not isinstance(cfg.get('friction_model', cfg),
-                                                      Mapping):
-        raise ConfigError(f'{MODEL_KEY} {path!r}: expected a friction_model mapping')
-    check_model_values(cfg.get('friction_model', cfg), f'{MODEL_KEY} {path!r}')
-    try:
-        missing = [c for c in aux_channels(cfg) if c not in aux]
-        if missing:
-            raise ConfigError(f'{MODEL_KEY} {path!r} reads channel(s) the file lacks: '
-                              f'{", ".join(map(str, missing))}')
-        regressors = regressors_from_config(cfg)
-        regressors.matrix(np.array([1.0, -1.0]), np.zeros(2),
-                          {c: np.zeros(2) for c in aux})
-    except MALFORMED as err:
-        if isinstance(err, ConfigError):
-            raise
-        raise ConfigError(f'{MODEL_KEY} {path!r}: malformed friction_model: {err!r}') from None
-    wheel = cfg.get('friction_model', cfg).get('wheel')
-    return RefinedModel(wheel if isinstance(wheel, str) and wheel in set(wheels) else None,
-                        regressors)
 
 
 def run_with_summary(tele: Telemetry, config: Mapping[str, Any]) -> Detection:

@@ -10,8 +10,11 @@ checked once per set-up (:class:`WheelSetup`); each runner gets its own detector
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, Iterable, Mapping
+from typing import Any, Iterable, Mapping, NamedTuple
 
+import numpy as np
+
+from rwa_monitor.core.friction import RegressorSet
 from rwa_monitor.core.gyro_runner import GyroColumns, GyroRunner
 from rwa_monitor.core.wheel_runner import WheelRunner
 from rwa_monitor.exceptions import ConfigError
@@ -58,6 +61,51 @@ class WheelSetup:
             self.refined.wheel in (None, wheel)
 
 
+class RefinedModel(NamedTuple):
+    """A refined friction model: the wheel it names (None: every wheel) and its regressors."""
+
+    wheel: str | None
+    regressors: RegressorSet
+
+
+def friction_model(path: str, tele: Telemetry) -> RefinedModel | None:
+    """Return the refined model of a file written by identify for a record, or None."""
+    return refined_model(path, tele.wheels, set(tele.aux))
+
+
+def refined_model(path: str, wheels: Iterable[str], aux: set[str]) -> RefinedModel | None:
+    """Return the refined model of a file written by identify, or None if unset.
+
+    ``wheels``: the record's wheels; ``aux``: its auxiliary channels. Raise ConfigError
+    if the file cannot be read or the record lacks a channel it reads.
+    """
+    if not path:
+        return None
+    from rwa_monitor.core.calibration_values import check_model_values, MALFORMED
+    from rwa_monitor.core.identify.model import aux_channels, regressors_from_config
+    from rwa_monitor.telemetry.yaml_file import read_yaml
+    cfg = read_yaml(path)
+    if not isinstance(cfg, Mapping) or not isinstance(cfg.get('friction_model', cfg),
+                                                      Mapping):
+        raise ConfigError(f'{MODEL_KEY} {path!r}: expected a friction_model mapping')
+    check_model_values(cfg.get('friction_model', cfg), f'{MODEL_KEY} {path!r}')
+    try:
+        missing = [c for c in aux_channels(cfg) if c not in aux]
+        if missing:
+            raise ConfigError(f'{MODEL_KEY} {path!r} reads channel(s) the file lacks: '
+                              f'{", ".join(map(str, missing))}')
+        regressors = regressors_from_config(cfg)
+        regressors.matrix(np.array([1.0, -1.0]), np.zeros(2),
+                          {c: np.zeros(2) for c in aux})
+    except MALFORMED as err:
+        if isinstance(err, ConfigError):
+            raise
+        raise ConfigError(f'{MODEL_KEY} {path!r}: malformed friction_model: {err!r}') from None
+    wheel = cfg.get('friction_model', cfg).get('wheel')
+    return RefinedModel(wheel if isinstance(wheel, str) and wheel in set(wheels) else None,
+                        regressors)
+
+
 def wheel_setup(values: Mapping[str, Any], wheels: Iterable[str],
                 aux: Iterable[str]) -> WheelSetup:
     """Return the set-up of a record's wheels (ConfigError naming a bad file or wheel).
@@ -73,7 +121,6 @@ def wheel_setup(values: Mapping[str, Any], wheels: Iterable[str],
         document = load(path)
         check_wheels(document, wheels, str(path))
         return WheelSetup(values, document, str(path))
-    from rwa_monitor.pipelines.llr import refined_model
     refined = refined_model(values.get(MODEL_KEY) or '', wheels, set(aux))
     return WheelSetup(values, refined=refined)
 
