@@ -9,7 +9,8 @@ checked once per set-up (:class:`WheelSetup`); each runner gets its own detector
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import copy
+from dataclasses import dataclass, field
 from typing import Any, Iterable, Mapping, NamedTuple
 
 import numpy as np
@@ -38,6 +39,7 @@ class WheelSetup:
     calibration: Mapping[str, Any] | None = None
     calibration_path: str = ''
     refined: Any = None
+    _nominals: dict[str, Any] = field(default_factory=dict, compare=False, repr=False)
 
     @property
     def setup(self) -> str:
@@ -48,12 +50,24 @@ class WheelSetup:
     def runner(self, wheel: str) -> WheelRunner:
         """Return a fresh runner of ``wheel``."""
         if self.calibration is not None:
-            from rwa_monitor.core.nominal import NominalWheel
-            return WheelRunner(wheel, self.values,
-                               nominal=NominalWheel(self.calibration['wheels'][wheel]))
+            return WheelRunner(wheel, self.values, nominal=self._nominal(wheel))
         if self.refined is not None and self.refined.wheel in (None, wheel):
             return WheelRunner(wheel, self.values, regressors=self.refined.regressors)
         return WheelRunner(wheel, self.values)
+
+    def _nominal(self, wheel: str) -> Any:
+        """Return a fresh nominal model of ``wheel``: a copy of one built once.
+
+        Building one tables the nominal friction over the calibrated speeds (tens of
+        milliseconds with a smooth speed effect, more than a pass's detection); a copy
+        gets its own table, whose slots count the samples its runner leaves untested.
+        """
+        if wheel not in self._nominals:
+            from rwa_monitor.core.nominal import NominalWheel
+            self._nominals[wheel] = NominalWheel(self.calibration['wheels'][wheel])
+        fresh = copy.copy(self._nominals[wheel])
+        fresh.table = fresh.table.copy()
+        return fresh
 
     def reads_aux(self, wheel: str) -> bool:
         """Return True if ``wheel``'s runner reads auxiliary channels (a refined model)."""
