@@ -24,7 +24,7 @@ from rwa_monitor.core import llr_samples as samples, llr_state, llr_stats
 from rwa_monitor.core.events import AnomalyEvent
 from rwa_monitor.core.friction import RegressorSet
 from rwa_monitor.core.llr_common import window_statistics
-from rwa_monitor.core.llr_config import DEFAULTS, LLRConfig, PARAMETERS
+from rwa_monitor.core.llr_config import DEFAULTS, LLRConfig
 from rwa_monitor.core.llr_noise import NoiseModel
 from rwa_monitor.core.llr_state import LLRState
 
@@ -84,7 +84,8 @@ class LLRDetector(llr_cstep.StepOwner):
     """
 
     # The keywords are the schema's names with the schema's defaults; __init__ only
-    # hands them to LLRConfig, which checks them against the schema.
+    # hands them to LLRConfig, which checks them against the schema (a keyword the schema
+    # does not know is refused there, one the signature lacks takes the schema default).
     def __init__(self, component: str = 'rw1', *, window: int = DEFAULTS['window'],
                  k_verif: int | str = DEFAULTS['k_verif'],
                  false_alarm_rate: float = DEFAULTS['false_alarm_rate'],
@@ -100,9 +101,9 @@ class LLRDetector(llr_cstep.StepOwner):
                  reference_max: int | None = DEFAULTS['reference_max'],
                  noise_speed_model: bool = DEFAULTS['noise_speed_model'],
                  regressors: RegressorSet | None = None) -> None:
-        given = locals()
-        self._config = LLRConfig.from_parameters(component, regressors,
-                                                 **{name: given[name] for name in PARAMETERS})
+        given = {name: value for name, value in locals().items()
+                 if name not in ('self', 'component', 'regressors')}
+        self._config = LLRConfig.from_parameters(component, regressors, **given)
         self.reset()
 
     # -- read-only state --------------------------------------------------------------
