@@ -441,3 +441,42 @@ def test_accepted_edits_never_index_out_of_the_kernel_arrays(tmp_path):
     result = json.loads(out.stdout.strip().splitlines()[-1])
     assert result['errors'] == []
     assert result['refused'] >= 20 and result['ran'] >= 20, result
+
+
+def _leaves(tree, path=()):
+    """Yield the paths of the scalar leaves of a JSON tree (array references excluded)."""
+    if isinstance(tree, dict) and set(tree) != {'array'}:
+        for key, value in tree.items():
+            yield from _leaves(value, path + (key,))
+    elif isinstance(tree, list):
+        for i, value in enumerate(tree):
+            yield from _leaves(value, path + (i,))
+    elif not isinstance(tree, dict):
+        yield path
+
+
+@settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.integers(0, 10**6), st.one_of(
+    st.integers(-3, 3), st.sampled_from([-10**9, 10**9, 0.5, 1e300, -1.0, 'nan', 'inf', None,
+                                         True, 'dry', 'both', 'undecided', [], {}])))
+def test_any_edited_value_of_the_json_is_refused_or_runs_without_error(open_state, pick,
+                                                                       value):
+    # One value of the JSON tree replaced (a small integer is added to an integer leaf):
+    # the record is refused when decoded or restored, or it runs.
+    params, det, rest = open_state
+    tree, arrays = records.encode(det.state())
+    leaves = list(_leaves(tree))
+    path = leaves[pick % len(leaves)]
+    node = tree
+    for key in path[:-1]:
+        node = node[key]
+    old = node[path[-1]]
+    node[path[-1]] = old + value if type(old) is int and type(value) is int else value
+    target = LLRDetector('rw1', **params)
+    try:
+        target.restore(records.decode(LLRState, json.loads(json.dumps(tree)), arrays))
+    except RecordError:
+        assert same_state(target, LLRDetector('rw1', **params))
+        return
+    feed(target, *rest, 'update')
+    target.finish()
