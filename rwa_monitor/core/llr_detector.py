@@ -23,7 +23,7 @@ from rwa_monitor.core import llr_kernel as kern, llr_layout as layout, llr_reado
 from rwa_monitor.core import llr_restore, llr_samples as samples, llr_state
 from rwa_monitor.core.events import AnomalyEvent
 from rwa_monitor.core.friction import RegressorSet
-from rwa_monitor.core.llr_config import DEFAULTS, LLRConfig
+from rwa_monitor.core.llr_config import DEFAULTS, LLRConfig, numpydoc_parameters
 from rwa_monitor.core.llr_noise import NoiseModel
 from rwa_monitor.core.llr_state import LLRState
 
@@ -42,16 +42,13 @@ class LLRDetector(llr_cstep.StepOwner):
     ----------
     component : str
         Wheel id, copied into the events.
+    <the llr_detector parameters of core/schema.py>
     regressors : RegressorSet or None
         Friction model; None: the paper's eq. (1).
-    **parameters
-        The ``llr_detector`` parameters of core/schema.py (docs/parameters.md), with their
-        defaults and ranges there: ``window`` (w), ``k_verif``, ``false_alarm_rate`` (r),
-        ``noise_std``, ``category_level``, ``category_revisions``, ``refine_change``,
-        ``min_excitation``, ``max_abs_speed``, ``max_abs_friction``,
-        ``noise_ar_max_order``, ``noise_fit_samples``, ``reference_max``,
-        ``noise_speed_model``. ``'auto'`` (or None) where the schema allows it. A bad value
-        raises ValueError naming the parameter, an unknown name TypeError.
+
+    The keyword parameters above are written from core/schema.py (docs/parameters.md);
+    None stands for ``'auto'`` where a parameter has it. A bad value raises ValueError
+    naming the parameter, an unknown name TypeError.
 
     The algorithm, its departures from the paper and the categorisation are in docs/llr.md
     ("Noise beyond white", "Slow drifts", "Noise growing with speed"). Positions count
@@ -81,6 +78,9 @@ class LLRDetector(llr_cstep.StepOwner):
     >>> first.revision, abs(first.index - 2000) < 200
     (0, True)
     """
+
+    __doc__ = __doc__.replace('    <the llr_detector parameters of core/schema.py>',
+                              numpydoc_parameters())
 
     # The keywords are the schema's names with the schema's defaults; __init__ only
     # hands them to LLRConfig, which checks them against the schema (a keyword the schema
