@@ -48,6 +48,8 @@ EXTRAS_REQUIRE = {
     'bsk': ['bsk>=2.12,<3'],
     # the live view (rwa-monitor-foxglove): the SDK's server and the WebSocket front
     'foxglove': ['foxglove-sdk>=0.30.3,<0.31', 'websockets>=17.4,<18'],
+    # the operator's view server (rwa-monitor openmct); Open MCT itself comes from npm
+    'openmct': ['tornado>=6.6,<7'],
     # the fleet engine
     'fleet': ['dask>=2026.8,<2027', 'distributed>=2026.8,<2027', 'pyarrow>=26.0,<27'],
     # tests, lint and benchmarks
@@ -57,7 +59,7 @@ EXTRAS_REQUIRE = {
             'flake8-docstrings>=1.7,<2', 'flake8-import-order>=0.19.2,<0.20',
             'pydocstyle>=6.3,<7', 'mpmath>=1.3,<2', 'ruptures>=1.1,<2',
             'river>=0.26.1,<0.27', 'colcon-common-extensions>=0.3.0,<0.4',
-            'py-spy>=0.4.3,<0.5'],
+            'py-spy>=0.4.3,<0.5', 'playwright>=1.65,<2'],
 }
 
 ROS_BUILD = bool({'install', 'develop'} & set(sys.argv[1:]))
@@ -92,7 +94,10 @@ setup(
         ('share/' + package_name + '/config', glob('config/*.yaml') + glob('config/*.json')),
         ('share/' + package_name + '/launch', glob('launch/*.py')),
     ],
-    package_data={package_name: ['config/*.yaml', 'data/*']},
+    # the operator's view: its page and plugin, and the npm lock of Open MCT (the bundle
+    # itself is installed by `make openmct` or `rwa-monitor openmct --install`)
+    package_data={package_name: ['config/*.yaml', 'data/*', 'openmct/web/*',
+                                 'openmct/npm/package.json', 'openmct/npm/package-lock.json']},
     python_requires='>=3.11',
     install_requires=['setuptools'] if ROS_BUILD else INSTALL_REQUIRES,
     extras_require={} if ROS_BUILD else EXTRAS_REQUIRE,

@@ -104,9 +104,9 @@ def test_ranges_run_from_the_tested_minor_to_the_next_breaking_release(declared)
 
 
 def test_extras_name_the_optional_parts(declared):
-    assert set(declared['extras_require']) == {'bsk', 'foxglove', 'fleet', 'dev'}
+    assert set(declared['extras_require']) == {'bsk', 'foxglove', 'fleet', 'dev', 'openmct'}
     core = {canonicalize_name(Requirement(r).name) for r in declared['install_requires']}
-    assert {'foxglove-sdk', 'bsk', 'dask', 'pytest'}.isdisjoint(core)
+    assert {'foxglove-sdk', 'bsk', 'dask', 'pytest', 'tornado', 'playwright'}.isdisjoint(core)
 
 
 def test_package_xml_lists_each_runtime_dependency_with_its_rosdep_key(declared):
