@@ -484,6 +484,18 @@ def test_invalid_parameters_raise_naming_the_parameter(params, name):
         detect_batch([0.0], [1.0], [1.0], **params)
 
 
+def test_keywords_and_defaults_are_the_schemas():
+    # The schema (core/schema.py) defines the parameters; the detector's keywords are its
+    # names with its defaults, and its checks are the schema's (test_schema: the edges).
+    import inspect
+    from rwa_monitor.core.schema import LLR
+    signature = inspect.signature(LLRDetector).parameters
+    assert [n for n in signature if n not in ('component', 'regressors')] == \
+        list(LLR.names(('all',)))
+    assert all(signature[p.name].default == p.default for p in LLR if p.scope == 'all')
+    assert LLRDetector('rw1').config.window == LLR['window'].default
+
+
 def test_invalid_component_and_unknown_parameter():
     with pytest.raises(ValueError, match='component'):
         LLRDetector('')

@@ -380,3 +380,103 @@ def test_any_edited_integer_is_refused_or_runs_without_error(open_state, slot, v
         return
     feed(target, *rest, 'update')
     target.finish()
+
+
+BOUNDS_CHECKED = '''
+import json, sys
+from unittest import mock
+import numpy as np
+sys.path.insert(0, 'test')
+from test_llr_state import _ints, feed, signal
+from rwa_monitor.core import llr_cstep, llr_detector, llr_layout as layout
+from rwa_monitor.core.llr import LLRDetector
+from rwa_monitor.core.records import RecordError
+rng = np.random.default_rng(5)
+t, w, f = signal(5000)
+out = {'refused': 0, 'ran': 0, 'errors': []}
+with mock.patch.object(llr_cstep, 'step_address', return_value=None), \\
+        mock.patch.object(llr_detector, '_C_CALL', False):
+    det = LLRDetector('rw1', window=150)
+    feed(det, t[:2500], w[:2500], f[:2500], 'arrays')
+    values = [-1, 0, 1, 5, 150, 255, 256, 257, 2499, 2500, 2501, 10**6, -2**63, 2**63 - 1]
+    for trial in range(int(sys.argv[1])):
+        state = det.state()
+        for _ in range(1 + trial % 3):   # one to three edits at once
+            slot = int(rng.integers(0, layout.I_SCALARS + 8))
+            value = int(state.ints[slot]) + int(rng.integers(-3, 4)) if rng.random() < 0.5 \\
+                else values[int(rng.integers(len(values)))]
+            state = _ints(state, slot, value)
+        target = LLRDetector('rw1', window=150)
+        try:
+            target.restore(state)
+        except RecordError:
+            out['refused'] += 1
+            continue
+        try:
+            feed(target, t[2500:2800], w[2500:2800], f[2500:2800], 'update')
+            target.process_arrays(t[2800:3100], w[2800:3100], f[2800:3100])
+            target.finish()
+            out['ran'] += 1
+        except Exception as err:   # an IndexError here is an out-of-bounds access
+            out['errors'].append(f'{type(err).__name__}: {err}')
+print(json.dumps(out))
+'''
+
+
+@pytest.mark.slow
+def test_accepted_edits_never_index_out_of_the_kernel_arrays(tmp_path):
+    # numba compiled with bounds checks (NUMBA_BOUNDSCHECK, a fresh cache so that the
+    # kernels are compiled so): an index out of an array raises IndexError instead of
+    # writing elsewhere. Records with one to three edited integers (positions, counts,
+    # offsets, orders, ring rows) are refused, or run the compiled step without one.
+    import os
+    import pathlib
+    import subprocess
+    import sys
+    root = pathlib.Path(__file__).resolve().parents[1]
+    env = dict(os.environ, NUMBA_BOUNDSCHECK='1', NUMBA_CACHE_DIR=str(tmp_path))
+    out = subprocess.run([sys.executable, '-c', BOUNDS_CHECKED, '200'], cwd=root, env=env,
+                         capture_output=True, text=True, timeout=280)
+    assert out.returncode == 0, out.stderr[-3000:]
+    result = json.loads(out.stdout.strip().splitlines()[-1])
+    assert result['errors'] == []
+    assert result['refused'] >= 20 and result['ran'] >= 20, result
+
+
+def _leaves(tree, path=()):
+    """Yield the paths of the scalar leaves of a JSON tree (array references excluded)."""
+    if isinstance(tree, dict) and set(tree) != {'array'}:
+        for key, value in tree.items():
+            yield from _leaves(value, path + (key,))
+    elif isinstance(tree, list):
+        for i, value in enumerate(tree):
+            yield from _leaves(value, path + (i,))
+    elif not isinstance(tree, dict):
+        yield path
+
+
+@settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.integers(0, 10**6), st.one_of(
+    st.integers(-3, 3), st.sampled_from([-10**9, 10**9, 0.5, 1e300, -1.0, 'nan', 'inf', None,
+                                         True, 'dry', 'both', 'undecided', [], {}])))
+def test_any_edited_value_of_the_json_is_refused_or_runs_without_error(open_state, pick,
+                                                                       value):
+    # One value of the JSON tree replaced (a small integer is added to an integer leaf):
+    # the record is refused when decoded or restored, or it runs.
+    params, det, rest = open_state
+    tree, arrays = records.encode(det.state())
+    leaves = list(_leaves(tree))
+    path = leaves[pick % len(leaves)]
+    node = tree
+    for key in path[:-1]:
+        node = node[key]
+    old = node[path[-1]]
+    node[path[-1]] = old + value if type(old) is int and type(value) is int else value
+    target = LLRDetector('rw1', **params)
+    try:
+        target.restore(records.decode(LLRState, json.loads(json.dumps(tree)), arrays))
+    except RecordError:
+        assert same_state(target, LLRDetector('rw1', **params))
+        return
+    feed(target, *rest, 'update')
+    target.finish()

@@ -224,7 +224,8 @@ def test_a_copied_detector_continues_as_the_original(how):
     for row in rows[:1000]:
         det.update(*row)
     twin = copy.deepcopy(det) if how == 'deepcopy' else pickle.loads(pickle.dumps(det))
-    assert twin._live.floats is not det._live.floats and twin._step_armed() == det._step_armed() == COMPILED
+    assert twin._live.floats is not det._live.floats
+    assert twin._step_armed() == det._step_armed() == COMPILED
     first, second = feed(det, rows[1000:]), feed(twin, rows[1000:])
     assert first and [e.to_json() for e in second] == [e.to_json() for e in first]
     same_state(det, twin)

@@ -13,6 +13,7 @@ from __future__ import annotations
 from dataclasses import dataclass, fields
 from functools import cached_property
 import math
+import textwrap
 from typing import Any
 
 from rwa_monitor.core import llr_stats
@@ -26,6 +27,24 @@ PARAMETERS = LLR.names(('all',))
 DEFAULTS = {name: LLR[name].default for name in PARAMETERS}
 # Python-only spellings: None stands for 'auto' (and for 0 = growing reference).
 _NONE_IS_AUTO = ('k_verif', 'noise_std', 'noise_ar_max_order', 'noise_fit_samples')
+
+
+def numpydoc_parameters(indent: str = '    ') -> str:
+    """Return the numpydoc entries of :data:`PARAMETERS`, written from the schema.
+
+    For the detector's docstring: name, type, default, the schema's one line of meaning,
+    unit and allowed values (core/schema.py).
+    """
+    lines = []
+    for name in PARAMETERS:
+        param = LLR[name]
+        kind = param.type.__name__ + (" or 'auto'" if param.auto else '')
+        lines.append(f'{indent}{name} : {kind}, default {param.default!r}')
+        text = f'{param.description} Allowed: {param.allowed()}' + (
+            f'; unit {param.unit}.' if param.unit else '.')
+        lines += textwrap.wrap(text, 88, initial_indent=2 * indent,
+                               subsequent_indent=2 * indent)
+    return '\n'.join(lines)
 
 
 @dataclass(frozen=True)

@@ -19,12 +19,11 @@ from typing import Any, Mapping
 import numpy as np
 
 from rwa_monitor.core import llr_calibrated_step as calibrated, llr_changes, llr_cstep
-from rwa_monitor.core import llr_kernel as kern, llr_layout as layout, llr_restore
-from rwa_monitor.core import llr_samples as samples, llr_state, llr_stats
+from rwa_monitor.core import llr_kernel as kern, llr_layout as layout, llr_readout
+from rwa_monitor.core import llr_restore, llr_samples as samples, llr_state
 from rwa_monitor.core.events import AnomalyEvent
 from rwa_monitor.core.friction import RegressorSet
-from rwa_monitor.core.llr_common import window_statistics
-from rwa_monitor.core.llr_config import DEFAULTS, LLRConfig, PARAMETERS
+from rwa_monitor.core.llr_config import DEFAULTS, LLRConfig, numpydoc_parameters
 from rwa_monitor.core.llr_noise import NoiseModel
 from rwa_monitor.core.llr_state import LLRState
 
@@ -43,16 +42,13 @@ class LLRDetector(llr_cstep.StepOwner):
     ----------
     component : str
         Wheel id, copied into the events.
+    <the llr_detector parameters of core/schema.py>
     regressors : RegressorSet or None
         Friction model; None: the paper's eq. (1).
-    **parameters
-        The ``llr_detector`` parameters of core/schema.py (docs/parameters.md), with their
-        defaults and ranges there: ``window`` (w), ``k_verif``, ``false_alarm_rate`` (r),
-        ``noise_std``, ``category_level``, ``category_revisions``, ``refine_change``,
-        ``min_excitation``, ``max_abs_speed``, ``max_abs_friction``,
-        ``noise_ar_max_order``, ``noise_fit_samples``, ``reference_max``,
-        ``noise_speed_model``. ``'auto'`` (or None) where the schema allows it. A bad value
-        raises ValueError naming the parameter, an unknown name TypeError.
+
+    The keyword parameters above are written from core/schema.py (docs/parameters.md);
+    None stands for ``'auto'`` where a parameter has it. A bad value raises ValueError
+    naming the parameter, an unknown name TypeError.
 
     The algorithm, its departures from the paper and the categorisation are in docs/llr.md
     ("Noise beyond white", "Slow drifts", "Noise growing with speed"). Positions count
@@ -83,8 +79,12 @@ class LLRDetector(llr_cstep.StepOwner):
     (0, True)
     """
 
+    __doc__ = __doc__.replace('    <the llr_detector parameters of core/schema.py>',
+                              numpydoc_parameters())
+
     # The keywords are the schema's names with the schema's defaults; __init__ only
-    # hands them to LLRConfig, which checks them against the schema.
+    # hands them to LLRConfig, which checks them against the schema (a keyword the schema
+    # does not know is refused there, one the signature lacks takes the schema default).
     def __init__(self, component: str = 'rw1', *, window: int = DEFAULTS['window'],
                  k_verif: int | str = DEFAULTS['k_verif'],
                  false_alarm_rate: float = DEFAULTS['false_alarm_rate'],
@@ -100,9 +100,9 @@ class LLRDetector(llr_cstep.StepOwner):
                  reference_max: int | None = DEFAULTS['reference_max'],
                  noise_speed_model: bool = DEFAULTS['noise_speed_model'],
                  regressors: RegressorSet | None = None) -> None:
-        given = locals()
-        self._config = LLRConfig.from_parameters(component, regressors,
-                                                 **{name: given[name] for name in PARAMETERS})
+        given = {name: value for name, value in locals().items()
+                 if name not in ('self', 'component', 'regressors')}
+        self._config = LLRConfig.from_parameters(component, regressors, **given)
         self.reset()
 
     # -- read-only state --------------------------------------------------------------
@@ -158,18 +158,7 @@ class LLRDetector(llr_cstep.StepOwner):
     @property
     def last_statistic(self) -> float:
         """Latest ``LLR_k / sigma^2`` (nan before the first test or if it was skipped)."""
-        live, config = self._live, self._config
-        k = self._latest_k()
-        if k < 0:
-            return math.nan
-        if live.general is not None:
-            return live.general.last_statistic
-        base, n_p = live.base(k, config.reference_max)
-        pp = (live.ring.pref[k % len(live.ring.row)] - base)[:, None]
-        pt = (live.prefix_now() - base)[:, None]
-        ok, _, y, *_ = window_statistics(pp, pt, np.array([float(n_p)]),
-                                         config.min_excitation, config.noise_std)
-        return float(y[0]) if ok[0] else math.nan
+        return llr_readout.last_statistic(self._live, self._config)
 
     @property
     def reference_start_index(self) -> int:
@@ -188,37 +177,12 @@ class LLRDetector(llr_cstep.StepOwner):
         P_k of the latest test, or all samples since the reference start before the first
         test; nan while not identifiable.
         """
-        p = self._config.p
-        row, n = self._reference_row()
-        pi, q, _ = llr_stats.unpack(row, p)
-        if n <= p or not bool(llr_stats.well_conditioned(pi, self._config.min_excitation)):
-            return np.full(p, np.nan)
-        return np.linalg.solve(pi, q)
+        return llr_readout.estimate(self._live, self._config)
 
     @property
     def noise_std(self) -> float:
         """Noise standard deviation in use (given, or estimated on the reference)."""
-        config = self._config
-        if config.noise_std is not None:
-            return config.noise_std
-        row, n = self._reference_row()
-        pi, _, _ = llr_stats.unpack(row, config.p)
-        if n <= config.p or not bool(llr_stats.well_conditioned(pi, config.min_excitation)):
-            return math.nan
-        return math.sqrt(llr_stats.segment_fit(row, n, config.p, None)[2])
-
-    def _latest_k(self) -> int:
-        """Return the candidate k of the latest test of the current reference, or -1."""
-        k = self._live.position - self._config.window
-        return k if k > self._live.reference_start + self._config.window else -1
-
-    def _reference_row(self) -> tuple[np.ndarray, int]:
-        live = self._live
-        k = self._latest_k()
-        if k > live.reference_start:
-            base, n_p = live.base(k, self._config.reference_max)
-            return live.ring.pref[k % len(live.ring.row)] - base, n_p
-        return live.prefix_now(), live.position - live.reference_start
+        return llr_readout.noise_std(self._live, self._config)
 
     # -- state ------------------------------------------------------------------------
     def reset(self) -> None:

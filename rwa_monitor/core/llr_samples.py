@@ -26,7 +26,7 @@ from rwa_monitor.core.llr_state import Live
 
 
 def as_arrays(time, speed, friction) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Return the three columns as contiguous 1-D float arrays of one length (ValueError if not)."""
+    """Return the columns as contiguous 1-D float arrays of one length (ValueError if not)."""
     arrays = []
     for name, values in (('time', time), ('speed', speed), ('friction', friction)):
         a = np.ascontiguousarray(values, dtype=float)

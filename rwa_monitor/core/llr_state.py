@@ -209,7 +209,7 @@ class SampleBuffer:
         return self._parts[0]
 
     def record(self) -> FitSamples:
-        """Return the samples as a :class:`FitSamples` record (arrays copied)."""
+        """Return the samples as a :class:`FitSamples` (arrays copied)."""
         rows, t, f, speed, h = (np.array(c) for c in self.columns())
         return FitSamples(self.speed_low, self.speed_high, self.next_fit, rows, t, f, speed, h)
 
