@@ -13,6 +13,7 @@ replaced when it changes) and its configuration (core/llr_config.py), nothing el
 from __future__ import annotations
 
 from dataclasses import replace
+import math
 
 import numpy as np
 
@@ -24,6 +25,10 @@ from rwa_monitor.core.llr_common import (candidate_log_p2, checkpoints, declarat
                                          revision_due)
 from rwa_monitor.core.llr_config import LLRConfig
 from rwa_monitor.core.llr_state import DeclaredChange, Live
+
+# A change whose position's interval to the sample before it exceeds this many times the
+# median interval fell in a gap of the stream (docs/llr.md "Changes in a gap").
+GAP_FACTOR = 10.0
 
 __all__ = ['after', 'DeclaredChange', 'finish']
 
@@ -77,7 +82,10 @@ def _declare(live: Live, config: LLRConfig, n: int) -> list[AnomalyEvent]:
         ramps[tau] = _ramp_block(live, config, tau, n, float(ring.time[tau % length]))
         return ramps[tau]
 
-    tau, start, cat = declaration(prefix, first, base, k_min, n, config, ramp_of)
+    def log_prior(taus: np.ndarray) -> np.ndarray:
+        return np.log(_intervals(ring.time, taus, length))
+
+    tau, start, cat = declaration(prefix, first, base, k_min, n, config, ramp_of, log_prior)
     if _continues(live, config, tau, n):
         events = _recheck(live, config, n, live.change.gap + live.prefix_now())
         live.change = replace(live.change, gap=live.change.gap + ring.pref[start % length])
@@ -85,7 +93,8 @@ def _declare(live: Live, config: LLRConfig, n: int) -> list[AnomalyEvent]:
     rows = (int(ring.row[tau % length]), int(ring.row[k_min % length]),
             int(ring.row[n % length]))
     times = (float(ring.time[tau % length]), float(ring.time[n % length]))
-    event = make_event(config.component, cat, rows, times, log_p, 0)
+    gap = _gap_before(ring.time, tau, first, n, length)
+    event = make_event(config.component, cat, rows, times, log_p, 0, after_gap_s=gap)
     live.last_event = event
     checks = checkpoints(tau, n, config.category_revisions, config.window)
     points = ramp_points(n, checks, config.window)
@@ -94,9 +103,28 @@ def _declare(live: Live, config: LLRConfig, n: int) -> list[AnomalyEvent]:
         n_before=tau - base, kind=cat.kind, guess=cat.guess, confirmed=cat.confirmed,
         revision=0, rows=rows, time=times[0], log_p=log_p, checks=tuple(checks),
         points=tuple(points[1:]), ramp_end=n, tau=tau, closed=not checks, tail=False,
-        finished=False, before=prefix[tau - first].copy(),
+        finished=False, after_gap_s=gap, before=prefix[tau - first].copy(),
         gap=prefix[start - first] - prefix[tau - first], ramp=ramps[tau][None, :])
     return [event] + _restart_and_test(live, config, start, n)
+
+
+def _intervals(time: np.ndarray, positions: np.ndarray, length: int) -> np.ndarray:
+    """Return the time between each position's sample and the one before it (s)."""
+    return time[positions % length] - time[(positions - 1) % length]
+
+
+def _gap_before(time: np.ndarray, tau: int, first: int, n: int, length: int) -> float:
+    """Return the gap the change at ``tau`` fell in, or NaN if it fell between samples.
+
+    A gap: the time from the sample before ``tau`` to ``tau``'s exceeds GAP_FACTOR times
+    the median interval of the samples held (``[first, n]``): a pause of the stream (a
+    downlink gap between passes), not its sampling.
+    """
+    if tau - 1 < first:
+        return math.nan
+    interval = float(time[tau % length] - time[(tau - 1) % length])
+    typical = float(np.median(_intervals(time, np.arange(first + 1, n + 1), length)))
+    return interval if interval > GAP_FACTOR * typical else math.nan
 
 
 def _restart_and_test(live: Live, config: LLRConfig, start: int, n: int
@@ -280,5 +308,6 @@ def _recheck(live: Live, config: LLRConfig, j: int, after_sums: np.ndarray,
     rows = cat.rows[:2] + (int(ring.row[j % length]),)
     times = (cat.time, float(ring.time[j % length]))
     live.last_event = make_event(config.component, new, rows, times, cat.log_p,
-                                 cat.revision, j - cat.tau + 1 if final else None)
+                                 cat.revision, j - cat.tau + 1 if final else None,
+                                 cat.after_gap_s)
     return [live.last_event]

@@ -23,13 +23,16 @@ _LN10 = math.log(10.0)
 
 def make_event(component: str, category: llr_kinds.Category, rows: tuple[int, int, int],
                times: tuple[float, float], log_p: float, revision: int,
-               final_samples: int | None = None) -> AnomalyEvent:
+               final_samples: int | None = None, after_gap_s: float = math.nan
+               ) -> AnomalyEvent:
     """Build the AnomalyEvent of a declaration or revision.
 
     ``rows = (change row, argmin row, declaration row)``, ``times = (change time,
     declaration time)``; ``category.confirmed``: the data tell the kind apart (docs/llr.md).
     An undecided kind carries its reason; ``final_samples``: the end-of-record
-    categorisation on that many samples after the change (``final`` True).
+    categorisation on that many samples after the change (``final`` True); ``after_gap_s``:
+    a change that fell in a gap of the samples, the time since the last sample before it
+    (the change lies in ``[time - after_gap_s, time]``).
     """
     dx, z = category.dx, category.z
     details = {keys.DELTA_DRY: float(dx[0]), keys.DELTA_VISCOUS: float(dx[1]),
@@ -42,6 +45,8 @@ def make_event(component: str, category: llr_kinds.Category, rows: tuple[int, in
                keys.DETECTABLE_VISCOUS: category.detectable[1]}
     if category.kind == llr_kinds.UNDECIDED:
         details[keys.KIND_REASON] = llr_kinds.REASONS.get(category.reason, category.reason)
+    if math.isfinite(after_gap_s):
+        details[keys.AFTER_GAP] = float(after_gap_s)
     if final_samples is not None:
         details[keys.FINAL] = True
         details[keys.FINAL_SAMPLES] = int(final_samples)
@@ -60,8 +65,8 @@ class Declaration(NamedTuple):
 
 
 def declaration(prefix: np.ndarray, first: int, c: int, k_min: int, n: int,
-                config: LLRConfig, ramp_of: Callable[[int], np.ndarray] | None = None
-                ) -> Declaration:
+                config: LLRConfig, ramp_of: Callable[[int], np.ndarray] | None = None,
+                log_prior: Callable[[np.ndarray], np.ndarray] | None = None) -> Declaration:
     """Return the change position, restart position and category at a declaration.
 
     ``prefix[i]`` is the prefix-sum row (reference start ``c``) at position ``first + i``,
@@ -74,14 +79,15 @@ def declaration(prefix: np.ndarray, first: int, c: int, k_min: int, n: int,
     declared as the same change again). With a sliding reference (``reference_max``) the
     caller passes ``c`` = the start of the reference window and rows relative to it.
     ``ramp_of(tau)``: the :func:`llr_growth.ramp_sums` of ``[tau, n]`` (the kind of a
-    growing change, docs/llr.md "Kinds on ramps"); None: steps only.
+    growing change, docs/llr.md "Kinds on ramps"); None: steps only. ``log_prior``: the
+    positions' log prior for the refinement (:func:`llr_stats.refine_change`).
     """
     p, noise_var, z_thr = config.p, config.noise_var, config.z_threshold
     tau = k_min
     if config.refine_change:
         w = config.window
         tau = llr_stats.refine_change(prefix, first, c, n, k_min - w, k_min + w, p,
-                                      noise_var, z_thr, k_min)
+                                      noise_var, z_thr, k_min, log_prior)
     before = prefix[tau - first]
     after = prefix[n + 1 - first] - before
     ramp = None if ramp_of is None else ramp_of(tau)

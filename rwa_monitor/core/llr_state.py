@@ -50,7 +50,8 @@ class DeclaredChange:
     :func:`llr_growth.ramp_sums` block per row, of ``[tau, ramp_end]`` (times since
     ``time``). ``closed``: the re-checks are over (no continuation test); the ramp sums
     still take in samples every ``window`` samples, into one last block (``tail``), for
-    the end of record. ``finished``: ``finish`` has run.
+    the end of record. ``finished``: ``finish`` has run. ``after_gap_s``: the change fell
+    in a gap of the samples; the time from the last sample before it (NaN: not in a gap).
     """
 
     n_before: int
@@ -68,6 +69,7 @@ class DeclaredChange:
     closed: bool
     tail: bool
     finished: bool
+    after_gap_s: float
     before: np.ndarray = array_field('float64', 1)
     gap: np.ndarray = array_field('float64', 1)
     ramp: np.ndarray = array_field('float64', 2)
