@@ -7,7 +7,8 @@ the row; a gyro (or reference) that is not three values, or a row no monitored a
 use, is ``bad_gyro``; a row without a star-tracker rate (invalid or missing quaternion,
 first quaternion after a gap) is ``held``: the axes keep their labels, so a star tracker
 that stops cannot turn into a fault. The rest is ``accepted``; an axis that cannot use an
-accepted row counts it in ``bad_axis_<a>``. :class:`GyroAxes` is what the gyro detectors
+accepted row (a value not finite or beyond MAX_ABS_RATE_RAD_S) counts it in
+``bad_axis_<a>``. :class:`GyroAxes` is what the gyro detectors
 share around it: one channel per axis and the protocol's properties.
 """
 
@@ -26,6 +27,10 @@ from rwa_monitor.core.records import Scalar
 _BUCKETS = ('accepted', 'held', 'bad_gyro', 'non_finite', 'non_increasing_time')
 
 AXES = ('x', 'y', 'z')
+# A body rate at or beyond this is no measurement (gyro ranges end below 20 rad/s): the
+# axis does not use the row and counts it (``bad_axis_<a>``). A fixed rule, not a
+# parameter: its only job is to keep values of 1e300 from overflowing the windows' sums.
+MAX_ABS_RATE_RAD_S = 1.0e3
 
 
 def check_axes(axes: Sequence[str]) -> tuple[str, ...]:

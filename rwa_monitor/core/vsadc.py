@@ -8,12 +8,11 @@ algorithm, Alg. 1, and every choice it leaves open: that module and docs/vsadc.m
 
 from __future__ import annotations
 
-import math
 from typing import Sequence
 
 from rwa_monitor.core import keys
 from rwa_monitor.core.events import AnomalyEvent
-from rwa_monitor.core.gyro_rows import AXES, GyroAxes, GyroRows
+from rwa_monitor.core.gyro_rows import AXES, GyroAxes, GyroRows, MAX_ABS_RATE_RAD_S
 from rwa_monitor.core.gyro_state import VsadcState
 from rwa_monitor.core.params import AUTO
 from rwa_monitor.core.vsadc_axis import (  # noqa: F401  (the labels, for importers)
@@ -92,8 +91,7 @@ exit_margin, hold, nominal_tracking, freeze_fraction, adaptive, recovery_fractio
         if not rows.accept(t, gyro, ref):
             return []
         g, r = gyro, _NO_REFERENCE if ref is None else ref
-        isfinite = math.isfinite
-        usable = [isfinite(g[i]) and isfinite(r[i]) for i in rows.index]
+        usable = [_plausible(g[i]) and _plausible(r[i]) for i in rows.index]
         if not any(usable):
             rows.bad_gyro += 1
             return []
@@ -103,7 +101,7 @@ exit_margin, hold, nominal_tracking, freeze_fraction, adaptive, recovery_fractio
         stamp = (t, index)
         events = []
         for axis, i, ch, ok in zip(self.axes, rows.index, self.channels, usable):
-            if not ok:
+            if not ok or not _plausible(rate[i]):
                 rows.bad_axis[axis] += 1
                 continue
             tr = ch.update(r[i] - rate[i], r[i] - g[i], stamp)
@@ -131,6 +129,11 @@ exit_margin, hold, nominal_tracking, freeze_fraction, adaptive, recovery_fractio
         """
         self._check_state(state, VsadcState)
         self._restore_state(state)
+
+
+def _plausible(value: float) -> bool:
+    """Return True for a finite rate below MAX_ABS_RATE_RAD_S (False for NaN too)."""
+    return abs(value) < MAX_ABS_RATE_RAD_S
 
 
 def make_event(axis: str, tr: Transition) -> AnomalyEvent:
