@@ -20,12 +20,22 @@ import functools
 import json
 import resource
 import time as _time
-from typing import Any, Mapping, Sequence
+from typing import Mapping, Sequence, TYPE_CHECKING
 
+import numpy as np
+
+from rwa_monitor.core.gyro_runner import GyroRunner
 from rwa_monitor.core.runner_facts import ComponentFacts
+from rwa_monitor.core.wheel_runner import WheelRunner
 from rwa_monitor.fleet.archive import after, PassFile, read_pass
 from rwa_monitor.fleet.records import (Chain, ComponentRecord, GYRO, PassFacts, TrendRow,
                                        WorkFacts)
+
+if TYPE_CHECKING:
+    from rwa_monitor.pipelines.runners import WheelSetup
+
+# Checked parameter values (core/schema.py): what a YAML block holds once validated.
+Values = Mapping[str, object]
 
 
 @dataclass(frozen=True)
@@ -40,8 +50,8 @@ class SpacecraftSpec:
     spacecraft: str
     wheels: tuple[str, ...]
     gyro: bool
-    llr: Mapping[str, Any] = field(default_factory=dict)
-    vsadc: Mapping[str, Any] = field(default_factory=dict)
+    llr: Values = field(default_factory=dict)
+    vsadc: Values = field(default_factory=dict)
     aux: tuple[str, ...] = ()
 
     @property
@@ -55,57 +65,74 @@ class SpacecraftSpec:
         return bool(self.llr.get('calibration_file'))
 
 
-def _key(values: Mapping[str, Any]) -> str:
+def _key(values: Values) -> str:
     return json.dumps(values, sort_keys=True, default=str)
 
 
 @functools.lru_cache(maxsize=64)
-def _wheel_setup(llr: str, wheels: tuple[str, ...], aux: tuple[str, ...]) -> Any:
+def _wheel_setup(llr: str, wheels: tuple[str, ...], aux: tuple[str, ...]) -> WheelSetup:
     """Return the wheels' set-up (files read once per worker and configuration)."""
     from rwa_monitor.pipelines.runners import wheel_setup
     return wheel_setup(json.loads(llr), wheels, aux)
 
 
 @functools.lru_cache(maxsize=64)
-def _gyro_calibration(path: str) -> Any:
+def _gyro_calibration(path: str) -> Mapping[str, Values]:
     """Return the gyro block of a calibration file (read once per worker)."""
     from rwa_monitor.telemetry.calibration_file import load_gyro_calibration
     return load_gyro_calibration(path)
 
 
-def setup_of(spec: SpacecraftSpec) -> Any:
+def setup_of(spec: SpacecraftSpec) -> WheelSetup:
     """Return the spacecraft's wheel set-up (pipelines/runners.py WheelSetup)."""
     return _wheel_setup(_key(spec.llr), spec.wheels, spec.aux)
 
 
-def make_runners(spec: SpacecraftSpec) -> dict[str, Any]:
+@dataclass
+class Runners:
+    """A spacecraft's runners: one per wheel, and the gyro's if it has one."""
+
+    wheels: dict[str, WheelRunner]
+    gyro: GyroRunner | None = None
+
+    def all(self) -> dict[str, WheelRunner | GyroRunner]:
+        """Return component -> runner, the wheels first."""
+        out: dict[str, WheelRunner | GyroRunner] = dict(self.wheels)
+        if self.gyro is not None:
+            out[GYRO] = self.gyro
+        return out
+
+    def restore(self, states: Mapping[str, ComponentRecord]) -> None:
+        """Restore each runner from its component's record (RecordError if one differs)."""
+        from rwa_monitor.core.records import RecordError
+        for name, runner in self.wheels.items():
+            record = states.get(name)
+            if record is not None:
+                if record.wheel is None:
+                    raise RecordError(f'{name}: the state holds no wheel runner for it')
+                runner.restore(record.wheel)
+        record = states.get(GYRO)
+        if self.gyro is not None and record is not None:
+            if record.gyro is None:
+                raise RecordError('gyro: the state holds no gyro runner')
+            self.gyro.restore(record.gyro)
+
+    def records(self) -> dict[str, ComponentRecord]:
+        """Return each runner's state as its component's record (copies)."""
+        out = {name: ComponentRecord(wheel=r.state()) for name, r in self.wheels.items()}
+        if self.gyro is not None:
+            out[GYRO] = ComponentRecord(gyro=self.gyro.state())
+        return out
+
+
+def make_runners(spec: SpacecraftSpec) -> Runners:
     """Return fresh runners of every component of the spacecraft."""
-    from rwa_monitor.core.gyro_runner import GyroRunner
     setup = setup_of(spec)
-    runners: dict[str, Any] = {wheel: setup.runner(wheel) for wheel in spec.wheels}
+    gyro = None
     if spec.gyro:
-        path = spec.vsadc.get('calibration_file') or ''
-        runners[GYRO] = GyroRunner(spec.vsadc, _gyro_calibration(path) if path else None)
-    return runners
-
-
-def restore(runners: Mapping[str, Any], states: Mapping[str, ComponentRecord]) -> None:
-    """Restore each runner from its component's record (RecordError if one differs)."""
-    for name, runner in runners.items():
-        record = states.get(name)
-        if record is None:
-            continue
-        state = record.gyro if name == GYRO else record.wheel
-        if state is None:
-            from rwa_monitor.core.records import RecordError
-            raise RecordError(f'{name}: the state holds no {name} runner')
-        runner.restore(state)
-
-
-def records_of(runners: Mapping[str, Any]) -> dict[str, ComponentRecord]:
-    """Return each runner's state as its component's record (copies)."""
-    return {name: ComponentRecord(gyro=runner.state()) if name == GYRO else
-            ComponentRecord(wheel=runner.state()) for name, runner in runners.items()}
+        path = str(spec.vsadc.get('calibration_file') or '')
+        gyro = GyroRunner(spec.vsadc, _gyro_calibration(path) if path else None)
+    return Runners({wheel: setup.runner(wheel) for wheel in spec.wheels}, gyro)
 
 
 def step(spec: SpacecraftSpec, chain: Chain, passes: Sequence[PassFile],
@@ -121,7 +148,7 @@ def step(spec: SpacecraftSpec, chain: Chain, passes: Sequence[PassFile],
     """
     start = _time.process_time()
     runners = make_runners(spec)
-    restore(runners, chain.states)
+    runners.restore(chain.states)
     setup = setup_of(spec)
     events = list(chain.events)
     facts = list(chain.passes)
@@ -142,31 +169,32 @@ def step(spec: SpacecraftSpec, chain: Chain, passes: Sequence[PassFile],
             if channel is None or channel.friction is None:
                 errors[name] = f'no {name}_speed and {name}_friction columns'
                 continue
-            runner = runners[name]
+            runner = runners.wheels[name]
             fed += len(wheels.time)
             events.extend(runner.feed(wheels.time, channel.speed, channel.friction,
                                       wheels.aux if setup.reads_aux(name) else None))
             if len(wheels.time):
                 trend.append(_trend_row(spec, name, found.name, wheels.time, channel.speed,
                                         runner.last_input))
-        if spec.gyro and len(kept):
+        if runners.gyro is not None and len(kept):
             if kept.gyro is None or kept.attitude is None:
                 errors[GYRO] = 'no gyro_x/y/z and q_x/y/z/w columns'
             else:
                 from rwa_monitor.pipelines.runners import gyro_columns
-                events.extend(runners[GYRO].feed(gyro_columns(kept)))
+                events.extend(runners.gyro.feed(gyro_columns(kept)))
         facts.append(PassFacts(found.name, len(kept), dropped, fed, float(tele.time[-1]),
                                None, errors))
-    states = records_of(runners)
-    component_facts: dict[str, ComponentFacts] = {n: r.facts() for n, r in runners.items()}
-    end_of_run = [e for r in runners.values() for e in r.finish()] if last else []
+    states = runners.records()
+    component_facts: dict[str, ComponentFacts] = {n: r.facts()
+                                                  for n, r in runners.all().items()}
+    end_of_run = [e for r in runners.all().values() for e in r.finish()] if last else []
     work = _account(chain.work, _time.process_time() - start)
     return Chain(last_time, states, tuple(events), tuple(end_of_run), tuple(facts),
                  tuple(trend), component_facts, work)
 
 
-def _trend_row(spec: SpacecraftSpec, wheel: str, name: str, t: Any, w: Any,
-               residual: Any) -> TrendRow:
+def _trend_row(spec: SpacecraftSpec, wheel: str, name: str, t: np.ndarray, w: np.ndarray,
+               residual: np.ndarray) -> TrendRow:
     """Return the pass's friction levels of the wheel (core/trend.py pass_levels).
 
     ``residual``: what the detector was fed, friction minus the nominal with a calibration

@@ -21,7 +21,7 @@ import math
 import pathlib
 import sys
 import time as _time
-from typing import Any, Iterator, Mapping, TextIO
+from typing import Iterator, Mapping, TextIO, TYPE_CHECKING
 
 from rwa_monitor.core.schema import FLEET, LLR, VSADC
 from rwa_monitor.exceptions import ConfigError
@@ -32,13 +32,16 @@ from rwa_monitor.fleet.records import Chain, PassRecord, SpacecraftRecord, WorkF
 from rwa_monitor.fleet.result import FleetResult, SpacecraftResult
 from rwa_monitor.telemetry.parameters_file import block_values, read_parameters_file
 
+if TYPE_CHECKING:
+    from distributed import Client, Future
+
 # Passes of a spacecraft fed by one task: consecutive ones up to about this many bytes of
 # files (a task costs a few milliseconds of the engine's own).
 TASK_BYTES = 64 << 20
 
 
 @contextlib.contextmanager
-def dask_client(workers: int = 2, scheduler: str | None = None) -> Iterator[Any]:
+def dask_client(workers: int = 2, scheduler: str | None = None) -> Iterator[Client]:
     """Yield a distributed Client: to ``scheduler``, or to a local cluster of processes."""
     from distributed import Client, LocalCluster
     if scheduler:
@@ -64,7 +67,7 @@ def dask_client(workers: int = 2, scheduler: str | None = None) -> Iterator[Any]
         yield client
 
 
-def node_blocks(config_path: pathlib.Path | None) -> dict[str, dict[str, Any]]:
+def node_blocks(config_path: pathlib.Path | None) -> dict[str, dict[str, object]]:
     """Return the checked llr, vsadc and fleet parameter blocks of a parameters file."""
     config = read_parameters_file(config_path)
     where = config_path or 'installed parameters'
@@ -95,7 +98,8 @@ def archive_epoch(archive: pathlib.Path, configured: str) -> dt.datetime | None:
     return moment.astimezone(dt.timezone.utc)
 
 
-def run_archive(archive: str | pathlib.Path, *, client: Any = None, workers: int = 2,
+def run_archive(archive: str | pathlib.Path, *, client: Client | None = None,
+                workers: int = 2,
                 scheduler: str | None = None, config: pathlib.Path | None = None,
                 state_dir: pathlib.Path | None = None, log: TextIO | None = None,
                 task_bytes: int = TASK_BYTES) -> FleetResult:
@@ -134,15 +138,16 @@ def run_archive(archive: str | pathlib.Path, *, client: Any = None, workers: int
         config=str(config or 'installed parameters'))
 
 
-def _submit(client: Any, plans: list[SpacecraftPlan], task_bytes: int) -> dict[str, Any]:
+def _submit(client: Client, plans: list[SpacecraftPlan], task_bytes: int
+            ) -> dict[str, Future]:
     """Submit every spacecraft's chain; return spacecraft -> future of its last step."""
     finals = {}
     for p in plans:
         if p.spec is None or not p.passes:
             continue
         prior = p.prior
-        chain: Any = Chain(prior.last_time if prior else -math.inf,
-                           dict(prior.components) if prior else {})
+        chain: Chain | Future = Chain(prior.last_time if prior else -math.inf,
+                                      dict(prior.components) if prior else {})
         groups = _groups(p.passes, task_bytes)
         for first, end in groups:
             chain = client.submit(step, p.spec, chain, p.passes[first:end],
@@ -151,7 +156,7 @@ def _submit(client: Any, plans: list[SpacecraftPlan], task_bytes: int) -> dict[s
     return finals
 
 
-def _gather(client: Any, finals: Mapping[str, Any], plans: list[SpacecraftPlan],
+def _gather(client: Client, finals: Mapping[str, Future], plans: list[SpacecraftPlan],
             log: TextIO | None) -> dict[str, Chain]:
     """Return each spacecraft's last chain, logging a line as each spacecraft finishes."""
     from distributed import as_completed
@@ -194,7 +199,8 @@ def _result(p: SpacecraftPlan, chain: Chain | None, run: int) -> SpacecraftResul
     return SpacecraftResult(p, chain, record, run)
 
 
-def _timings(chains: Mapping[str, Chain], wall: float, client_cpu: float) -> dict[str, Any]:
+def _timings(chains: Mapping[str, Chain], wall: float, client_cpu: float
+             ) -> dict[str, object]:
     """Return wall, client CPU, per-worker CPU and peak RSS, samples and rate."""
     workers: dict[str, WorkFacts] = {}
     samples = 0
@@ -210,7 +216,7 @@ def _timings(chains: Mapping[str, Chain], wall: float, client_cpu: float) -> dic
 
 
 def measure(archive: str | pathlib.Path, *, workers: int = 1,
-            config: pathlib.Path | None = None) -> dict[str, Any]:
+            config: pathlib.Path | None = None) -> dict[str, object]:
     """Run the engine on a local cluster of ``workers``; return its timings (bench fleet).
 
     Keys: ``wall_s``, ``cpu_s`` (sum over workers), ``per_worker`` (``cpu_s``,

@@ -15,11 +15,14 @@ from __future__ import annotations
 import json
 import math
 import pathlib
-from typing import Any
+from typing import Any, TYPE_CHECKING
 
 from rwa_monitor.exceptions import OutputError
 from rwa_monitor.fleet.history import parquet
 from rwa_monitor.telemetry.atomic import FolderOutput, write_bytes_atomic, write_text_atomic
+
+if TYPE_CHECKING:
+    from rwa_monitor.fleet.result import FleetResult
 
 FORMAT = 'rwa_monitor.fleet.outputs'
 FILES = ('events.json', 'events.parquet', 'summary.json', 'trend.parquet', 'report.html')
@@ -50,7 +53,7 @@ def check_output(out: pathlib.Path) -> None:
                           'choose a new or empty folder')
 
 
-def write_outputs(out: pathlib.Path, result: Any) -> list[pathlib.Path]:
+def write_outputs(out: pathlib.Path, result: FleetResult) -> list[pathlib.Path]:
     """Write the five output files of a FleetResult as one set; return their paths."""
     from rwa_monitor.fleet.report import render
     check_output(out)

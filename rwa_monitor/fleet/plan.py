@@ -15,7 +15,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
 import pathlib
-from typing import Any, Mapping, Sequence
+from typing import Mapping, Sequence, TYPE_CHECKING
 
 from rwa_monitor.exceptions import ConfigError
 from rwa_monitor.fleet import archive as arc, state
@@ -24,7 +24,11 @@ from rwa_monitor.fleet.records import SpacecraftRecord
 from rwa_monitor.telemetry.schema import (ATTITUDE, FRICTION_SUFFIX, GYRO, REFERENCE,
                                           SPEED_SUFFIX, TIME, TRUTH_PREFIX)
 
+if TYPE_CHECKING:
+    from distributed import Client
+
 CALIBRATION_KEY = 'calibration_file'
+Blocks = Mapping[str, Mapping[str, object]]
 MODEL_KEY = 'friction_model_file'
 
 
@@ -48,7 +52,7 @@ class SpacecraftPlan:
         return self.craft.id
 
 
-def plan(client: Any, fleet: Sequence[arc.Spacecraft], blocks: Mapping[str, Any],
+def plan(client: Client, fleet: Sequence[arc.Spacecraft], blocks: Blocks,
          saved: Mapping[str, SpacecraftRecord]) -> list[SpacecraftPlan]:
     """Return the plans of the spacecraft; StateError if a saved state does not fit the run."""
     first = [_prior(craft, blocks, saved.get(craft.id)) for craft in fleet]
@@ -59,7 +63,7 @@ def plan(client: Any, fleet: Sequence[arc.Spacecraft], blocks: Mapping[str, Any]
     return [_complete(p, scans.get(p.id, {}), blocks) for p in first]
 
 
-def _prior(craft: arc.Spacecraft, blocks: Mapping[str, Any],
+def _prior(craft: arc.Spacecraft, blocks: Blocks,
            prior: SpacecraftRecord | None) -> SpacecraftPlan:
     """Return the plan with the calibration read and the saved record checked."""
     try:
@@ -84,7 +88,7 @@ def _to_scan(p: SpacecraftPlan) -> list[str]:
             if (pathlib.Path(path).name, _size(path)) not in done]
 
 
-def _complete(p: SpacecraftPlan, scans: Mapping[str, Any], blocks: Mapping[str, Any]
+def _complete(p: SpacecraftPlan, scans: Mapping[str, arc.PassFile | str], blocks: Blocks
               ) -> SpacecraftPlan:
     """Return the plan with its passes sorted, set aside or late, and its spec."""
     if p.error is not None:
@@ -127,7 +131,7 @@ def _complete(p: SpacecraftPlan, scans: Mapping[str, Any], blocks: Mapping[str, 
 
 
 def _spec(craft: arc.Spacecraft, names: list[str], readable: Sequence[arc.PassFile],
-          blocks: Mapping[str, Any]) -> SpacecraftSpec:
+          blocks: Blocks) -> SpacecraftSpec:
     """Return the spacecraft's runner spec; ConfigError if its files do not fit it."""
     wheels = tuple(n for n in names if n != arc.GYRO_COMPONENT)
     aux = tuple(sorted({c for f in readable[:1] for c in f.columns if _is_aux(c)}))
@@ -138,7 +142,7 @@ def _spec(craft: arc.Spacecraft, names: list[str], readable: Sequence[arc.PassFi
     return spec
 
 
-def _block(values: Mapping[str, Any], craft: arc.Spacecraft) -> dict[str, Any]:
+def _block(values: Mapping[str, object], craft: arc.Spacecraft) -> dict[str, object]:
     """Return a detector block with the spacecraft's calibration file set."""
     return {**values, CALIBRATION_KEY: craft.calibration or ''}
 

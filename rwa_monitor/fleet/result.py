@@ -16,8 +16,9 @@ import pathlib
 from typing import Any, Mapping, Sequence
 
 from rwa_monitor.core.events import AnomalyEvent
+from rwa_monitor.core.runner_facts import ComponentFacts
 from rwa_monitor.fleet import history, state
-from rwa_monitor.fleet.plan import SpacecraftPlan
+from rwa_monitor.fleet.plan import Blocks, SpacecraftPlan
 from rwa_monitor.fleet.records import Chain, GYRO, SpacecraftRecord, TrendRow
 
 
@@ -86,7 +87,7 @@ def _owner(event: AnomalyEvent) -> str:
     return GYRO if event.component.startswith('gyro_') else event.component
 
 
-def _facts_fields(facts: Any) -> dict[str, Any]:
+def _facts_fields(facts: ComponentFacts) -> dict[str, Any]:
     if facts.parts:
         return {'counters': dict(facts.rejected),
                 'axes': {part.component: part.fields() for part in facts.parts}}
@@ -103,7 +104,7 @@ def latest_kinds(events: Sequence[AnomalyEvent]) -> dict[tuple[str, int], Anomal
     return latest
 
 
-def health(facts: Any, events: Sequence[AnomalyEvent]) -> str:
+def health(facts: ComponentFacts, events: Sequence[AnomalyEvent]) -> str:
     """Return a component's current verdict: the kind of its latest change, or its state.
 
     A wheel with changes: the latest change's kind at its latest revision (e.g. ``dry``);
@@ -130,14 +131,15 @@ class FleetResult:
     run: int = 0
     epoch: dt.datetime | None = None
     state_dir: pathlib.Path | None = None
-    loaded: Any = None
+    loaded: state.Loaded | None = None
     saved: Mapping[str, SpacecraftRecord] = field(default_factory=dict)
     trends: list[dict[str, Any]] = field(default_factory=list)
 
     @classmethod
-    def assemble(cls, crafts: list[SpacecraftResult], blocks: Mapping[str, Any],
+    def assemble(cls, crafts: list[SpacecraftResult], blocks: Blocks,
                  engine: dict[str, Any], *, run: int, epoch: dt.datetime | None,
-                 state_dir: Any, loaded: Any, saved: Mapping[str, SpacecraftRecord],
+                 state_dir: str | pathlib.Path | None, loaded: state.Loaded | None,
+                 saved: Mapping[str, SpacecraftRecord],
                  prior_history: list[history.Entry], prior_trend: list[TrendRow],
                  timings: dict[str, Any], config: str) -> 'FleetResult':
         """Return the result of the gathered spacecraft (history, trend, summary)."""
@@ -186,7 +188,7 @@ class FleetResult:
         """Return the events table of the history, ``new`` marking this run's events."""
         return history.rows(self.history, self.run, self.epoch)
 
-    def _summary(self, blocks: Mapping[str, Any], engine: dict[str, Any],
+    def _summary(self, blocks: Blocks, engine: dict[str, Any],
                  config: str) -> dict[str, Any]:
         from rwa_monitor.fleet.trends import add_trends, trend_limits, wheel_trends
         current = history.current(self.history)

@@ -8,6 +8,7 @@ report.html draws the same entries (it does not fit them again).
 from __future__ import annotations
 
 from collections import defaultdict
+from dataclasses import dataclass
 import math
 from typing import Any, Mapping, Sequence
 
@@ -18,10 +19,30 @@ from rwa_monitor.core.trend import wheel_trend
 LEVELS = ('dry', 'viscous')
 
 
-def trend_limits(fleet_block: Mapping[str, Any]) -> dict[str, float]:
-    """Return the limits of the fleet block that are set (``dry``/``viscous``; 0 = none)."""
-    return {level: float(fleet_block[f'{level}_limit']) for level in LEVELS
-            if fleet_block[f'{level}_limit'] > 0.0}
+@dataclass(frozen=True)
+class TrendLimits:
+    """The limits whose projected crossing the trend reports (None: no limit).
+
+    In the levels' own reference: an absolute level without a calibration, the rise
+    against the nominal with one (docs/fleet.md).
+    """
+
+    dry: float | None = None
+    viscous: float | None = None
+
+    def as_dict(self) -> dict[str, float]:
+        """Return the limits that are set, by level."""
+        return {level: value for level, value in (('dry', self.dry),
+                                                  ('viscous', self.viscous))
+                if value is not None}
+
+
+def trend_limits(fleet_block: Mapping[str, object]) -> TrendLimits:
+    """Return the limits of the fleet block (``dry_limit``, ``viscous_limit``; 0 = none)."""
+    def limit(level: str) -> float | None:
+        value = float(fleet_block[f'{level}_limit'])
+        return value if value > 0.0 else None
+    return TrendLimits(limit('dry'), limit('viscous'))
 
 
 def by_wheel(rows: Sequence[Mapping[str, Any]]) -> dict[tuple[str, str], list]:
@@ -43,7 +64,8 @@ def number(value: Any) -> float:
 
 
 def wheel_trends(trend_rows: Sequence[Mapping[str, Any]],
-                 limits: Mapping[str, float] | None = None) -> list[dict[str, Any]]:
+                 limits: TrendLimits | Mapping[str, float] | None = None
+                 ) -> list[dict[str, Any]]:
     """Return one row per spacecraft and wheel: the trend of its dry and viscous levels.
 
     Each pass's level is placed at its mid time ``(t_start + t_end) / 2``; the trend is
@@ -55,7 +77,7 @@ def wheel_trends(trend_rows: Sequence[Mapping[str, Any]],
     ``slope_per_day``, ``slope_se``, ``p_value``, ``intercept``, ``limit``,
     ``crossing_s``, ``crossing_low_s``, ``crossing_high_s`` (None without a crossing).
     """
-    limits = dict(limits or {})
+    limits = limits.as_dict() if isinstance(limits, TrendLimits) else dict(limits or {})
     out = []
     for (craft, wheel), rows in sorted(by_wheel(trend_rows).items()):
         latest = rows[-1].get('relative_to', '')
@@ -90,7 +112,7 @@ def add_trends(summary: dict[str, Any], trends: Sequence[Mapping[str, Any]],
     (telemetry time in s; null where a number is not defined, and for an end of the
     interval the data cannot bound).
     """
-    summary['trend_limits'] = dict(limits)
+    summary['trend_limits'] = limits.as_dict()
     for entry in trends:
         craft = summary['spacecraft'].get(entry['spacecraft'])
         wheel = craft and craft['components'].get(entry['wheel'])
