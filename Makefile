@@ -9,7 +9,8 @@ STAMP := $(VENV)/.installed
 
 venv: $(STAMP)
 
-$(STAMP): requirements.txt setup.py setup.cfg rwa_monitor/core/_stepcall.c
+$(STAMP): requirements.txt setup.py setup.cfg rwa_monitor/core/_stepcall.c \
+		rwa_monitor/telemetry/_packetwalk.c
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --upgrade --quiet pip
 	$(PY) -m pip install --quiet -r requirements.txt
@@ -81,7 +82,8 @@ BSK_VENV ?= .venv-bsk
 BSK_PY := $(BSK_VENV)/bin/python
 BSK_STAMP := $(BSK_VENV)/.installed
 
-$(BSK_STAMP): requirements.txt requirements-bsk.txt setup.py setup.cfg rwa_monitor/core/_stepcall.c
+$(BSK_STAMP): requirements.txt requirements-bsk.txt setup.py setup.cfg rwa_monitor/core/_stepcall.c \
+		rwa_monitor/telemetry/_packetwalk.c
 	$(PYTHON) -m venv $(BSK_VENV)
 	$(BSK_PY) -m pip install --upgrade --quiet pip
 	$(BSK_PY) -m pip install --quiet -r requirements.txt

@@ -19,9 +19,10 @@ ROSDEP_KEYS = {
     'scikit-learn': 'python3-sklearn', 'matplotlib': 'python3-matplotlib',
     'pyyaml': 'python3-yaml', 'rosbags': 'python3-rosbags-pip',
     'mcap-ros2-support': 'mcap-ros2-support', 'websockets': 'python3-websockets',
+    'lxml': 'python3-lxml',
 }
 # Without a rosdep key: package.xml's comments name each (and what brings it in).
-NO_ROSDEP_KEY = {'threadpoolctl', 'mcap', 'foxglove-sdk'}
+NO_ROSDEP_KEY = {'threadpoolctl', 'mcap', 'foxglove-sdk', 'space-packet-parser'}
 
 
 def setup_kwargs(*argv):

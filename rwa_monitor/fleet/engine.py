@@ -79,14 +79,20 @@ def node_blocks(config_path: pathlib.Path | None) -> dict[str, dict[str, object]
     return blocks
 
 
-def archive_epoch(archive: pathlib.Path, configured: str) -> dt.datetime | None:
-    """Return time 0 of the archive: ``epoch_utc`` of the config, else of archive.yaml."""
+def archive_epoch(archive: pathlib.Path, configured: str,
+                  fleet: list[arc.Spacecraft] | None = None) -> dt.datetime | None:
+    """Return time 0 of the archive, from the first of these that gives one.
+
+    ``epoch_utc`` of the config's fleet block; ``epoch_utc`` of ARCHIVE/archive.yaml; the
+    ``epoch_utc`` of the telemetry maps of CCSDS passes (``telemetry_map.yaml`` in the
+    spacecraft folders), which must then agree.
+    """
     text, where = configured, 'fleet.epoch_utc'
     if not text:
         meta = arc.metadata(archive)
-        text, where = meta.get('epoch_utc') or '', str(archive / arc.METADATA)
+        text, where = str(meta.get('epoch_utc') or ''), str(archive / arc.METADATA)
     if not text:
-        return None
+        return _map_epoch(fleet or [])
     try:
         moment = dt.datetime.fromisoformat(str(text).replace('Z', '+00:00'))
     except ValueError:
@@ -96,6 +102,24 @@ def archive_epoch(archive: pathlib.Path, configured: str) -> dt.datetime | None:
         raise ConfigError(f'{where}: epoch_utc {text!r} has no time zone (end it with Z '
                           'for UTC)')
     return moment.astimezone(dt.timezone.utc)
+
+
+def _map_epoch(fleet: list[arc.Spacecraft]) -> dt.datetime | None:
+    """Return the epoch the spacecraft folders' telemetry maps share (CCSDS passes)."""
+    from rwa_monitor.telemetry import ARCHIVE_MAP
+    from rwa_monitor.telemetry.telemetry_map import read_map
+    found = {}
+    for craft in fleet:
+        path = pathlib.Path(craft.folder) / ARCHIVE_MAP
+        if path.is_file():
+            epoch = read_map(path).epoch_utc
+            if epoch is not None:
+                found[str(path)] = epoch.astimezone(dt.timezone.utc)
+    if len(set(found.values())) > 1:
+        raise ConfigError('the telemetry maps give different epochs (' + ', '.join(
+            f'{p}: {e.isoformat()}' for p, e in found.items()) + '); give epoch_utc in '
+            'ARCHIVE/archive.yaml or in the fleet block of --config')
+    return next(iter(found.values()), None)
 
 
 def run_archive(archive: str | pathlib.Path, *, client: Client | None = None,
@@ -114,7 +138,7 @@ def run_archive(archive: str | pathlib.Path, *, client: Client | None = None,
     blocks = node_blocks(config)
     root = pathlib.Path(archive)
     fleet = arc.list_archive(root)
-    epoch = archive_epoch(root, blocks['fleet']['epoch_utc'])
+    epoch = archive_epoch(root, str(blocks['fleet']['epoch_utc']), fleet)
     loaded = state.load(pathlib.Path(state_dir)) if state_dir is not None else None
     saved = loaded.records if loaded else {}
     start_wall, start_cpu = _time.perf_counter(), _time.process_time()
