@@ -24,8 +24,10 @@ import fnmatch
 import os
 import pathlib
 import shutil
+import signal
 import stat
 import tempfile
+import threading
 from typing import IO, Iterable, Iterator
 
 from rwa_monitor.exceptions import OutputError
@@ -179,12 +181,13 @@ def atomic_write(path: str | os.PathLike, mode: str = 'w', *, encoding: str | No
     _make_parent(path, target, make_parents)
     remove_stale(target)
     try:
-        fd, tmp_name = tempfile.mkstemp(prefix=temporary_prefix(target), suffix='.tmp',
-                                        dir=target.parent)
+        with _signals_held():
+            fd, tmp_name = tempfile.mkstemp(prefix=temporary_prefix(target), suffix='.tmp',
+                                            dir=target.parent)
+            tmp = pathlib.Path(tmp_name)
     except OSError as err:
         raise OutputError(f'{path}: cannot write in {target.parent}: '
                           f'{err.strerror or err}') from None
-    tmp = pathlib.Path(tmp_name)
     try:
         os.chmod(fd, _mode_of(target, 0o666))
         with os.fdopen(fd, mode, **kwargs) as handle:
@@ -198,6 +201,27 @@ def atomic_write(path: str | os.PathLike, mode: str = 'w', *, encoding: str | No
         if isinstance(err, OSError) and not isinstance(err, OutputError):
             raise OutputError(f'{path}: write failed: {err.strerror or err}') from None
         raise
+
+
+@contextlib.contextmanager
+def _signals_held() -> Iterator[None]:
+    """Hold SIGINT and SIGTERM while a temporary file is made and named.
+
+    A Ctrl-C that arrives after the file exists but before the code that removes it on
+    failure has its name would leave it behind; held, the signal is delivered when the
+    block ends, inside that code. Only the main thread receives these signals; elsewhere,
+    or where the platform has no signal masks, nothing is held.
+    """
+    mask = getattr(signal, 'pthread_sigmask', None)
+    if mask is None or threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    held = {signal.SIGINT, signal.SIGTERM}
+    previous = mask(signal.SIG_BLOCK, held)
+    try:
+        yield
+    finally:
+        mask(signal.SIG_SETMASK, previous)
 
 
 @contextlib.contextmanager
