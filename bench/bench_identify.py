@@ -178,9 +178,9 @@ def _undeclared(quick: bool) -> list[dict]:
             names = [e.name for e in sel.effects]
             rows.append({'effect': effect, 'seed': seed, 'found': names,
                          'noise_floor': data.noise_floor,
-                         'held_out_before': sel.baseline_fit.rmse_held_out,
-                         'held_out_after': sel.final_fit.rmse_held_out,
-                         'ratio_after': sel.final_fit.rmse_held_out / data.noise_floor,
+                         'held_out_before': sel.baseline_fit.rmse_test,
+                         'held_out_after': sel.final_fit.rmse_test,
+                         'ratio_after': sel.final_fit.rmse_test / data.noise_floor,
                          'jumps': len(sel.segments.starts) - 1})
     return rows
 
@@ -225,9 +225,9 @@ def _bus_seed(out_dir: pathlib.Path, exe: pathlib.Path, seed: int, hours: float,
             wheels[wheel] = {
                 'samples': len(sel.data),
                 'noise_floor': sel.data.noise_floor,
-                'held_out_before': sel.baseline_fit.rmse_held_out,
-                'held_out_after': sel.final_fit.rmse_held_out,
-                'ratio_after': sel.final_fit.rmse_held_out / sel.data.noise_floor,
+                'held_out_before': sel.baseline_fit.rmse_test,
+                'held_out_after': sel.final_fit.rmse_test,
+                'ratio_after': sel.final_fit.rmse_test / sel.data.noise_floor,
                 'effects': [e['name'] for e in reports[wheel]['effects']],
                 'parameters': {e.name: {k: v for k, v in e.params.items()
                                         if not isinstance(v, list)} for e in sel.effects},
@@ -357,7 +357,7 @@ def _stress(quick: bool) -> dict[str, Any]:
     data = sel.data
     return {'samples': n, 'seconds': seconds, 'cpu_seconds': cpu,
             'reversals': data.past.passages, 'effects': [e.name for e in sel.effects],
-            'ratio_after': sel.final_fit.rmse_held_out / data.noise_floor,
+            'ratio_after': sel.final_fit.rmse_test / data.noise_floor,
             'stribeck_speed': next((e.params['velocity_rad_s'] for e in sel.effects
                                     if e.name == 'stribeck_hysteresis'), None)}
 

@@ -9,27 +9,79 @@ import numpy as np
 RCOND = 1e-10
 
 
-def held_out_mask(n: int, blocks: int = 60, every: int = 3) -> np.ndarray:
-    """Return the held-out rows: every ``every``-th of ``blocks`` contiguous time blocks.
+BLOCKS = 60
+TEST_EVERY = 3
+VALIDATION_EVERY = 6
+
+
+def _blocks(n: int, blocks: int = BLOCKS) -> np.ndarray:
+    return np.minimum(np.arange(n) * blocks // max(n, 1), blocks - 1)
+
+
+def held_out_mask(n: int, blocks: int = BLOCKS, every: int = TEST_EVERY) -> np.ndarray:
+    """Return the held-out test rows: every ``every``-th of ``blocks`` contiguous time blocks.
 
     Interleaved blocks (not the last third) so that a slow effect (drift, temperature)
     is seen over its whole range on both sides; contiguous blocks so that neighbouring,
-    correlated samples rarely sit on both sides.
+    correlated samples rarely sit on both sides. These rows are never used to fit or to
+    choose anything: their RMSE is the held-out result reported.
     """
-    block = np.minimum(np.arange(n) * blocks // max(n, 1), blocks - 1)
-    return block % every == every - 1
+    return _blocks(n, blocks) % every == every - 1
+
+
+def validation_mask(n: int, blocks: int = BLOCKS, every: int = VALIDATION_EVERY
+                    ) -> np.ndarray:
+    """Return the validation rows: every ``every``-th block, carved from the training part.
+
+    The selection's decisions (an effect's confirmation on rows it was not fitted on,
+    the choice among significant effects and among named sets) use these rows, never the
+    held-out test rows (:func:`held_out_mask`); blocks 0, 6, 12, ... (none of them a test
+    block), so that with the defaults half of the rows are fitted, a sixth validate and
+    a third test.
+    """
+    block = _blocks(n, blocks)
+    return (block % every == 0) & ~held_out_mask(n, blocks)
+
+
+@dataclass(frozen=True)
+class Split:
+    """Rows of a record: validation (selection decisions) and test (reported only)."""
+
+    validation: np.ndarray
+    test: np.ndarray
+
+    @property
+    def train(self) -> np.ndarray:
+        """Return the rows the weights are fitted on."""
+        return ~(self.validation | self.test)
+
+    @property
+    def decision(self) -> np.ndarray:
+        """Return the rows any decision may look at (all but the test rows)."""
+        return ~self.test
+
+
+def split_rows(n: int) -> Split:
+    """Return the fixed split of n rows: training, validation and held-out test blocks."""
+    return Split(validation_mask(n), held_out_mask(n))
 
 
 @dataclass
 class Fit:
-    """A least-squares fit: coefficients, rank, and sums of squares on both row sets."""
+    """A least-squares fit: coefficients, rank, and sums of squares on the three row sets.
+
+    Fitted on the training rows; ``validation`` rows serve the selection's decisions,
+    ``test`` rows (the held-out result) only the report.
+    """
 
     coef: np.ndarray
     rank: int
     rss_train: float
-    rss_held_out: float
+    rss_validation: float
+    rss_test: float
     n_train: int
-    n_held_out: int
+    n_validation: int
+    n_test: int
 
     @property
     def rmse_train(self) -> float:
@@ -37,9 +89,14 @@ class Fit:
         return float(np.sqrt(self.rss_train / self.n_train))
 
     @property
-    def rmse_held_out(self) -> float:
-        """Return the held-out root-mean-square residual."""
-        return float(np.sqrt(self.rss_held_out / max(self.n_held_out, 1)))
+    def rmse_validation(self) -> float:
+        """Return the root-mean-square residual on the validation rows."""
+        return float(np.sqrt(self.rss_validation / max(self.n_validation, 1)))
+
+    @property
+    def rmse_test(self) -> float:
+        """Return the held-out (test) root-mean-square residual."""
+        return float(np.sqrt(self.rss_test / max(self.n_test, 1)))
 
 
 class Design:
@@ -51,14 +108,15 @@ class Design:
     column cost 30-90 ms (measured), the loop well under one.
     """
 
-    def __init__(self, y: np.ndarray, columns: np.ndarray, held_out: np.ndarray) -> None:
+    def __init__(self, y: np.ndarray, columns: np.ndarray, split: Split) -> None:
         self.y = np.asarray(y, dtype=float)
-        self.held_out = np.asarray(held_out, dtype=bool)
-        self.train = ~self.held_out
+        self.split = split
+        self.train = split.train
+        self._rows = {'validation': split.validation, 'test': split.test}
         self.X = np.empty((len(self.y), 0))
         self._xt = np.empty((int(np.sum(self.train)), 0))
-        self._xh = np.empty((int(np.sum(self.held_out)), 0))
-        self._yh = self.y[self.held_out]
+        self._xo = {k: np.empty((int(np.sum(m)), 0)) for k, m in self._rows.items()}
+        self._yo = {k: self.y[m] for k, m in self._rows.items()}
         self._yt = self.y[self.train]
         self._yy = float(self._yt @ self._yt)
         self._n_train = len(self._yt)
@@ -72,7 +130,7 @@ class Design:
         self._gram, self._xy = self._extended(columns)
         self.X = np.hstack([self.X, columns])
         self._xt = np.ascontiguousarray(self.X[self.train])
-        self._xh = np.ascontiguousarray(self.X[self.held_out])
+        self._xo = {k: np.ascontiguousarray(self.X[m]) for k, m in self._rows.items()}
 
     def _extended(self, columns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         ct = columns[self.train]
@@ -82,7 +140,7 @@ class Design:
 
     def fit(self, columns: np.ndarray | None = None) -> Fit:
         """Return the fit of the current columns, plus ``columns`` if given."""
-        p = self._xh.shape[1]
+        p = self.X.shape[1]
         if columns is None:
             gram, xy = self._gram, self._xy
         else:
@@ -94,12 +152,16 @@ class Design:
                                         rcond=RCOND)
         coef = z * scale
         rss_train = max(self._yy - 2.0 * coef @ xy + coef @ gram @ coef, 0.0)
-        resid_ho = self._yh - np.einsum('ij,j->i', self._xh, coef[:p])
-        if columns is not None:
-            resid_ho -= np.einsum('ij,j->i', columns[self.held_out], coef[p:])
+        rss = {}
+        for key, rows in self._rows.items():
+            resid = self._yo[key] - np.einsum('ij,j->i', self._xo[key], coef[:p])
+            if columns is not None:
+                resid -= np.einsum('ij,j->i', columns[rows], coef[p:])
+            rss[key] = float(np.einsum('i,i->', resid, resid))
         return Fit(coef=coef, rank=int(rank), rss_train=float(rss_train),
-                   rss_held_out=float(np.einsum('i,i->', resid_ho, resid_ho)),
-                   n_train=self._n_train, n_held_out=len(self._yh))
+                   rss_validation=rss['validation'], rss_test=rss['test'],
+                   n_train=self._n_train, n_validation=len(self._yo['validation']),
+                   n_test=len(self._yo['test']))
 
     def residual(self, fit: Fit) -> np.ndarray:
         """Return y minus the model of ``fit`` (current columns) on every row."""
