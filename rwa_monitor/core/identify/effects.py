@@ -243,10 +243,10 @@ def prerequisite(name: str) -> str | None:
     return base if int(count) == 2 else f'{base}:{int(count) - 1}'
 
 
-def offered(name: str, tried: set[str]) -> bool:
-    """Return whether ``name`` may be scored: untried, and its prerequisite tried."""
+def offered(name: str, tried: set[str], present: set[str]) -> bool:
+    """Return whether ``name`` may be scored: untried, its prerequisite in the model."""
     need = prerequisite(name)
-    return name not in tried and (need is None or need in tried)
+    return name not in tried and (need is None or need in present)
 
 
 def left_out(name: str) -> frozenset[str]:
@@ -345,10 +345,16 @@ def presliding_candidate(data: IdentData, abs_speed: np.ndarray | None = None
                          ) -> Candidate:
     """Return the pre-sliding band candidate (needs samples near zero speed).
 
-    Band widths span quantiles of ``abs_speed`` (default abs(w) of ``data``).
+    Band widths span quantiles of ``abs_speed`` (default abs(w) of ``data``), and reach
+    at least three times the speed's noise (candidates_motion.speed_noise): within its
+    noise the sampled speed's sign says nothing of the motion's direction, so a band
+    narrower than that cannot be told from a jump of the dry term at every noisy sign
+    change (a joint at rest: a quarter of its samples within the noise).
     """
+    from rwa_monitor.core.identify.candidates_motion import speed_noise
     aw = np.abs(data.speed) if abs_speed is None else np.abs(abs_speed)
     lo, hi = (float(np.quantile(aw, q)) for q in PRESLIDING_RANGE)
+    hi = max(hi, 3.0 * speed_noise(data))
     if hi <= 0 or np.sum(aw < hi) < 10 or data.past is None or data.past.passages == 0:
         return Candidate('presliding', 'presliding', [], tests=1,
                          skipped='not testable: the speed never comes near zero')

@@ -20,10 +20,10 @@ weight opposes the motion.
   starts at the sliding level of the last motion and ends when the applied torque
   reaches the breakaway level of the next one, the torque passing smoothly in between
   as the drive winds up (S(u), u the normalised time in the stop: linear, quadratic or
-  cosine). Columns inside stops: sign(w) (inside a stop the dry term does not follow the
-  sign of the sampled speed, which is noise), -(1 - S) d_before (the level held at the
-  stop's start, positive) and -S d_after (the breakaway level, positive). The stop's end
-  is read from the record: the column is known once the stop is over.
+  cosine). Columns inside stops: sign(w) (there the dry term does not follow the sign of
+  the sampled speed, which is noise), -(1 - S) d_before (the level held at the stop's
+  start, positive) and -S d_after (the breakaway level, positive).
+  The stop's end is read from the record: the column is known once the stop is over.
 - ``presliding_state`` (pre-sliding with a state): before gross sliding the contact
   deforms elastically: after a reversal friction builds up over a displacement, not a
   speed (Dahl's model, dz/dq = (sign(dq) - z) / d; or one Maxwell-slip element, linear

@@ -196,7 +196,8 @@ def _run(datas: list[IdentData], segments: list[Segments], alpha: float,
         if len(run.added) >= max_effects:
             run.stop = f'max_effects = {max_effects} reached'
             break
-        chosen, record = joint_step(run.wheels, residuals, tried, alpha, alpha_held)
+        chosen, record = joint_step(run.wheels, residuals, tried, alpha, alpha_held,
+                                    frozenset(a['candidate'].name for a in run.added))
         record['banned'] = run.banned
         run.steps.append(record)
         if chosen is None:

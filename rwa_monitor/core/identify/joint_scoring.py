@@ -193,14 +193,15 @@ def preferred_joint(wheels: Wheels, winners: list[dict], level: float, record: d
 
 
 def joint_step(wheels: Wheels, residuals: list[np.ndarray], tried: set[str], alpha: float,
-               alpha_held: float) -> tuple[dict | None, dict]:
+               alpha_held: float, present: frozenset[str] = frozenset()
+               ) -> tuple[dict | None, dict]:
     """Score every untried joint candidate; return the named effect to add (or None).
 
     select.selection_step on the pooled evidence. The catch-all is scored and recorded;
     when it alone is significant it is left in ``record['catch_all']`` (joint.py decides).
     """
     cands, fallback = joint_candidates(wheels.datas, residuals)
-    cands = [c for c in cands if fx.offered(c.name, tried)]
+    cands = [c for c in cands if fx.offered(c.name, tried, present)]
     m = sum(c.tests for c in cands if c.skipped is None) + fallback.tests
     level = alpha / m
     record: dict = {'level': level, 'tests': m, 'candidates': [], 'pooled': True}

@@ -219,7 +219,8 @@ def _select(data: IdentData, segments: Segments, alpha: float, alpha_held: float
             sel.stop_reason = f'max_effects = {max_effects} reached'
             break
         chosen, record = selection_step(design, current, data, residual, tried, alpha,
-                                        alpha_held, catch_all=False)
+                                        alpha_held, catch_all=False,
+                                        present=frozenset(e.name for e in sel.effects))
         sel.steps.append(record)
         if chosen is None:
             sel.stop_reason = 'no candidate effect is significant'
@@ -247,14 +248,16 @@ def _select(data: IdentData, segments: Segments, alpha: float, alpha_held: float
 
 def selection_step(design: Design, current: Fit, data: IdentData, residual: np.ndarray,
                    tried: set[str], alpha: float, alpha_held: float,
-                   catch_all: bool = True) -> tuple[dict | None, dict]:
+                   catch_all: bool = True, present: frozenset[str] = frozenset()
+                   ) -> tuple[dict | None, dict]:
     """Score every untried candidate on one wheel; return the one to add (or None).
 
     The catch-all is scored and recorded at every step and chosen only when no named
     effect is significant; with ``catch_all`` False it is not chosen: when it alone is
     significant it is left in ``record['catch_all']`` (the caller decides, _named_first).
     """
-    cands = [c for c in fx.named_candidates(data, residual) if fx.offered(c.name, tried)]
+    cands = [c for c in fx.named_candidates(data, residual)
+             if fx.offered(c.name, tried, present)]
     fallback = fx.fallback_candidate(data)
     m = sum(c.tests for c in cands if c.skipped is None) + fallback.tests
     level = alpha / m
