@@ -287,3 +287,55 @@ def continues(before: np.ndarray, n_before: int, after: np.ndarray, blocks: np.n
         v[:, :p] += q_b
         best.append(float(np.max(explained_sum(joint, v))))
     return (best[1] - best[0]) / noise_var <= ramp_limits(p, z_threshold)[0]
+
+
+def after_noise_ratio(before: np.ndarray, n_before: int, after: np.ndarray,
+                      ramp: np.ndarray | None, p: int, noise_var: float,
+                      z_threshold: float, n_after: int | None = None) -> float:
+    """Return ``kappa >= 1``: the after segment's noise variance over ``noise_var``.
+
+    Not in the paper (docs/llr.md "Kinds on spin-downs"). The categorisation's
+    ``sigma^2`` is the reference's, an average over its speeds; when the noise grows with
+    ``|w|`` (friction differentiated from a speed sampled once per revolution: its noise
+    std grows about 300-fold from 3 to 36 rad/s on the measured drum coasts) and the
+    after segment sits at other speeds (a new coast starts at its top speed), its samples
+    are noisier than ``sigma^2`` says and every component test is inflated, the viscous
+    one most (its column is largest where the noise is). The after segment's own variance:
+    its residual after its own offsets and, given the growth blocks ``ramp``, the growth
+    columns at the best time shape (so a growing change is not taken for noise),
+    ``RSS / (n_a - dof)``. Kept (kappa > 1) only when it exceeds ``noise_var`` by more
+    than the F quantile at the category level (``n_a - dof``, ``n_before - p`` degrees):
+    with one noise level, kappa = 1 (the tests unchanged) but for a false significance at
+    that level. ``n_after``: the after segment's sample count (None: ``sum h_dry^2``,
+    a count unless the terms were prewhitened).
+    """
+    from scipy import special
+    pi_a, q_a, e_a = unpack(after, p)
+    n_a = float(pi_a[0, 0]) if n_after is None else float(n_after)
+    if ramp is not None:
+        gram, rhs = after_gram(after, ramp_shapes(ramp, p), p)
+        explained, dof = float(np.max(explained_sum(gram, rhs))), p + 2
+    else:
+        explained, dof = float(solve_scaled(pi_a, q_a) @ q_a), p
+    if n_a - dof < 2 or n_before - p < 2 or noise_var <= 0.0:
+        return 1.0
+    ratio = max(float(e_a) - explained, 0.0) / (n_a - dof) / noise_var
+    limit = float(special.fdtri(n_a - dof, n_before - p, 1.0 - level_of(z_threshold)))
+    return ratio if ratio > limit else 1.0
+
+
+def reweighted(after: np.ndarray, ramp: np.ndarray | None, kappa: float
+               ) -> tuple[np.ndarray, np.ndarray | None]:
+    """Return the after sums and growth blocks with each sample weighted ``1 / kappa``.
+
+    Weighted least squares with the before segment's samples at weight 1: the joint fit
+    of before and after, and every test on it, then use each segment's own noise level.
+    The blocks' knots (first float of each row) are times, not sums, and stay.
+    """
+    if kappa == 1.0:
+        return after, ramp
+    after = np.asarray(after, dtype=float) / kappa
+    if ramp is not None:
+        ramp = np.array(ramp, dtype=float, copy=True)
+        ramp[..., 1:] /= kappa
+    return after, ramp

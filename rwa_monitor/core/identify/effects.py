@@ -249,6 +249,22 @@ def offered(name: str, tried: set[str], present: set[str]) -> bool:
     return name not in tried and (need is None or need in present)
 
 
+def renumbered(names: list[str]) -> list[str]:
+    """Return effect names with the repeats of an effect numbered 1, 2, ... in order.
+
+    A stage removed by the backfit leaves its followers' numbers with a gap
+    (``gear_ripple:2`` alone): the final model counts its stages from the first again.
+    """
+    out, seen = [], 0
+    for name in names:
+        if name.partition(':')[0] == 'gear_ripple' and prerequisite(name) is not None \
+                or name == 'gear_ripple':
+            seen += 1
+            name = 'gear_ripple' if seen == 1 else f'gear_ripple:{seen}'
+        out.append(name)
+    return out
+
+
 def left_out(name: str) -> frozenset[str]:
     """Return ``name`` and the repeats that follow it (left out of a selection together)."""
     if name.partition(':')[0] != 'gear_ripple':

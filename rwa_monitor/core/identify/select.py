@@ -243,6 +243,8 @@ def _select(data: IdentData, segments: Segments, alpha: float, alpha_held: float
         evidence['residual_failing_after'] = list(diag['failing'])
     sel.final_fit = current
     sel.diagnostics_after = diag
+    for eff, name in zip(sel.effects, fx.renumbered([e.name for e in sel.effects])):
+        eff.name = name
     return sel
 
 
