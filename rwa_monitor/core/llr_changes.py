@@ -331,8 +331,7 @@ class ChangeRules:
         """
         cat = self._cat
         new = llr_kinds.categorise(cat.before, cat.n_before, after, self._p,
-                                   self._noise_var, self._z_thr, np.asarray(cat.ramp),
-                                   j - cat.tau + 1)
+                                   self._noise_var, self._z_thr, np.asarray(cat.ramp))
         if not final and not revision_due(cat.kind, cat.guess, cat.confirmed, new):
             return []
         if final and cat.confirmed and not new.confirmed and \

@@ -163,8 +163,7 @@ def declaration(prefix: np.ndarray, first: int, c: int, k_min: int, n: int,
     before = prefix[tau - first]
     after = prefix[n + 1 - first] - before
     ramp = None if ramp_of is None else ramp_of(tau)
-    category = llr_kinds.categorise(before, tau - c, after, p, noise_var, z_thr, ramp,
-                                    n - tau + 1)
+    category = llr_kinds.categorise(before, tau - c, after, p, noise_var, z_thr, ramp)
     return Declaration(tau, max(tau, k_min), category)
 
 

@@ -16,10 +16,9 @@ from typing import NamedTuple
 
 import numpy as np
 
-from rwa_monitor.core.llr_growth import (after_gram, after_noise_ratio, grows,
-                                         growth_separation, MIN_SEPARATION, ramp_fits,
-                                         ramp_kind, ramp_limits, ramp_shapes,
-                                         ramp_statistics, reweighted, steps_beside_growth)
+from rwa_monitor.core.llr_growth import (after_gram, grows, growth_separation,
+                                         MIN_SEPARATION, ramp_fits, ramp_kind, ramp_limits,
+                                         ramp_shapes, ramp_statistics, steps_beside_growth)
 from rwa_monitor.core.llr_stats import (before_noise_var, change_fits, KINDS, solve_scaled,
                                         unpack)
 
@@ -118,7 +117,7 @@ def separable(dx: np.ndarray, h: int, detectable: tuple[float, float], mean_spee
 
 def categorise(before: np.ndarray, n_before: int, after: np.ndarray, p: int,
                noise_var: float | None, z_threshold: float,
-               ramp: np.ndarray | None = None, n_after: int | None = None) -> Category:
+               ramp: np.ndarray | None = None) -> Category:
     """Return the :class:`Category` (kind, dx, z, sigma^2, confirmed) of one change.
 
     Not in the paper (which promises a categorisation but gives none); the design and its
@@ -158,20 +157,11 @@ def categorise(before: np.ndarray, n_before: int, after: np.ndarray, p: int,
     kind). A step has no growth: a true single
     step is named the other kind, or loses its confirmation, only through a false
     significance at the category level.
-
-    When the after segment is significantly noisier than ``sigma^2``
-    (:func:`llr_growth.after_noise_ratio`: a spin-down restarting at its noisiest speeds),
-    its samples are weighted by the ratio (:func:`llr_growth.reweighted`) and every test
-    above uses each segment's own noise level (docs/llr.md "Kinds on spin-downs").
-    ``n_after``: the after segment's sample count (the sums may be of AR-prewhitened
-    terms, whose ``sum h_dry^2`` is not a count); None: ``sum h_dry^2``.
     """
     before = np.asarray(before, dtype=float)
     after = np.asarray(after, dtype=float)
-    s2 = before_noise_var(before, n_before, p) if noise_var is None else float(noise_var)
-    kappa = after_noise_ratio(before, n_before, after, ramp, p, s2, z_threshold, n_after)
-    after, ramp = reweighted(after, ramp, kappa)
     explained, dx = change_fits(before, after, p)
+    s2 = before_noise_var(before, n_before, p) if noise_var is None else float(noise_var)
     chi_v = max(float(explained[2] - explained[0]), 0.0) / s2
     chi_d = max(float(explained[2] - explained[1]), 0.0) / s2
     z_d = math.copysign(math.sqrt(chi_d), float(dx[2, 0]))
