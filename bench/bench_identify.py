@@ -591,10 +591,11 @@ def _markdown(res: dict) -> str:
               f'{st["reversals"]} zero passages; prepare + identify took {st["seconds"]:.1f} s '
               f'wall, {st["cpu_seconds"]:.1f} s CPU (goal < 10 s); effects '
               f'{", ".join(st["effects"]) or "none"}, held-out '
-              f'{st["ratio_after"]:.3f} x floor. The measured joint data set with frequent '
-              f'reversals (the 0.077 N m neural-model comparison of the issue) is kept aside '
-              f'by the project and is not available here: that acceptance line is not '
-              f'measured.', '']
+              f'{st["ratio_after"]:.3f} x floor. Three files of the measured robot-joint '
+              f'data set (frequent reversals, published neural and physics-informed fits on '
+              f'the same rows) are in ../shared: section "identify on a robot arm\'s '
+              f'joints" (`python -m bench identify_joint`); the files kept aside for '
+              f'acceptance are not available here.', '']
     sp = res['speed']
     lines += ['### Speed', '',
               table(['file', 'samples', 'zero passages', 'wall time (s)', 'CPU time (s)',

@@ -87,7 +87,7 @@ def prune(design: Design, added: list[AddedEffect], alpha_held: float
                 failing.append((-np.inf, eff, own))
                 continue
             own['bic_gain'] = own['lr'] - (own['dof'] + eff.evidence['parameters']
-                                           - eff.evidence['dof']) * np.log(full.n_train)
+                                           - eff.evidence['dof']) * np.log(full.n_train_eff)
             entry = {'p_value': own['p_value'], 'lr_validation': own['lr_validation'],
                      'bic_gain': own['bic_gain'], 'dof': own['dof']}
             if not significant(entry, eff.evidence.get('level', 1.0), alpha_held):

@@ -61,10 +61,15 @@ def fold_mask(n: int, blocks: int = BLOCKS) -> np.ndarray:
 
 @dataclass(frozen=True)
 class Split:
-    """Rows of a record: the test rows (reported only) and fold A of the training rows."""
+    """Rows of a record: the test rows (reported only) and fold A of the training rows.
+
+    ``stride``: rows per independent noise sample (friction differentiated from speed
+    over 2h + 1 samples: 2h + 1; else 1); the likelihood ratios count n / stride.
+    """
 
     fold: np.ndarray
     test: np.ndarray
+    stride: int = 1
 
     @property
     def train(self) -> np.ndarray:
@@ -72,9 +77,9 @@ class Split:
         return ~self.test
 
 
-def split_rows(n: int) -> Split:
+def split_rows(n: int, stride: int = 1) -> Split:
     """Return the fixed split of n rows: training folds A and B, held-out test blocks."""
-    return Split(fold_mask(n), held_out_mask(n))
+    return Split(fold_mask(n), held_out_mask(n), max(1, int(stride)))
 
 
 @dataclass
@@ -94,6 +99,17 @@ class Fit:
     n_train: int
     n_validation: int
     n_test: int
+    stride: int = 1
+
+    @property
+    def n_train_eff(self) -> float:
+        """Return the independent samples among the training rows (n_train / stride)."""
+        return self.n_train / self.stride
+
+    @property
+    def n_validation_eff(self) -> float:
+        """Return the independent samples among the validation predictions."""
+        return self.n_validation / self.stride
 
     @property
     def rmse_train(self) -> float:
@@ -188,7 +204,8 @@ class Design:
             resid -= np.einsum('ij,j->i', columns[self.split.test], coef[p:])
         return Fit(coef=coef, rank=rank, rss_train=float(rss_train),
                    rss_validation=float(rss_cv), rss_test=float(resid @ resid),
-                   n_train=self._n_train, n_validation=self._n_train, n_test=len(self._ys))
+                   n_train=self._n_train, n_validation=self._n_train, n_test=len(self._ys),
+                   stride=self.split.stride)
 
     def residual(self, fit: Fit) -> np.ndarray:
         """Return y minus the model of ``fit`` (current columns) on every row."""

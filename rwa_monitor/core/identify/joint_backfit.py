@@ -29,7 +29,7 @@ def reprofile_joint(wheels: Wheels, added: list[dict], passes: int = 3) -> Wheel
             scored = score_joint(others, cand)
             if scored is None:
                 continue
-            now = sum(likelihood_ratio(o.n_train, o.rss_train, c.rss_train)
+            now = sum(likelihood_ratio(o.n_train_eff, o.rss_train, c.rss_train)
                       for o, c, s in zip(others.current, wheels.current, a['per'])
                       if s is not None)
             if others.pooled_lr(scored['per']) <= now + 1e-9 * max(abs(now), 1.0):
@@ -67,8 +67,8 @@ def prune_joint(wheels: Wheels, added: list[dict], alpha_held: float
                 weights.append(full.coef[columns])
                 own = drop_one(wheels.designs[k], full, columns)
                 lr, held, dof = lr + own['lr'], held + own['lr_validation'], dof + own['dof']
-                gain += own['lr'] - own['dof'] * float(np.log(full.n_train))
-                n_total += full.n_train
+                gain += own['lr'] - own['dof'] * float(np.log(full.n_train_eff))
+                n_total += full.n_train_eff
             entry = {'lr': lr, 'dof': dof, 'lr_validation': held,
                      'p_value': float(stats.chi2.sf(lr, dof)) if dof else 1.0,
                      'bic_gain': gain - a['candidate'].free * float(np.log(max(n_total, 1)))}

@@ -31,7 +31,7 @@ class Wheels:
     def __init__(self, datas: list[IdentData], segments: list[Segments]) -> None:
         self.datas = datas
         self.segments = segments
-        self.designs = [Design(d.friction, s.columns(d.speed), split_rows(len(d)))
+        self.designs = [Design(d.friction, s.columns(d.speed), split_rows(len(d), d.stride))
                         for d, s in zip(datas, segments)]
         self.base = [dz.fit() for dz in self.designs]
         self.current = list(self.base)
@@ -43,7 +43,7 @@ class Wheels:
         for k, (data, seg) in enumerate(zip(self.datas, self.segments)):
             cols = [seg.columns(data.speed)] + [a['per'][k]['columns'] for a in added
                                                 if a is not skip and a['per'][k] is not None]
-            design = Design(data.friction, np.hstack(cols), split_rows(len(data)))
+            design = Design(data.friction, np.hstack(cols), split_rows(len(data), data.stride))
             other.designs.append(design)
             other.current.append(design.fit())
         return other
@@ -80,7 +80,7 @@ class Wheels:
 
     def pooled_lr(self, per: list[dict | None]) -> float:
         """Return the summed training likelihood ratio of a candidate's fits."""
-        return sum(likelihood_ratio(s['fit'].n_train, cur.rss_train, s['fit'].rss_train)
+        return sum(likelihood_ratio(s['fit'].n_train_eff, cur.rss_train, s['fit'].rss_train)
                    for s, cur in zip(per, self.current) if s is not None)
 
 
@@ -102,10 +102,10 @@ def score_joint(wheels: Wheels, cand: JointCandidate) -> dict | None:
             continue
         fit = s['fit']
         k = max(int(fit.rank - cur.rank), 0)
-        lr_k = likelihood_ratio(fit.n_train, cur.rss_train, fit.rss_train)
-        held_k = likelihood_ratio(fit.n_validation, cur.rss_validation, fit.rss_validation)
-        lr, lr_held, dof, n_total = lr + lr_k, lr_held + held_k, dof + k, n_total + fit.n_train
-        gain += lr_k - k * float(np.log(fit.n_train))
+        lr_k = likelihood_ratio(fit.n_train_eff, cur.rss_train, fit.rss_train)
+        held_k = likelihood_ratio(fit.n_validation_eff, cur.rss_validation, fit.rss_validation)
+        lr, lr_held, dof, n_total = lr + lr_k, lr_held + held_k, dof + k, n_total + fit.n_train_eff
+        gain += lr_k - k * float(np.log(fit.n_train_eff))
         own[data.wheel] = {'lr': lr_k, 'dof': k, 'lr_validation': held_k,
                            'rmse_validation': fit.rmse_validation}
     if dof <= 0:

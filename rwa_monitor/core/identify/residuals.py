@@ -54,6 +54,12 @@ from rwa_monitor.core.identify.effects import uniform_resample
 from rwa_monitor.core.identify.fitting import held_out_mask
 
 STOP_TESTS_EXCLUDED = ('variance_vs_speed',)
+# Fewest independent residuals (every stride-th, test rows left out) for "the residual
+# passes" to stop the selection: with fewer, two bins of a dozen samples each cannot see
+# the curvature an unmodelled drag leaves (a coast of 566 revolutions differentiated over
+# 41 samples keeps 9 independent residuals), and the selection goes on with its entry
+# tests alone.
+MIN_TESTED = 60
 REPORT_ONLY_PREFIX = 'signal:'
 MIN_PASSAGES = 2
 
@@ -259,6 +265,7 @@ def _diagnose(data: IdentData, residual: np.ndarray, alpha: float, bins: int,
     level = alpha / max(len(stop), 1)
     out['level'] = level
     out['failing'] = [k for k in stop if out['tests'][k]['p_value'] <= level]
-    out['passes'] = not out['failing']
+    out['tested_samples'] = n
+    out['passes'] = not out['failing'] and n >= MIN_TESTED
     out['rmse'] = float(np.sqrt(np.mean(residual ** 2)))
     return out

@@ -95,14 +95,14 @@ def score_candidate(design: Design, current: Fit, cand: fx.Candidate, data: Iden
     dof = fit.rank - current.rank
     if dof <= 0:
         return None
-    lr = likelihood_ratio(fit.n_train, current.rss_train, fit.rss_train)
-    lr_held = likelihood_ratio(fit.n_validation, current.rss_validation, fit.rss_validation)
+    lr = likelihood_ratio(fit.n_train_eff, current.rss_train, fit.rss_train)
+    lr_held = likelihood_ratio(fit.n_validation_eff, current.rss_validation, fit.rss_validation)
     free = int(dof) + free_parameters(cand)
     return {'candidate': cand, 'params': params, 'fit': fit, 'columns': cols,
             'evidence': {'lr': lr, 'dof': int(dof), 'p_value': float(stats.chi2.sf(lr, dof)),
                          'lr_validation': lr_held,
                          'parameters': free,
-                         'bic_gain': lr - free * float(np.log(fit.n_train)),
+                         'bic_gain': lr - free * float(np.log(fit.n_train_eff)),
                          'rmse_in_sample': fit.rmse_train,
                          'rmse_validation': fit.rmse_validation}}
 
@@ -113,10 +113,10 @@ def drop_one(design: Design, full: Fit, columns: slice) -> dict:
     keep[columns] = False
     without = Design(design.y, design.X[:, keep], design.split).fit()
     dof = max(int(full.rank - without.rank), 0)
-    lr = likelihood_ratio(full.n_train, without.rss_train, full.rss_train)
+    lr = likelihood_ratio(full.n_train_eff, without.rss_train, full.rss_train)
     return {'lr': lr, 'dof': dof,
             'p_value': float(stats.chi2.sf(lr, dof)) if dof else 1.0,
-            'lr_validation': likelihood_ratio(full.n_validation, without.rss_validation,
+            'lr_validation': likelihood_ratio(full.n_validation_eff, without.rss_validation,
                                             full.rss_validation)}
 
 

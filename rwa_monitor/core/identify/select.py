@@ -201,7 +201,8 @@ def _select(data: IdentData, segments: Segments, alpha: float, alpha_held: float
     the loop stops because no named effect is significant while the catch-all is,
     ``Selection.catch_all`` holds the catch-all's scored fit (not added).
     """
-    design = Design(data.friction, segments.columns(data.speed), split_rows(len(data)))
+    design = Design(data.friction, segments.columns(data.speed),
+                    split_rows(len(data), data.stride))
     base_fit = design.fit()
     sel = Selection(data=data, segments=segments, design=design, baseline_fit=base_fit,
                     final_fit=base_fit, baseline_names=segments.names())
