@@ -73,8 +73,8 @@ def stages(selection) -> list[dict[str, Any]]:
     nb = len(selection.baseline_names)
     current = Design(design.y, design.X[:, :nb], design.split)
     rows = []
-    for name, columns in [('baseline', None)] + [(e.name, e.columns)
-                                                   for e in selection.effects]:
+    added = [(e.name, e.columns) for e in selection.effects]
+    for name, columns in [('baseline', None)] + added:
         if columns is not None:
             current.add(design.X[:, columns])
         fit = current.fit()
@@ -141,7 +141,7 @@ def _fmt(value: float) -> str:
 
 def markdown(res: dict[str, Any]) -> str:
     """Return the docs/results.md section of this bench."""
-    lines = ['## identify on a robot arm\'s joints (issue 35)', '',
+    lines = ["## identify on a robot arm's joints (issue 35)", '',
              '`python -m bench identify_joint`'
              + (' --quick (smoke run, not a result)' if res.get('quick') else '') + '. '
              'Data: ../shared/data/measured/robot-joint (github.com/longshike/NNFM-A-Novel-'
@@ -166,7 +166,7 @@ def markdown(res: dict[str, Any]) -> str:
         p = f['published_test']
         rows = [[s['model'], MEANING.get(s['model'].split(':')[0], ''), _fmt(s['train']),
                  _fmt(s['validation']), _fmt(s['test'])] for s in f['stages']]
-        rows += [[f'published {m}', '(the paper\'s fit, same rows)', '', '', _fmt(p[m])]
+        rows += [[f'published {m}', "(the paper's fit, same rows)", '', '', _fmt(p[m])]
                  for m in PUBLISHED]
         lines += [f'### {f["file"]} ({f["samples"]} samples)', '',
                   table(['model (effects added in this order)', 'physics',

@@ -14,7 +14,7 @@ from rwa_monitor.core.identify.select import identify
 
 def joint_record(seed: int, n: int = 6000, rate: float = 50.0, lag: float = 0.3,
                  cycles: float = 20.0):
-    """A joint that reciprocates with dwells; lagged dry friction and a position ripple.
+    """Return a joint that reciprocates with dwells: lagged dry friction, a position ripple.
 
     Speed 0.2 rad/s peak, at rest a quarter of every 8 s cycle; friction -0.2 L_T[tanh(w /
     0.002)] - 0.5 w + 0.05 + 0.02 cos(2 pi 20 q), noise 0.01 N m; speed noise 1e-3 rad/s.
@@ -52,7 +52,8 @@ def test_presliding_states_build_up_over_a_displacement_after_a_reversal():
     q = np.concatenate([np.linspace(0.0, 0.1, 101), np.linspace(0.1, 0.0, 101)[1:]])
     slip = motion.maxwell_slip(q, 0.01)
     assert slip[10] == pytest.approx(1.0) and slip[5] == pytest.approx(0.5)
-    assert slip[100 + 10] == pytest.approx(0.0, abs=1e-12) and slip[100 + 20] == pytest.approx(-1.0)
+    assert slip[100 + 10] == pytest.approx(0.0, abs=1e-12)
+    assert slip[100 + 20] == pytest.approx(-1.0)
     dahl = motion.dahl(q, 0.01)
     assert dahl[100] == pytest.approx(1.0 - np.exp(-10.0))       # 0.1 rad = 10 d
     assert dahl[101] < dahl[100] and -1.0 <= dahl.min() and dahl.max() <= 1.0

@@ -110,9 +110,7 @@ def smoothed(values: np.ndarray, half_width: int) -> np.ndarray:
 
 
 class Stick(NamedTuple):
-    """Stick episodes: mask, normalised time inside, direction before and after each.
-
-    """
+    """Stick episodes: mask, normalised time inside, direction before and after each."""
 
     mask: np.ndarray
     u: np.ndarray

@@ -20,8 +20,8 @@ interval (the zero-order hold of a torque command), aux channels and history cha
 (hysteresis) taken at the interval's start; time-dependent effects (drift, periodic) are
 evaluated at the stage times. Effects with a state or a position (effects_motion.py:
 lag, stop, pre-sliding state, position) are simulated along the measured speed and
-held over each interval, as the history channel is. Each segment's coefficients are those of the baseline
-segment (friction jumps) the sample belongs to.
+held over each interval, as the history channel is. Each segment's coefficients are
+those of the baseline segment (friction jumps) the sample belongs to.
 """
 
 from __future__ import annotations

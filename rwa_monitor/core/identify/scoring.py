@@ -116,8 +116,8 @@ def drop_one(design: Design, full: Fit, columns: slice) -> dict:
     lr = likelihood_ratio(full.n_train_eff, without.rss_train, full.rss_train)
     return {'lr': lr, 'dof': dof,
             'p_value': float(stats.chi2.sf(lr, dof)) if dof else 1.0,
-            'lr_validation': likelihood_ratio(full.n_validation_eff, without.rss_validation,
-                                            full.rss_validation)}
+            'lr_validation': likelihood_ratio(full.n_validation_eff,
+                                              without.rss_validation, full.rss_validation)}
 
 
 def significant(evidence: dict, level: float, alpha_held: float) -> bool:
