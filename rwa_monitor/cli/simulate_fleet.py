@@ -7,6 +7,7 @@ import pathlib
 import sys
 import time
 
+from rwa_monitor.cli.options import FORMATS
 from rwa_monitor.exceptions import ConfigError
 from rwa_monitor.sim.fleet import pass_telemetry, plan_fleet, write_fleet
 from rwa_monitor.telemetry.atomic import write_text_atomic
@@ -15,7 +16,8 @@ EPILOG = '''\
 layout: DIR/<spacecraft>/<pass id>.csv (telemetry schema, random pass ids: names do not sort
 in time), DIR/truth.json (per spacecraft and wheel: base levels, wear rate, faults), and with
 --calibrate DIR/<spacecraft>/calibration.yaml from the spacecraft's commissioning passes (the
-first two days', fault-free).
+first two days', fault-free). --format ccsds: passes DIR/<spacecraft>/<pass id>.bin of CCSDS
+space packets, with telemetry.xml (XTCE) and telemetry_map.yaml beside them.
 example: rwa-monitor simulate fleet -o archive --spacecraft 20 --days 7 --rate 10 --seed 0
 '''
 
@@ -53,6 +55,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help='first passes kept fault-free and used by --calibrate '
                              '(default: two days of passes)')
     parser.add_argument('--seed', type=int, default=0, help='random seed (default 0)')
+    parser.add_argument('--format', choices=FORMATS, default='auto',
+                        help='passes as CSV (auto, default) or as CCSDS space packets (ccsds)')
     parser.set_defaults(func=run)
 
 
@@ -70,14 +74,15 @@ def run(args: argparse.Namespace) -> int:
     except ValueError as err:
         raise ConfigError(str(err)) from None
     start = time.perf_counter()
-    files = write_fleet(out, plan)
+    suffix = '.bin' if args.format == 'ccsds' else '.csv'
+    files = write_fleet(out, plan, suffix, _write_packet_pass if suffix == '.bin' else None)
     if args.calibrate:
         for craft in plan.spacecraft:
             folder = out / craft.name
             records = []
             for i in range(plan.commissioning_passes):
                 records.append(pass_telemetry(plan, craft, i))
-                records[-1].source = str(folder / f'{craft.passes[i].pass_id}.csv')
+                records[-1].source = str(folder / f'{craft.passes[i].pass_id}{suffix}')
             write_calibration(folder / 'calibration.yaml', records)
     n_pass = sum(len(c.passes) for c in plan.spacecraft)
     samples = n_pass * int(plan.pass_s * plan.rate_hz + 1e-9)
@@ -88,6 +93,13 @@ def run(args: argparse.Namespace) -> int:
           f'{len(files) - 1} files in {time.perf_counter() - start:.1f} s; truth in '
           f'{out / "truth.json"}')
     return 0
+
+
+def _write_packet_pass(path: pathlib.Path, tele) -> None:
+    """Write one pass as packets; the folder's telemetry.xml and map describe every pass."""
+    from rwa_monitor.telemetry import ARCHIVE_MAP, ARCHIVE_XTCE
+    from rwa_monitor.telemetry.ccsds_write import write_packets
+    write_packets(path, tele, path.parent / ARCHIVE_XTCE, path.parent / ARCHIVE_MAP)
 
 
 def write_calibration(path: pathlib.Path, records: list) -> None:

@@ -490,13 +490,20 @@ FLEET = Schema('fleet', (_limit('dry', 'N m'), _limit('viscous', 'N m s/rad')),
 # ------------------------------------------------------------------------------- replay
 
 REPLAY = Schema('telemetry_replay', (
-    Param('file', '', 'Telemetry to replay: CSV file, rosbag2 folder, or bare .mcap or .db3 '
-          'file; required, give it with -p file:=PATH (never in a parameters file, where it '
-          'would beat the command line).', read_only=True, required=True, scope='node'),
+    Param('file', '', 'Telemetry to replay: CSV or Parquet file, rosbag2 folder, bare .mcap or '
+          '.db3 file, or CCSDS space packets (.bin); required, give it with -p file:=PATH '
+          '(never in a parameters file, where it would beat the command line).',
+          read_only=True, required=True, scope='node'),
     Param('topics', '', 'Topics of the streams in a recording, as wheels=/a,gyro=/b,'
           'star_tracker=/c,reference_rate=/d; streams not named keep the DESIGN.md topics '
           '(/telemetry/wheels, /telemetry/gyro, /telemetry/star_tracker, '
           '/telemetry/reference_rate).', read_only=True, scope='node'),
+    Param('xtce_file', '', 'XTCE definition of a file of CCSDS space packets; empty: FILE.xml, '
+          'else telemetry.xml beside the file (docs/contracts.md); given, the file is read '
+          'as packets whatever its suffix.', read_only=True, scope='node'),
+    Param('telemetry_map_file', '', 'Map from XTCE parameters to telemetry columns of a '
+          'packet file; empty: FILE_map.yaml, else telemetry_map.yaml beside the file '
+          '(docs/contracts.md).', read_only=True, scope='node'),
     Param('rate', 1.0, 'Time factor: 1.0 real time, 40.0 forty times faster, 0.0 as fast as '
           'the subscribers take it without loss.', low=0.0, high=1.0e6, scope='node'),
     Param('start_offset', 0.0, 'Seconds from the first sample where the replay (and every '
