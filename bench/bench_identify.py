@@ -517,7 +517,8 @@ def _markdown(res: dict) -> str:
              '`python -m bench identify`'
              + (' --quick (smoke run, not a result)' if res['quick'] else '') + '. '
              'Method and decisions: docs/identify.md. RMSE in N m; "held out" = the '
-             'interleaved blocks not used for fitting.', '']
+             'interleaved test blocks, never used to fit or to decide (since issue 35).',
+             '']
     m = res['measured']
     if 'runs' in m:
         p = m['pooled']
