@@ -14,9 +14,9 @@ import numpy as np
 
 from rwa_monitor.core.identify import effects_motion as em
 from rwa_monitor.core.identify import motion
+from rwa_monitor.core.identify.candidate import Candidate
 from rwa_monitor.core.identify.data import IdentData
 from rwa_monitor.core.identify.differentiate import local_noise_std
-from rwa_monitor.core.identify.effects import Candidate
 from rwa_monitor.core.identify.fitting import held_out_mask
 
 RIPPLE_PEAKS = 3
@@ -141,7 +141,7 @@ def ripple_candidates(data: IdentData, residual: np.ndarray, band: float, why: s
     offered once the one before it is in the model (effects.offered).
     """
     names = ['gear_ripple'] + [f'gear_ripple:{k}' for k in range(2, em.RIPPLES + 1)]
-    return [ripple_candidate(data, residual, band, why)._replace_name(n) for n in names]
+    return [ripple_candidate(data, residual, band, why).renamed(n) for n in names]
 
 
 def ripple_candidate(data: IdentData, residual: np.ndarray, band: float, why: str | None

@@ -54,12 +54,13 @@ Effects (names are the DESIGN.md vocabulary):
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
 from typing import Callable
 
 import numpy as np
 
 from rwa_monitor.core.identify import effects_motion as em
+from rwa_monitor.core.identify.candidate import Candidate
+from rwa_monitor.core.identify.candidates_motion import motion_candidates, speed_noise
 from rwa_monitor.core.identify.data import IdentData, speed_history
 from rwa_monitor.core.identify.fitting import held_out_mask
 
@@ -210,27 +211,6 @@ def evaluate(kind: str, params: dict, data: IdentData) -> np.ndarray:
                             for _, col in regressor_columns(kind, params)])
 
 
-@dataclass
-class Candidate:
-    """An effect to test: its vocabulary name, kind and grid of nonlinear parameters."""
-
-    name: str
-    kind: str
-    grid: list[dict]
-    tests: int = 0
-    skipped: str | None = None
-    extra: dict = field(default_factory=dict)
-
-    def __post_init__(self) -> None:
-        if not self.tests:
-            self.tests = len(self.grid)
-
-    def _replace_name(self, name: str) -> 'Candidate':
-        """Return a copy under another name (a repeat of an effect that may recur)."""
-        return Candidate(name, self.kind, self.grid, self.tests, self.skipped,
-                         dict(self.extra))
-
-
 def prerequisite(name: str) -> str | None:
     """Return the effect that must be in the model before ``name`` is offered, or None.
 
@@ -304,7 +284,6 @@ def named_candidates(data: IdentData, residual: np.ndarray) -> list[Candidate]:
                          [{'frequency_hz': f, 't0_s': t0} for f in freqs],
                          tests=max(tested, 1),
                          skipped=None if freqs else 'not testable: too few samples'))
-    from rwa_monitor.core.identify.candidates_motion import motion_candidates
     return out + motion_candidates(data, residual)
 
 
@@ -367,7 +346,6 @@ def presliding_candidate(data: IdentData, abs_speed: np.ndarray | None = None
     narrower than that cannot be told from a jump of the dry term at every noisy sign
     change (a joint at rest: a quarter of its samples within the noise).
     """
-    from rwa_monitor.core.identify.candidates_motion import speed_noise
     aw = np.abs(data.speed) if abs_speed is None else np.abs(abs_speed)
     lo, hi = (float(np.quantile(aw, q)) for q in PRESLIDING_RANGE)
     hi = max(hi, 3.0 * speed_noise(data))

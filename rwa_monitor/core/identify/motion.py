@@ -29,6 +29,9 @@ from scipy.ndimage import uniform_filter1d
 # exp(-EXPONENT_BLOCK) stays far above the smallest double: blocks of the lag recurrence
 # end before the cumulative decay reaches it (see first_order_lag).
 EXPONENT_BLOCK = 300.0
+# One step's decay is capped here: exp(-50) = 2e-22, a state forgotten to double
+# precision (a time gap far longer than the lag); without the cap exp(decay) overflows.
+MAX_DECAY = 50.0
 
 
 def position(time: np.ndarray, speed: np.ndarray) -> np.ndarray:
@@ -74,7 +77,7 @@ def first_order_lag(time: np.ndarray, values: np.ndarray, lag_s: float) -> np.nd
     values = np.asarray(values, dtype=float)
     if len(values) == 0:
         return values.copy()
-    decay = np.concatenate([[0.0], np.diff(time)]) / float(lag_s)
+    decay = np.minimum(np.concatenate([[0.0], np.diff(time)]) / float(lag_s), MAX_DECAY)
     return _affine(decay, -np.expm1(-decay) * values, values[0])
 
 
@@ -87,7 +90,7 @@ def dahl(travel: np.ndarray, breakaway: float) -> np.ndarray:
     """
     travel = np.asarray(travel, dtype=float)
     step = np.concatenate([[0.0], np.diff(travel)])
-    decay = np.abs(step) / float(breakaway)
+    decay = np.minimum(np.abs(step) / float(breakaway), MAX_DECAY)
     return _affine(decay, -np.expm1(-decay) * np.sign(step), 0.0)
 
 
