@@ -20,13 +20,14 @@ import pathlib
 
 import numpy as np
 
-from rwa_monitor.exceptions import ConfigError, RwaMonitorError
+from rwa_monitor.exceptions import ConfigError
 from rwa_monitor.telemetry import ARCHIVE_MAP, ARCHIVE_XTCE, is_packets, parquet_io
 from rwa_monitor.telemetry import read_telemetry, rosbag_io, Telemetry, Wheel
 from rwa_monitor.telemetry.ccsds_write import sibling_paths
 from rwa_monitor.telemetry.schema import ATTITUDE, FRICTION_SUFFIX, GYRO, SPEED_SUFFIX, TIME
 
 CALIBRATION = 'calibration.yaml'
+METADATA = 'archive.yaml'
 GYRO_COMPONENT = 'gyro'
 
 
@@ -78,6 +79,19 @@ def list_archive(archive: str | os.PathLike) -> list[Spacecraft]:
     return fleet
 
 
+def metadata(archive: str | os.PathLike) -> dict:
+    """Return ARCHIVE/archive.yaml (e.g. ``epoch_utc``), or {} if there is none."""
+    path = pathlib.Path(archive) / METADATA
+    if not path.is_file():
+        return {}
+    from rwa_monitor.telemetry.yaml_file import read_yaml
+    found = read_yaml(path)
+    if not isinstance(found, dict):
+        raise ConfigError(f'{path}: expected a mapping such as epoch_utc: '
+                          '2026-01-01T00:00:00Z')
+    return found
+
+
 def is_pass(path: pathlib.Path) -> bool:
     """Return True for a path the readers take as a pass."""
     if rosbag_io.is_recording(path):
@@ -115,8 +129,8 @@ def scan_pass(path: str) -> PassFile | str:
         else:
             first, columns = _csv_first(path)
         return PassFile(name, path, size_of(path), first, tuple(columns))
-    except (RwaMonitorError, OSError, ValueError, IndexError) as err:
-        return f'{type(err).__name__}: {err}'
+    except Exception as err:  # noqa: BLE001 - a pass is outside data: any failure is its own
+        return f'unreadable: {type(err).__name__}: {err}'
 
 
 def scan_passes(paths: list[str]) -> list[PassFile | str]:
@@ -151,8 +165,8 @@ def read_pass(path: str) -> Telemetry | str:
     """Return a pass's telemetry, or the reason it cannot be read (never raises on data)."""
     try:
         tele = read_telemetry(path)
-    except (RwaMonitorError, OSError, ValueError) as err:
-        return f'{type(err).__name__}: {err}'
+    except Exception as err:  # noqa: BLE001 - a pass is outside data: any failure is its own
+        return f'unreadable: {type(err).__name__}: {err}'
     if not len(tele):
         return 'no rows'
     return tele

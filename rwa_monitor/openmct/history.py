@@ -121,7 +121,10 @@ def load_fleet(store: GroundStore, out: pathlib.Path) -> dict[str, Any]:
     """Fill ``store`` from a fleet's output folder; return summary.json's content."""
     out = pathlib.Path(out)
     summary = _json(out / 'summary.json')
-    events = _json(out / 'events.json').get('events', [])
+    # The history's end-of-run events that a later run replaced are kept there, marked
+    # ``superseded``; the view shows the current answer only (docs/contracts.md).
+    events = [e for e in _json(out / 'events.json').get('events', [])
+              if not e.get('superseded')]
     crafts = summary.get('spacecraft') or {}
     trend_rows = _trend_rows(out / 'trend.parquet')
     for row in trend_rows:
