@@ -24,18 +24,11 @@ import json
 import pathlib
 import sys
 
-import numpy as np
-
 from rwa_monitor.cli.main import EXIT_NOT_EXAMINED
 from rwa_monitor.cli.options import add_topics, INPUT_HELP, read_input
 from rwa_monitor.core.schema import AUTO, default_text, help_text, IDENTIFY, Param
 from rwa_monitor.exceptions import NotExaminedError, RwaMonitorError
-from rwa_monitor.pipelines.identify import examinable, identify_wheel, identify_wheels
-from rwa_monitor.pipelines.identify_report import (OUTPUT_FILES, side_by_side, wheels_markdown,
-                                                   write_outputs)
 from rwa_monitor.telemetry.atomic import child, FolderOutput, write_text_atomic
-from rwa_monitor.telemetry.coastdown import coastdown_folder, coastdown_runs
-from rwa_monitor.telemetry.coastdown import pendulum_inertia, read_coastdown
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -99,6 +92,13 @@ def _given(value):
 
 def run(args: argparse.Namespace) -> int:
     """Run the identification on one wheel (or every wheel) and write the outputs."""
+    # The identification and its report load scipy's statistics (most of a second): only
+    # when the command runs, so that ``rwa-monitor --help`` starts at once.
+    import numpy as np
+    from rwa_monitor.pipelines.identify import examinable, identify_wheel, identify_wheels
+    from rwa_monitor.pipelines.identify_report import OUTPUT_FILES
+    from rwa_monitor.telemetry.coastdown import (coastdown_folder, coastdown_runs,
+                                                 pendulum_inertia, read_coastdown)
     if args.format == 'coastdown':
         if not args.run or args.run == 'list':
             for name, body, n in coastdown_runs(args.file):
@@ -153,6 +153,8 @@ def run(args: argparse.Namespace) -> int:
 
 def _write(args, found, many, title, work, results, agreement, not_examined) -> None:
     """Write every output into ``work`` (swapped onto ``args.out`` by the caller)."""
+    from rwa_monitor.pipelines.identify_report import side_by_side, wheels_markdown
+    from rwa_monitor.pipelines.identify_report import write_outputs
     for wheel, (selection, extra) in found.items():
         out, shown = ((child(work, wheel), child(args.out, wheel)) if many
                       else (work, args.out))
@@ -183,6 +185,7 @@ def _leave_out_implausible(tele, wheels: list[str]) -> None:
     non-finite row; a note says how many), and a column holding nothing else is refused
     naming it (it used to end in "Singular matrix" or an infinite RMSE).
     """
+    import numpy as np
     from rwa_monitor.core.schema import LLR
     for wheel in (tele.wheels if wheels == [None] else wheels):   # None: the file's only one
         channels = tele.wheels.get(wheel)
