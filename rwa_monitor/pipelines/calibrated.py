@@ -303,13 +303,19 @@ def run_llr(tele: Telemetry, kwargs: Mapping[str, Any], path: str
                  'not_tested': skipped, 'calibration': str(path),
                  'runtime_s': _time.perf_counter() - start}
         if skipped['outside_calibrated_range']:
-            lo, hi = nominal.speed_range
-            entry['warning'] = (f'{skipped["outside_calibrated_range"]} samples outside the '
-                                f'calibrated speed range [{lo:.1f}, {hi:.1f}] rad/s: not '
-                                f'tested')
+            entry['warning'] = (f'{skipped["outside_calibrated_range"]} samples at speeds '
+                                f'the calibration did not determine its nominal at '
+                                f'({tested_text(nominal.tested)}): not tested')
         summary[wheel_id] = entry
         events.extend(found)
     return events, summary
+
+
+def tested_text(intervals: Sequence[tuple[float, float]]) -> str:
+    """Return the tested speed intervals as text (``tested at -250.0..-3.0, 3.0..240.0 rad/s``)."""
+    if not intervals:
+        return 'no speed tested'
+    return 'tested at ' + ', '.join(f'{a:.1f}..{b:.1f}' for a, b in intervals) + ' rad/s'
 
 
 def diagnose_wheel(block: Mapping[str, Any], time: np.ndarray, speed: np.ndarray,
