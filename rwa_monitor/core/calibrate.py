@@ -64,10 +64,10 @@ REFIT_RCOND = 1.0e-9
 # Speeds above this fraction of the largest |speed| seen form the reference region.
 REFERENCE_FRACTION = 0.3
 # The nominal is tested where the commissioning determined it (tested_speeds): the
-# standard error of its prediction at most this fraction of the standard error of the
-# mean of one LLR test window, noise std / sqrt(window) (docs/calibration.md, "Where the
-# nominal is tested").
-NOMINAL_SE_FRACTION = 0.5
+# standard error of its prediction at most this multiple of the standard error of the
+# mean of one LLR test window, noise std / sqrt(window): the nominal rests on at least
+# a window's worth of samples (docs/calibration.md, "Where the nominal is tested").
+NOMINAL_SE_FRACTION = 1.0
 # Speed step (rad/s) at which that standard error is evaluated.
 COVERAGE_STEP_RAD_S = 0.05
 # A speed whose regressor row leaves the fit's row space by more than this (relative) is
@@ -179,7 +179,6 @@ def calibrate_wheel(wheel: str, time: np.ndarray, speed: np.ndarray, friction: n
     for width in widths:
         band['speed_abs_below_rad_s'] = float(width)
         refit_outside_band(model, w, f, width)
-        block['tested_speeds_rad_s'] = tested_speeds(model, w, width, noise_model['std_nm'])
         residual, _ = NominalWheel(block).residual(t, w, f)
         events = [e for e in detect_batch(t, w, residual, component=wheel,
                                           false_alarm_rate=false_alarm_rate)
@@ -191,6 +190,12 @@ def calibrate_wheel(wheel: str, time: np.ndarray, speed: np.ndarray, friction: n
                            if inside.any() else noise_model['std_nm'])
     band['samples'] = int(np.sum(inside))
     band['noise_band_rad_s'] = float(widths[0])
+    # After the self-check, which looks for changes in the data on every sample outside
+    # the band (in sample, the nominal's error where data are few is fitted away).
+    block['tested_speeds_rad_s'] = tested_speeds(model, w, band['speed_abs_below_rad_s'],
+                                                 noise_model['std_nm'])
+    block['tested_samples'] = int(sum(np.count_nonzero((w >= a) & (w <= b))
+                                      for a, b in block['tested_speeds_rad_s']))
     block['fss'] = fss_reference(w, f, model, noise_model)
     block['changes_found_s'] = [float(e.time) for e in events]
     warnings = [f'{wheel}: a friction change ({e.kind}) at t = {e.time:.1f} s in the '
@@ -239,8 +244,8 @@ def tested_speeds(model: dict[str, Any], speed: np.ndarray, band_rad_s: float,
       determined by the data at all: a piecewise-linear knot beyond the data);
     - the standard error of its prediction, ``noise_std sqrt(x^T (X^T X)^+ x)`` with the
       same column scaling and singular-value cut as the fit, is at most
-      NOMINAL_SE_FRACTION ``noise_std / sqrt(window)``: the nominal is known to half the
-      precision of one test window's mean (``window``: the LLR's default).
+      NOMINAL_SE_FRACTION ``noise_std / sqrt(window)``: the nominal is known at least as
+      precisely as one test window's mean (``window``: the LLR's default).
 
     Evaluated every COVERAGE_STEP_RAD_S; a run of such speeds is one interval. Where
     commissioning passed only quickly (a zero crossing in a fast slew leaves a few

@@ -75,6 +75,10 @@ class NominalWheel:
         self._tables = {side: self._table(side, knots) for side in (1.0, -1.0)}
         self.at_zero = (float(nominal_prediction(self.friction_model, np.zeros(1))[0])
                         if any(a <= 0.0 <= b for a, b in self.tested) else np.nan)
+        # Both sides packed for the compiled lookup (also LLRDetector.update_nominal's).
+        self.table = llr_calibrated_step.pack_table(
+            self.band_rad_s, self.speed_range, self.at_zero, 1.0 / TABLE_STEP_RAD_S,
+            _lookup(*self._tables[1.0]), _lookup(*self._tables[-1.0]))
 
     def _tested(self, intervals: Any) -> tuple[tuple[float, float], ...]:
         """Return the signed speed intervals where the nominal is tested.
@@ -91,10 +95,6 @@ class NominalWheel:
             return ((lo, hi),)
         return tuple((a, b) for a, b in ((lo, min(hi, -self.band_rad_s)),
                                          (max(lo, self.band_rad_s), hi)) if a <= b)
-        # Both sides packed for the compiled lookup (also LLRDetector.update_nominal's).
-        self.table = llr_calibrated_step.pack_table(
-            self.band_rad_s, self.speed_range, self.at_zero, 1.0 / TABLE_STEP_RAD_S,
-            _lookup(*self._tables[1.0]), _lookup(*self._tables[-1.0]))
 
     def _table(self, side: float, knots: list[float]
                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
