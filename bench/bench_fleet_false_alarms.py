@@ -58,8 +58,12 @@ def spacecraft_telemetry(plan: Any, craft: Any) -> tuple[list[Any], Any]:
     return records[:plan.commissioning_passes], joined
 
 
-def detect_spacecraft(plan: Any, craft: Any, folder: pathlib.Path) -> dict[str, Any]:
-    """Commission, then run detect's code on the joined passes; return events and facts."""
+def detect_spacecraft(plan: Any, craft: Any, folder: pathlib.Path,
+                      llr: dict[str, Any] | None = None) -> dict[str, Any]:
+    """Commission, then run detect's code on the joined passes; return events and facts.
+
+    ``llr``: llr_detector parameters to set beside the installed ones (tests).
+    """
     import yaml
     from rwa_monitor.cli.cmd_detect import load_config
     from rwa_monitor.core.identify.model import plain
@@ -71,6 +75,7 @@ def detect_spacecraft(plan: Any, craft: Any, folder: pathlib.Path) -> dict[str, 
     config = load_config(None)
     block = config.setdefault('llr_detector', {}).setdefault('ros__parameters', {})
     block['calibration_file'] = str(path)
+    block.update(llr or {})
     events, summary = detect(joined.only('wheels'), config)
     wheels = summary['pipelines']['llr']['components'] if 'pipelines' in summary else {}
     return {'events': [e for e in events if e.detector == 'llr'], 'summary': wheels,
