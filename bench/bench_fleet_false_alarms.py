@@ -25,7 +25,6 @@ the ``fleet_false_alarms`` section of docs/results.md.
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import os
 import pathlib
@@ -42,10 +41,15 @@ SETTINGS = {'spacecraft': 6, 'days': 4.0}
 QUICK = {'spacecraft': 2, 'days': 3.0}
 DEFAULT_SEEDS = tuple(range(1, 4))
 GOAL_PER_100_H = 1.0
+# The fleet report's trend flag level (docs/fleet.md, "Report").
+TREND_LEVEL = 1.0e-3
 
 
 def spacecraft_telemetry(plan: Any, craft: Any) -> tuple[list[Any], Any]:
-    """Return (the commissioning records, every pass joined in time order)."""
+    """Return (the commissioning records, every pass joined in time order).
+
+    The joined record's ``aux['pass']`` numbers the passes (0, 1, ...), for the trend.
+    """
     from rwa_monitor.sim.fleet import pass_telemetry
     from rwa_monitor.telemetry import Telemetry
     order = sorted(range(len(craft.passes)), key=lambda i: craft.passes[i].start_s)
@@ -55,6 +59,8 @@ def spacecraft_telemetry(plan: Any, craft: Any) -> tuple[list[Any], Any]:
     parts = [r.columns() for r in records]
     joined = Telemetry.from_columns({k: np.concatenate([c[k] for c in parts])
                                      for k in parts[0]}, source=f'{craft.name} joined')
+    joined.aux['pass'] = np.concatenate([np.full(len(r), float(i))
+                                         for i, r in enumerate(records)])
     return records[:plan.commissioning_passes], joined
 
 
@@ -76,10 +82,38 @@ def detect_spacecraft(plan: Any, craft: Any, folder: pathlib.Path,
     block = config.setdefault('llr_detector', {}).setdefault('ros__parameters', {})
     block['calibration_file'] = str(path)
     block.update(llr or {})
+    passes = joined.aux.pop('pass')
     events, summary = detect(joined.only('wheels'), config)
     wheels = summary['pipelines']['llr']['components'] if 'pipelines' in summary else {}
     return {'events': [e for e in events if e.detector == 'llr'], 'summary': wheels,
-            'warnings': warnings, 'time': joined.time}
+            'warnings': warnings, 'time': joined.time,
+            'trend': trends(document['calibration']['wheels'], joined, passes)}
+
+
+def trends(blocks: dict[str, Any], joined: Any, passes: np.ndarray) -> dict[str, Any]:
+    """Return per wheel the dry trend of the pass levels against nominal (the fleet's).
+
+    As the fleet engine does (docs/fleet.md): ``pass_levels`` of each pass on the
+    calibrated detector's input (``NominalWheel.residual``: NaN where not tested), then
+    ``wheel_trend`` of the dry levels at the passes' mid times.
+    """
+    from rwa_monitor.core.nominal import NominalWheel
+    from rwa_monitor.core.trend import pass_levels, wheel_trend
+    bounds = np.flatnonzero(np.diff(passes)) + 1
+    out = {}
+    for wheel, block in blocks.items():
+        ch = joined.wheels[wheel]
+        residual, _ = NominalWheel(block).residual(joined.time, ch.speed, ch.friction)
+        mids, levels, errors = [], [], []
+        for seg in np.split(np.arange(len(joined)), bounds):
+            lv = pass_levels(joined.time[seg], ch.speed[seg], residual[seg])
+            mids.append(0.5 * (lv.t_start + lv.t_end))
+            levels.append(lv.dry)
+            errors.append(lv.dry_se)
+        line = wheel_trend(np.array(mids), np.array(levels), np.array(errors))
+        out[wheel] = {'dry_slope_nm_per_day': line.slope, 'dry_slope_se': line.slope_se,
+                      'p_value': line.p_value, 'passes': line.passes}
+    return out
 
 
 def _healthy_until(craft: Any, wheel: str) -> float:
@@ -115,6 +149,8 @@ def score_spacecraft(plan: Any, craft: Any, found: dict[str, Any]) -> dict[str, 
             'false': [_brief(e, time) for e in false], 'faults': [],
             'wear_declarations': ([_brief(e, time, events) for e in first]
                                   if craft.wear_per_day[wheel] > 0 else []),
+            'wear_nm_per_day': craft.wear_per_day[wheel],
+            'trend': found['trend'].get(wheel, {}),
             'verdict': found['summary'].get(wheel, {}).get('verdict'),
             'not_tested': found['summary'].get(wheel, {}).get('not_tested', {})}
         for fault in (f for f in craft.faults if f.wheel == wheel):
@@ -164,8 +200,9 @@ def _line(craft: dict[str, Any]) -> str:
     parts = []
     for wheel, entry in craft['wheels'].items():
         tags = [f'{len(entry["false"])} false'] if entry['false'] else []
-        tags += [f'fault {f["truth_kind"]}: ' + (f'found {f["final_kind"]}' if f['found']
-                                           else 'missed') for f in entry['faults']]
+        tags += [f'fault {f["truth_kind"]}: '
+                 + (f'found {f["final_kind"]}' if f['found'] else 'missed')
+                 for f in entry['faults']]
         if entry['wears']:
             tags.append(f'wears, {len(entry["wear_declarations"])} declared')
         if tags:
@@ -188,7 +225,16 @@ def totals(crafts: list[dict[str, Any]]) -> dict[str, Any]:
             'wear_declarations_ramp': sum(d['kind_shape'] == 'ramp' for w in wheels
                                           for d in w['wear_declarations']),
             'wheels_not_examined': sum(w['verdict'] not in (None, 'examined')
-                                       for w in wheels)}
+                                       for w in wheels),
+            'wearing_wheels': sum(w['wears'] for w in wheels),
+            'wearing_trend_flagged': sum(w['wears'] and _trend_flag(w) for w in wheels),
+            'other_trend_flagged': sum(not w['wears'] and _trend_flag(w) for w in wheels)}
+
+
+def _trend_flag(wheel: dict[str, Any]) -> bool:
+    """Return the report's trend flag: a dry slope with p < TREND_LEVEL (docs/fleet.md)."""
+    p = wheel.get('trend', {}).get('p_value', math.nan)
+    return bool(p < TREND_LEVEL)
 
 
 def evaluate(seeds: Iterable[int], spacecraft: int, days: float) -> dict[str, Any]:
@@ -203,22 +249,24 @@ def evaluate(seeds: Iterable[int], spacecraft: int, days: float) -> dict[str, An
 
 def markdown(result: dict[str, Any], label: str) -> str:
     """Return the docs/results.md table of one evaluation."""
-    t = result['totals']
     s = result['settings']
-    rows = [[r['seed'], r['false'], f'{r["healthy_hours"]:.1f}',
-             f'{r["false_per_100_h"]:.2f}', f'{r["faults_found"]}/{r["faults"]}',
-             f'{r["faults_right_kind"]}/{r["faults"]}',
-             f'{r["wear_declarations"]} ({r["wear_declarations_ramp"]} ramp)']
-            for r in result['runs']]
-    rows.append(['all', t['false'], f'{t["healthy_hours"]:.1f}',
-                 f'{t["false_per_100_h"]:.2f}', f'{t["faults_found"]}/{t["faults"]}',
-                 f'{t["faults_right_kind"]}/{t["faults"]}',
-                 f'{t["wear_declarations"]} ({t["wear_declarations_ramp"]} ramp)'])
+    rows = [[r['seed'], *_cells(r)] for r in result['runs']]
+    rows.append(['all', *_cells(result['totals'])])
     return (f'{label}: {s["spacecraft"]} spacecraft x {s["days"]:g} days per seed, '
             f'seeds {_span(s["seeds"])}; goal at most {GOAL_PER_100_H:g} false first '
             'declaration per 100 healthy wheel-hours.\n\n'
-            + report.table(['seed', 'false', 'healthy wheel-hours', 'per 100 h', 'faults found',
-                            'right final kind', 'wearing wheels: declarations'], rows))
+            + report.table(['seed', 'false', 'healthy wheel-hours', 'per 100 h',
+                            'faults found', 'right final kind',
+                            'wearing wheels: declarations', 'trend flag: wearing / others'],
+                           rows))
+
+
+def _cells(t: dict[str, Any]) -> list[Any]:
+    return [t['false'], f'{t["healthy_hours"]:.1f}', f'{t["false_per_100_h"]:.2f}',
+            f'{t["faults_found"]}/{t["faults"]}', f'{t["faults_right_kind"]}/{t["faults"]}',
+            f'{t["wear_declarations"]} ({t["wear_declarations_ramp"]} ramp)',
+            f'{t.get("wearing_trend_flagged", "-")}/{t.get("wearing_wheels", "-")} / '
+            f'{t.get("other_trend_flagged", "-")}']
 
 
 def _span(seeds: list[int]) -> str:

@@ -57,7 +57,7 @@ def test_the_fault_of_the_seeded_constellation_is_found_with_its_kind(seed_one):
 
 
 def _smooth_block(speed, friction, band=0.0):
-    """A calibration block whose nominal is model (1) plus the smooth-speed effect."""
+    """Return a calibration block whose nominal is model (1) plus the smooth-speed effect."""
     from rwa_monitor.core.identify import effects as fx
     from rwa_monitor.core.identify.data import IdentData
     data = IdentData(wheel='rw1', time=np.arange(speed.size) * 0.1, speed=speed,
