@@ -12,10 +12,12 @@ the plan's truth (what truth.json holds):
 - false declaration: a first declaration (revision 0) whose change estimate lies in a
   wheel's healthy time (a declaration on a wearing wheel is not false: its friction
   changes);
-- a fault is found when a first declaration on its wheel has its change estimate at or
-  after the last sample before the fault (the fault may fall between passes) and is
-  declared no earlier than the first sample carrying it; its final kind is the kind of
-  the last event of that change (the end-of-record revision included).
+- a fault is found when a first declaration on its wheel is declared no earlier than the
+  first sample carrying it, with its change estimated no earlier than the start of the
+  pass that holds the last sample before the fault (a fault between passes is then
+  estimated before the gap: counted as found and as *misdated*, not as false); its final
+  kind is the kind of the last event of that change (the end-of-record revision
+  included).
 
 ``--seeds`` picks seeds (development and acceptance seeds are kept apart by the user:
 docs/results.md says which were which). Results: bench/results/fleet_false_alarms.json and
@@ -138,33 +140,38 @@ def score_spacecraft(plan: Any, craft: Any, found: dict[str, Any]) -> dict[str, 
         limit = _healthy_until(craft, wheel)
         healthy_s = float(np.sum(np.clip(np.minimum(ends, limit) - starts, 0.0, None)
                                  + (ends < limit) / plan.rate_hz))
-        # A change estimated at the last sample before a fault that falls between passes
-        # is that fault (dated at the gap's start), not a false declaration.
-        before = time[time < limit]
-        healthy_end = float(before[-1]) if before.size and math.isfinite(limit) else limit
-        false = [e for e in first if e.time < healthy_end]
+        faults = []
+        for fault in (f for f in craft.faults if f.wheel == wheel):
+            before = time[time < fault.time_s]
+            after = time[time >= fault.time_s]
+            lo = float(before[-1]) if before.size else -math.inf
+            first_sample = float(after[0]) if after.size else math.inf
+            # The fault's declaration: declared once a sample carries it, its change
+            # estimated at or after the start of the pass that holds the last sample
+            # before the fault (an estimate before that sample is misdated: the fault
+            # fell in the gap after it, docs/fleet.md "False declarations").
+            since = float(np.max(starts[starts <= lo], initial=-math.inf))
+            hits = [e for e in first if e.time >= since - 1e-9
+                    and e.declared_time >= first_sample]
+            result = {'truth_kind': fault.kind, 'time_s': fault.time_s,
+                      'first_sample_s': first_sample, 'found': bool(hits)}
+            if hits:
+                result.update(_brief(hits[0], time, events))
+                result['misdated_s'] = max(0.0, lo - hits[0].time)
+                result['event_index'] = hits[0].index
+            faults.append(result)
+        found_at = {f.get('event_index') for f in faults}
+        false = [e for e in first if e.time < limit and e.index not in found_at]
         entry: dict[str, Any] = {
             'wears': craft.wear_per_day[wheel] > 0, 'healthy_hours': healthy_s / 3600.0,
             'declarations': len(first),
-            'false': [_brief(e, time) for e in false], 'faults': [],
+            'false': [_brief(e, time) for e in false], 'faults': faults,
             'wear_declarations': ([_brief(e, time, events) for e in first]
                                   if craft.wear_per_day[wheel] > 0 else []),
             'wear_nm_per_day': craft.wear_per_day[wheel],
             'trend': found['trend'].get(wheel, {}),
             'verdict': found['summary'].get(wheel, {}).get('verdict'),
             'not_tested': found['summary'].get(wheel, {}).get('not_tested', {})}
-        for fault in (f for f in craft.faults if f.wheel == wheel):
-            before = time[time < fault.time_s]
-            after = time[time >= fault.time_s]
-            lo = float(before[-1]) if before.size else -math.inf
-            first_sample = float(after[0]) if after.size else math.inf
-            hits = [e for e in first if e.time >= lo - 1e-9
-                    and e.declared_time >= first_sample]
-            result = {'truth_kind': fault.kind, 'time_s': fault.time_s,
-                      'first_sample_s': first_sample, 'found': bool(hits)}
-            if hits:
-                result.update(_brief(hits[0], time, events))
-            entry['faults'].append(result)
         out['wheels'][wheel] = entry
     return out
 
@@ -221,6 +228,7 @@ def totals(crafts: list[dict[str, Any]]) -> dict[str, Any]:
             'faults': len(faults), 'faults_found': sum(f['found'] for f in faults),
             'faults_right_kind': sum(f['found'] and f['final_kind'] == f['truth_kind']
                                      for f in faults),
+            'faults_misdated': sum(f.get('misdated_s', 0.0) > 0 for f in faults),
             'wear_declarations': sum(len(w['wear_declarations']) for w in wheels),
             'wear_declarations_ramp': sum(d['kind_shape'] == 'ramp' for w in wheels
                                           for d in w['wear_declarations']),
@@ -263,7 +271,8 @@ def markdown(result: dict[str, Any], label: str) -> str:
 
 def _cells(t: dict[str, Any]) -> list[Any]:
     return [t['false'], f'{t["healthy_hours"]:.1f}', f'{t["false_per_100_h"]:.2f}',
-            f'{t["faults_found"]}/{t["faults"]}', f'{t["faults_right_kind"]}/{t["faults"]}',
+            f'{t["faults_found"]}/{t["faults"]} ({t.get("faults_misdated", 0)} misdated)',
+            f'{t["faults_right_kind"]}/{t["faults"]}',
             f'{t["wear_declarations"]} ({t["wear_declarations_ramp"]} ramp)',
             f'{t.get("wearing_trend_flagged", "-")}/{t.get("wearing_wheels", "-")} / '
             f'{t.get("other_trend_flagged", "-")}']
