@@ -133,7 +133,8 @@ def score_spacecraft(plan: Any, craft: Any, found: dict[str, Any]) -> dict[str, 
     ends = starts + (int(math.floor(pass_s * plan.rate_hz + 1e-9)) - 1) / plan.rate_hz
     time = found['time']
     out: dict[str, Any] = {'spacecraft': craft.name, 'wheels': {}, 'warnings':
-                           found['warnings']}
+                           found['warnings'],
+                           'events': [e.to_json() for e in found['events']]}
     for wheel in plan.wheels:
         events = [e for e in found['events'] if e.component == wheel]
         first = [e for e in events if e.revision == 0]
