@@ -135,8 +135,10 @@ def calibrate_wheel(wheel: str, time: np.ndarray, speed: np.ndarray, friction: n
     calibrated LLR detector (docs/llr.md, "Calibrated") runs on the calibration data
     against the model just fitted, at ``false_alarm_rate``. The low-speed band starts
     where the noise profile puts it (``noise_band_rad_s``) and is widened, edge by edge
-    up to MAX_BAND_RAD_S, until that self-check is silent; at each width the weights are
-    refitted on the samples outside the band (:func:`refit_outside_band`): the residual of a static
+    up to MAX_BAND_RAD_S, until that self-check is silent (if no width silences it, the
+    noise profile's band stands: what is declared is not structure near zero speed); at
+    each width the weights are refitted on the samples outside the band
+    (:func:`refit_outside_band`): the residual of a static
     nominal model stays structured a little beyond where its excess noise is visible (on
     the bus: the Stribeck hysteresis, a few 1e-6 N m at 3-6 rad/s), and the band must
     hold what the detector would take for changes. Each change still declared at the
@@ -176,15 +178,23 @@ def calibrate_wheel(wheel: str, time: np.ndarray, speed: np.ndarray, friction: n
     band = noise_model['low_speed_band']
     widths = [band['speed_abs_below_rad_s']] + [
         e for e in BAND_EDGES if band['speed_abs_below_rad_s'] < e <= MAX_BAND_RAD_S]
-    for width in widths:
+
+    def self_check(width: float) -> list:
         band['speed_abs_below_rad_s'] = float(width)
         refit_outside_band(model, w, f, width)
         residual, _ = NominalWheel(block).residual(t, w, f)
-        events = [e for e in detect_batch(t, w, residual, component=wheel,
-                                          false_alarm_rate=false_alarm_rate)
-                  if e.revision == 0]
+        return [e for e in detect_batch(t, w, residual, component=wheel,
+                                        false_alarm_rate=false_alarm_rate)
+                if e.revision == 0]
+
+    for width in widths:
+        events = self_check(width)
         if not events:
             break
+    if events and len(widths) > 1:
+        # No band removes them: not the low-speed structure the widening is for (a change
+        # in the data, or a chance declaration), so the noise profile's band stands.
+        events = self_check(widths[0])
     inside = np.abs(w) < band['speed_abs_below_rad_s']
     band['std_nm'] = float(np.sqrt(np.mean(fitted_everywhere[inside] ** 2))
                            if inside.any() else noise_model['std_nm'])

@@ -37,9 +37,9 @@ class DeclaredChange:
     positions where the kind is re-checked (:func:`llr_common.checkpoints`), ``points``:
     the remaining positions where the ramp sums take in samples
     (:func:`llr_common.ramp_points`), ``ramp``: :func:`llr_growth.ramp_sums` blocks of
-    ``[tau, ramp_end]`` (times since ``time``). ``closed``: the re-checks are over (no
-    continuation test, :meth:`ChangeRules._continues`); the ramp sums still take in the
-    samples every ``window`` samples, into one last block (``tail``), for the end of
+    ``[tau, ramp_end]`` (times since ``time``). ``closed``: the re-checks are over; the
+    ramp sums still take in the samples every ``window`` samples, into one last block
+    (``tail``), for the continuation test (:meth:`ChangeRules._continues`) and the end of
     record. ``finished``: :meth:`ChangeRules.finish` has run.
     """
 
@@ -223,16 +223,18 @@ class ChangeRules:
     def _continues(self, tau: int, n: int) -> bool:
         """Return True if the change declared at ``n`` is the previous one still growing.
 
-        Possible while the previous change's kind is still re-checked (its ramp sums are
-        kept up to date): :func:`llr_growth.continues` on its segments up to ``n`` and on
-        the samples ``[tau, n]``. If so, its ramp sums take in the samples up to ``n``.
+        Its ramp sums are kept up to date whether its re-checks are over (closed) or not:
+        :func:`llr_growth.continues` on its segments up to ``n`` and on the samples
+        ``[tau, n]``. If so, its ramp sums take in the samples up to ``n``. A closed change
+        is tested too: a slow wear grows for days, past the last re-check (docs/llr.md
+        "One declaration per ramp").
         """
         prev = self._cat
-        if prev is None or prev.closed or prev.finished:
+        if prev is None or prev.finished:
             return False
         blocks = list(prev.ramp)
         if prev.ramp_end < n:
-            blocks.append(self._ramp_block(prev.ramp_end + 1, n, prev.time))
+            _add_block(blocks, self._ramp_block(prev.ramp_end + 1, n, prev.time), prev.tail)
         after = prev.gap + self._prefix_now()
         times = self._rings().time[np.arange(tau, n + 1) % self._L]
         if not llr_growth.continues(prev.before, prev.n_before, after, np.asarray(blocks),
@@ -282,13 +284,7 @@ class ChangeRules:
         cat = self._cat
         if j <= cat.ramp_end:
             return
-        block = self._ramp_block(cat.ramp_end + 1, j, cat.time)
-        if cat.tail:
-            # Merge into the block after the last re-check: sums add, the knot moves.
-            block = np.concatenate([block[:1], cat.ramp[-1][1:] + block[1:]])
-            cat.ramp[-1] = block
-        else:
-            cat.ramp.append(block)
+        _add_block(cat.ramp, self._ramp_block(cat.ramp_end + 1, j, cat.time), cat.tail)
         cat.tail = cat.closed
         cat.ramp_end = j
 
@@ -349,3 +345,16 @@ class ChangeRules:
         self._last_event = make_event(self._component, new, rows, times, cat.log_p,
                                       cat.revision, j - cat.tau + 1 if final else None)
         return [self._last_event]
+
+
+def _add_block(blocks: list[np.ndarray], block: np.ndarray, tail: bool) -> None:
+    """Append a ramp-sum block, or merge it into the last one after the last re-check.
+
+    Merged, the sums add and the knot moves to the new block's end: the time shapes of
+    a closed change stay those of its re-checks plus the straight ramp to the end, so
+    their number stays bounded however long the change grows.
+    """
+    if tail:
+        blocks[-1] = np.concatenate([block[:1], blocks[-1][1:] + block[1:]])
+    else:
+        blocks.append(block)
