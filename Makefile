@@ -4,11 +4,13 @@ VENV ?= .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test bench lint venv clean test-bsk demo-bus bench-bus interop
+.PHONY: demo test bench lint venv clean test-bsk demo-bus bench-bus interop openmct browser \
+	screenshots
 
 venv: $(STAMP)
 
-$(STAMP): requirements.txt setup.py setup.cfg rwa_monitor/core/_stepcall.c
+$(STAMP): requirements.txt setup.py setup.cfg rwa_monitor/core/_stepcall.c \
+		rwa_monitor/telemetry/_packetwalk.c
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --upgrade --quiet pip
 	$(PY) -m pip install --quiet -r requirements.txt
@@ -26,7 +28,7 @@ INTEROP := test/interop/node_modules/.installed
 # once); ROS tests lease their own domain id (test/ros_harness.py).
 TEST_WORKERS ?= 2
 
-test: $(STAMP) interop
+test: $(STAMP) interop openmct browser
 	$(PY) -m pytest test -n $(TEST_WORKERS) --dist loadfile
 
 interop:
@@ -36,6 +38,34 @@ interop:
 $(INTEROP): test/interop/package.json test/interop/package-lock.json
 	cd test/interop && npm ci --no-audit --no-fund --silent
 	touch $(INTEROP)
+
+# The operator's view (rwa-monitor openmct): the Open MCT bundle pinned by its lock file,
+# installed from the npm registry into a folder git ignores (rwa_monitor/openmct/bundle.py
+# says how the command finds it); skipped without npm (the command then says so).
+OPENMCT := rwa_monitor/openmct/npm/node_modules/.installed
+
+openmct:
+	@if command -v npm >/dev/null 2>&1; then $(MAKE) --no-print-directory $(OPENMCT); \
+	else echo 'npm not found: rwa-monitor openmct and its browser tests need Open MCT (npm)'; fi
+
+$(OPENMCT): rwa_monitor/openmct/npm/package.json rwa_monitor/openmct/npm/package-lock.json
+	cd rwa_monitor/openmct/npm && npm ci --no-audit --no-fund --silent
+	touch $(OPENMCT)
+
+# The browser tests drive Debian's chromium (playwright, requirements.txt); installed here
+# when missing and we are root with apt-get, else those tests skip and say why.
+browser:
+	@if command -v chromium >/dev/null 2>&1; then :; \
+	elif [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then \
+	  echo 'installing chromium (Debian) for the browser tests'; \
+	  apt-get -o DPkg::Lock::Timeout=600 update -qq && \
+	  DEBIAN_FRONTEND=noninteractive apt-get -o DPkg::Lock::Timeout=600 install -y -qq \
+	    chromium >/dev/null || echo 'chromium could not be installed: browser tests skip'; \
+	else echo 'chromium not found and not installable here: the browser tests will skip'; fi
+
+# The screenshots in docs/images: the browser tests, photographing into docs/.
+screenshots: $(STAMP) openmct browser
+	RWA_MONITOR_SCREENSHOTS=docs/images $(PY) -m pytest test/test_openmct_browser.py -q
 
 bench: $(STAMP)
 	$(PY) -m bench
@@ -52,7 +82,8 @@ BSK_VENV ?= .venv-bsk
 BSK_PY := $(BSK_VENV)/bin/python
 BSK_STAMP := $(BSK_VENV)/.installed
 
-$(BSK_STAMP): requirements.txt requirements-bsk.txt setup.py setup.cfg rwa_monitor/core/_stepcall.c
+$(BSK_STAMP): requirements.txt requirements-bsk.txt setup.py setup.cfg rwa_monitor/core/_stepcall.c \
+		rwa_monitor/telemetry/_packetwalk.c
 	$(PYTHON) -m venv $(BSK_VENV)
 	$(BSK_PY) -m pip install --upgrade --quiet pip
 	$(BSK_PY) -m pip install --quiet -r requirements.txt

@@ -42,12 +42,17 @@ INSTALL_REQUIRES = ROS_WHEELS + [
     'mcap>=1.6,<2',
     'mcap-ros2-support>=0.6,<0.7',
     'rosbags>=0.11.9,<0.12',
+    # CCSDS space packets in XTCE (telemetry/ccsds.py): reference decoder, safe XML
+    'space-packet-parser>=6.2,<7',
+    'lxml>=6.1,<7',
 ]
 EXTRAS_REQUIRE = {
     # the spacecraft simulation bus (rwa-monitor-bus, simulate basilisk)
     'bsk': ['bsk>=2.12,<3'],
     # the live view (rwa-monitor-foxglove): the SDK's server and the WebSocket front
     'foxglove': ['foxglove-sdk>=0.30.3,<0.31', 'websockets>=17.4,<18'],
+    # the operator's view server (rwa-monitor openmct); Open MCT itself comes from npm
+    'openmct': ['tornado>=6.6,<7'],
     # the fleet engine
     'fleet': ['dask>=2026.8,<2027', 'distributed>=2026.8,<2027', 'pyarrow>=26.0,<27'],
     # tests, lint and benchmarks
@@ -57,7 +62,7 @@ EXTRAS_REQUIRE = {
             'flake8-docstrings>=1.7,<2', 'flake8-import-order>=0.19.2,<0.20',
             'pydocstyle>=6.3,<7', 'mpmath>=1.3,<2', 'ruptures>=1.1,<2',
             'river>=0.26.1,<0.27', 'colcon-common-extensions>=0.3.0,<0.4',
-            'py-spy>=0.4.3,<0.5'],
+            'py-spy>=0.4.3,<0.5', 'playwright>=1.65,<2', 'yamcs-pymdb>=1.4,<2'],
 }
 
 ROS_BUILD = bool({'install', 'develop'} & set(sys.argv[1:]))
@@ -80,7 +85,10 @@ CONSOLE_SCRIPTS = ['rwa-monitor = rwa_monitor.cli.main:main'] + [
 # The one C call per streaming sample (docs/llr.md "Streaming call"); optional: without a C
 # compiler the package installs and the detector runs its compiled step from Python.
 EXT_MODULES = [Extension('rwa_monitor.core._stepcall', ['rwa_monitor/core/_stepcall.c'],
-                         optional=True)]
+                         optional=True),
+               # the packet walk (telemetry/_packetwalk.c); without it numba compiles it
+               Extension('rwa_monitor.telemetry._packetwalk',
+                         ['rwa_monitor/telemetry/_packetwalk.c'], optional=True)]
 
 setup(
     name=package_name,
@@ -92,7 +100,10 @@ setup(
         ('share/' + package_name + '/config', glob('config/*.yaml') + glob('config/*.json')),
         ('share/' + package_name + '/launch', glob('launch/*.py')),
     ],
-    package_data={package_name: ['config/*.yaml', 'data/*']},
+    # the operator's view: its page and plugin, and the npm lock of Open MCT (the bundle
+    # itself is installed by `make openmct` or `rwa-monitor openmct --install`)
+    package_data={package_name: ['config/*.yaml', 'data/*', 'openmct/web/*',
+                                 'openmct/npm/package.json', 'openmct/npm/package-lock.json']},
     python_requires='>=3.11',
     install_requires=['setuptools'] if ROS_BUILD else INSTALL_REQUIRES,
     extras_require={} if ROS_BUILD else EXTRAS_REQUIRE,

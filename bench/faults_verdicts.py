@@ -259,7 +259,7 @@ _FAILING_READER = (
     'from rwa_monitor.cli.main import main\n'
     'def broken(*args, **kwargs):\n'
     '    raise RuntimeError("reader failed")\n'
-    'detect.read_telemetry = broken\n'
+    'detect.read_input = broken\n'
     'sys.exit(main(sys.argv[1:]))\n')
 
 

@@ -109,10 +109,11 @@ def detect_events(path: pathlib.Path, calibration: pathlib.Path | None = None,
     return json.loads(out.read_text())['events']
 
 
-def events_of(events: list[dict], spacecraft: str) -> list[dict]:
-    """Return a spacecraft's fleet events without the ``spacecraft`` field."""
-    return [{k: v for k, v in e.items() if k != 'spacecraft'} for e in events
-            if e['spacecraft'] == spacecraft]
+def events_of(result, spacecraft: str) -> list[dict]:
+    """Return a spacecraft's current events of a fleet result (detect's JSON fields)."""
+    from rwa_monitor.fleet import history
+    return [h.event.to_json() for h in history.current(result.history)
+            if h.spacecraft == spacecraft]
 
 
 def references(archive: pathlib.Path, joined_files: dict[str, pathlib.Path]

@@ -19,9 +19,10 @@ ROSDEP_KEYS = {
     'scikit-learn': 'python3-sklearn', 'matplotlib': 'python3-matplotlib',
     'pyyaml': 'python3-yaml', 'rosbags': 'python3-rosbags-pip',
     'mcap-ros2-support': 'mcap-ros2-support', 'websockets': 'python3-websockets',
+    'lxml': 'python3-lxml',
 }
 # Without a rosdep key: package.xml's comments name each (and what brings it in).
-NO_ROSDEP_KEY = {'threadpoolctl', 'mcap', 'foxglove-sdk'}
+NO_ROSDEP_KEY = {'threadpoolctl', 'mcap', 'foxglove-sdk', 'space-packet-parser'}
 
 
 def setup_kwargs(*argv):
@@ -104,9 +105,9 @@ def test_ranges_run_from_the_tested_minor_to_the_next_breaking_release(declared)
 
 
 def test_extras_name_the_optional_parts(declared):
-    assert set(declared['extras_require']) == {'bsk', 'foxglove', 'fleet', 'dev'}
+    assert set(declared['extras_require']) == {'bsk', 'foxglove', 'fleet', 'dev', 'openmct'}
     core = {canonicalize_name(Requirement(r).name) for r in declared['install_requires']}
-    assert {'foxglove-sdk', 'bsk', 'dask', 'pytest'}.isdisjoint(core)
+    assert {'foxglove-sdk', 'bsk', 'dask', 'pytest', 'tornado', 'playwright'}.isdisjoint(core)
 
 
 def test_package_xml_lists_each_runtime_dependency_with_its_rosdep_key(declared):

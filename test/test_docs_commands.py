@@ -136,10 +136,11 @@ def test_documented_commands_run_as_written(scratch):
             continue
         _run(command, scratch, env)
         ran.append(command)
-    assert len(ran) == 15, ran
+    assert len(ran) == 18, ran
     assert (scratch / 'run_bag' / 'metadata.yaml').is_file()
     assert (scratch / 'id' / 'report.json').is_file()
     assert (scratch / 'events_bag.json').is_file()
+    assert (scratch / 'pass.xml').is_file() and (scratch / 'events_pass.json').is_file()
 
 
 class _Process:

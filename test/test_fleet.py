@@ -1,9 +1,11 @@
-"""rwa-monitor fleet: events equal detect on the joined passes; bad passes; --state.
+"""rwa-monitor fleet: events equal detect on the joined passes; bad passes; outputs.
 
 The archive (test/fleet_archive.py) holds two spacecraft whose passes are cut from one
 simulated record each, written under names out of time order, with gaps and an overlap,
 one spacecraft calibrated. The reference is ``rwa-monitor detect`` on the same rows as
-one file. The engine runs on a local Dask cluster of 2 worker processes.
+one file. The engine runs on a local Dask cluster of 2 worker processes. Daily runs
+(``--state``) are in test/test_fleet_history.py, the state folder in
+test/test_fleet_state.py.
 """
 
 import json
@@ -12,13 +14,14 @@ import shutil
 from distributed import Client, LocalCluster
 from fleet_archive import (as_read, CUTS_A, CUTS_B, detect_events, events_of, joined,
                            joined_from_files, make_archive, references, rows, write_passes)
+import numpy as np
+import pyarrow.parquet as pq
 import pytest
 import yaml
 
 from rwa_monitor.cli.main import main
 from rwa_monitor.core.identify.model import plain
 from rwa_monitor.exceptions import ConfigError
-from rwa_monitor.fleet import state
 from rwa_monitor.fleet.engine import run_archive
 from rwa_monitor.pipelines import calibrated
 from rwa_monitor.sim.aocs import add_gyro_channels, named_fault
@@ -48,10 +51,13 @@ def test_events_equal_detect_on_joined_passes(archive, client):
     assert len(client.scheduler_info()['workers']) == 2
     for craft, events in reference.items():
         assert events, 'the reference must find something for the test to mean anything'
-        assert events_of(result.events, craft) == events
+        assert events_of(result, craft) == events
     grouped = run_archive(folder, client=client)            # all passes in one task
-    assert grouped.events == result.events
-    assert json.dumps(grouped.trend) == json.dumps(result.trend)   # NaN-safe
+    assert [h.event.to_json() for h in grouped.history] == \
+        [h.event.to_json() for h in result.history]
+    assert [r.fields() for r in grouped.trend] == [r.fields() for r in result.trend] or \
+        json.dumps([r.fields() for r in grouped.trend]) == json.dumps(
+            [r.fields() for r in result.trend])               # NaN-safe
     summary = result.summary['spacecraft']
     # Time order by first stamp, never by name; the overlap of 100 rows dropped.
     assert summary['sat-a']['passes'] == [name for _, _, name in CUTS_A]
@@ -65,16 +71,18 @@ def test_events_equal_detect_on_joined_passes(archive, client):
     assert summary['sat-b']['components']['rw1']['verdict'] == 'unknown'
     assert list(summary['sat-b']['not_examined']) == ['rw1'] and not summary['sat-a'][
         'not_examined']
+    assert summary['sat-a']['components']['rw2']['health'] == 'dry'
+    assert summary['sat-a']['components']['rw1']['health'] == 'healthy'
     assert result.anomaly and result.incomplete
     workers = result.timings['per_worker']
     assert workers and all(w['peak_rss_mb'] > 0 for w in workers.values())
-    trend = [r for r in result.trend if r['spacecraft'] == 'sat-b' and r['wheel'] == 'rw2']
-    assert [r['pass'] for r in trend] == [name for _, _, name in CUTS_B]
-    assert {r['relative_to'] for r in trend} == {'nominal'}
+    trend = [r for r in result.trend if r.spacecraft == 'sat-b' and r.wheel == 'rw2']
+    assert [r.pass_name for r in trend] == [name for _, _, name in CUTS_B]
+    assert {r.relative_to for r in trend} == {'nominal'}
 
 
 def test_cli_outputs_and_unreadable_pass(tmp_path):
-    """A healthy spacecraft with a broken pass: the rest runs, exit code 3."""
+    """A healthy spacecraft with broken passes: the rest runs, exit code 3."""
     craft = tmp_path / 'archive' / 'sat-c'
     craft.mkdir(parents=True)
     tele = simulate_friction(duration_s=600, rate_hz=10, wheels=('rw1',), seed=5)
@@ -86,6 +94,10 @@ def test_cli_outputs_and_unreadable_pass(tmp_path):
     (craft / 'notes.txt').write_text('not telemetry')
     (craft / 'p9.csv').write_bytes(b'\xff\xfe junk')
     (craft / 'p8.csv').write_text(broken[0] + '\n')              # header only
+    import pyarrow as pa
+    pq.write_table(pa.table({'time': pa.array([None] * 5, type=pa.float64()),
+                             'rw1_speed': [1.0] * 5, 'rw1_friction': [0.0] * 5}),
+                   craft / 'p7.parquet')                         # a time column all null
     (tmp_path / 'archive' / 'sat-empty').mkdir()
     broken_cal = tmp_path / 'archive' / 'sat-d'
     broken_cal.mkdir()
@@ -101,8 +113,9 @@ def test_cli_outputs_and_unreadable_pass(tmp_path):
     assert summary['not_examined']['pass p8.csv'].endswith('no rows')
     assert 'not a number' in summary['not_examined']['pass p0.csv']
     assert 'pass p9.csv' in summary['not_examined']
+    assert 'first time is None' in summary['not_examined']['pass p7.parquet']
     assert summary['ignored'] == {'notes.txt': summary['ignored']['notes.txt']}
-    assert summary['components']['rw1']['passes'] == 2
+    assert summary['components']['rw1']['passes_this_run'] == 2
     assert summary['components']['rw1']['samples'] == 6000
     for name in ('events.json', 'events.parquet', 'summary.json', 'trend.parquet',
                  'report.html'):
@@ -110,7 +123,7 @@ def test_cli_outputs_and_unreadable_pass(tmp_path):
     inside = tmp_path / 'archive' / 'out'
     assert main(['fleet', str(tmp_path / 'archive'), '-o', str(inside)]) == 2
     assert not inside.exists()
-    for name in ('p0.csv', 'p8.csv', 'p9.csv'):
+    for name in ('p0.csv', 'p7.parquet', 'p8.csv', 'p9.csv'):
         (craft / name).unlink()
     (tmp_path / 'archive' / 'sat-empty').rmdir()
     shutil.rmtree(broken_cal)
@@ -122,61 +135,53 @@ def test_cli_outputs_and_unreadable_pass(tmp_path):
     blocked.write_text('a file, not a folder')
     assert main(['fleet', str(tmp_path / 'archive'), '-o', str(blocked), '--state',
                  str(kept), '--workers', '1']) == 2
-    assert not list(kept.glob('*.json'))
+    assert not (kept / 'current.json').exists()
     assert main(['fleet', str(tmp_path / 'archive'), '-o', str(out), '--state', str(kept),
                  '--workers', '1']) == 0
-    assert (kept / 'sat-c.json').exists()
+    assert (kept / 'current.json').exists()
+    # --state inside -o, or -o inside --state: refused before anything is run.
+    for state_dir, output in ((out / 'state', out), (kept, kept / 'out')):
+        assert main(['fleet', str(tmp_path / 'archive'), '-o', str(output), '--state',
+                     str(state_dir), '--workers', '1']) == 2
 
 
-def _partial(folder, target, keep):
-    """Copy the archive with only the passes named in ``keep``."""
-    for craft in folder.iterdir():
-        (target / craft.name).mkdir(parents=True, exist_ok=True)
-        for entry in craft.iterdir():
-            if entry.name in keep or entry.name == 'calibration.yaml':
-                shutil.copy(entry, target / craft.name / entry.name)
+def test_output_folder_of_someone_else_is_refused(tmp_path, capsys):
+    """An -o folder holding a user's events.json or report.html is never replaced."""
+    craft = tmp_path / 'archive' / 'sat-c'
+    craft.mkdir(parents=True)
+    write_telemetry(craft / 'p1.csv', simulate_friction(duration_s=300, rate_hz=10,
+                                                        wheels=('rw1',), seed=5))
+    for name in ('events.json', 'report.html', 'notes.md'):
+        out = tmp_path / f'out-{name}'
+        out.mkdir()
+        (out / name).write_text('mine')
+        assert main(['fleet', str(tmp_path / 'archive'), '-o', str(out), '--workers',
+                     '1']) == 2
+        assert (out / name).read_text() == 'mine' and len(list(out.iterdir())) == 1
+        assert 'not replacing' in capsys.readouterr().err
 
 
-def test_resumed_state_equals_full_run(archive, client, tmp_path):
+def test_outputs_have_every_event_field_and_utc_times(archive, client, tmp_path):
+    from rwa_monitor.fleet.outputs import write_outputs
     folder, reference, _ = archive
-    first = {'pass_k.csv', 'pass_b.parquet', 'zz.csv'}
-    growing = tmp_path / 'archive'
-    _partial(folder, growing, first)
-    kept = tmp_path / 'state'
-    one = run_archive(growing, client=client, state_dir=kept, task_bytes=1)
-    _partial(folder, growing, {name for _, _, name in CUTS_A + CUTS_B})
-    two = run_archive(growing, client=client, state_dir=kept)
-    for craft, events in reference.items():
-        # The first run's end-of-archive categorisations are superseded by the second run
-        # (its state is the one before them): every other event is reported once.
-        before = [e for e in events_of(one.events, craft) if not e.get('final')]
-        assert before + events_of(two.events, craft) == events
-        assert events_of(two.events, craft), 'the second part must hold events'
-    done = two.summary['spacecraft']['sat-a']['already_processed']
-    assert done == ['pass_k.csv', 'pass_b.parquet']
-    three = run_archive(growing, client=client, state_dir=kept)
-    assert three.events == [] and not three.incomplete
-    # The friction trend covers the wheel's life: earlier passes' rows come from the state.
-    full = run_archive(folder, client=client)
-    assert json.dumps(two.trend) == json.dumps(full.trend) == json.dumps(three.trend)
-
-
-def test_foreign_state_is_refused(archive, client, tmp_path):
-    folder, _, _ = archive
-    kept = tmp_path / 'state'
-    run_archive(folder, client=client, state_dir=kept)
-    other = tmp_path / 'other.yaml'
-    other.write_text('llr_detector:\n  ros__parameters:\n    window: 400\n')
-    with pytest.raises(state.StateMismatch, match='other parameters'):
-        run_archive(folder, client=client, state_dir=kept, config=other)
-    document = json.loads((kept / 'sat-a.json').read_text())
-    document['version'] = state.VERSION + 1
-    (kept / 'sat-a.json').write_text(json.dumps(document))
-    with pytest.raises(ConfigError, match='refusing to mix'):
-        run_archive(folder, client=client, state_dir=kept)
-    code = main(['fleet', str(folder), '-o', str(tmp_path / 'out'), '--state', str(kept),
-                 '--workers', '1'])
-    assert code == 2
+    copy = tmp_path / 'archive'
+    shutil.copytree(folder, copy)
+    (copy / 'archive.yaml').write_text('epoch_utc: 2026-03-01T12:00:00Z\n')
+    result = run_archive(copy, client=client)
+    write_outputs(tmp_path / 'out', result)
+    table = pq.read_table(tmp_path / 'out' / 'events.parquet').to_pylist()
+    document = json.loads((tmp_path / 'out' / 'events.json').read_text())['events']
+    assert len(table) == len(document) == sum(len(v) for v in reference.values())
+    keys = set().union(*(e.keys() for v in reference.values() for e in v))
+    assert keys <= set(table[0]) and {'final', 'final_samples', 'time_utc', 'new',
+                                      'superseded'} <= set(table[0])
+    first = min(document, key=lambda e: e['time'])
+    assert first['time_utc'].startswith('2026-03-0') and first['time_utc'].endswith('Z')
+    assert all(e['new'] and not e['superseded'] for e in document)
+    summary = json.loads((tmp_path / 'out' / 'summary.json').read_text())
+    assert summary['epoch_utc'] == '2026-03-01T12:00:00.000Z'
+    page = (tmp_path / 'out' / 'report.html').read_text()
+    assert 'UTC' in page and '<h2>Events</h2>' in page and 'Data from 2026-03-01' in page
 
 
 def test_recording_passes_equal_detect(client, tmp_path):
@@ -198,7 +203,7 @@ def test_recording_passes_equal_detect(client, tmp_path):
                                                 tmp_path / 'joined.parquet'))
     assert reference
     result = run_archive(tmp_path / 'archive', client=client, task_bytes=1)
-    assert events_of(result.events, 'sat-r') == reference
+    assert events_of(result, 'sat-r') == reference
     summary = result.summary['spacecraft']['sat-r']
     assert summary['passes'] == names and summary['rows_dropped'] == 100
 
@@ -221,24 +226,49 @@ def test_calibrated_gyro_equals_detect(client, tmp_path):
                               craft / 'calibration.yaml')
     assert any(e['component'] == 'gyro_z' for e in reference)
     result = run_archive(tmp_path / 'archive', client=client, task_bytes=1)
-    assert events_of(result.events, 'sat-g') == reference
+    assert events_of(result, 'sat-g') == reference
 
 
-def test_limits_from_the_config_reach_summary_and_leave_the_state(archive, client, tmp_path):
+def test_refined_friction_model_equals_detect(client, tmp_path):
+    """The fleet takes every option detect takes, a refined friction model included."""
+    t = np.arange(0.0, 3000.0, 0.1)
+    rng = np.random.default_rng(8)
+    w = 150.0 * np.sin(t / 60.0) + 20.0
+    temp = 20.0 + 10.0 * np.sin(t / 700.0)
+    f = (-(2e-4 + 1e-5 * (temp - 20.0) + 3e-4 * (t >= 2000.0)) * np.sign(w) - 5e-7 * w
+         + rng.normal(0.0, 5e-5, t.size))
+    from rwa_monitor.telemetry import Telemetry
+    tele = Telemetry.from_columns({'time': t, 'rw1_speed': w, 'rw1_friction': f,
+                                   'rw1_temperature': temp})
+    model = tmp_path / 'model.yaml'
+    model.write_text('friction_model:\n  wheel: rw1\n  effects:\n'
+                     '  - name: aux:rw1_temperature:dry\n    kind: aux\n'
+                     '    params: {column: rw1_temperature, component: dry, center: 20.0}\n')
+    config = tmp_path / 'config.yaml'
+    config.write_text(f'llr_detector:\n  ros__parameters:\n    friction_model_file: {model}\n'
+                      '    window: 300\n')
+    tele = as_read(tele, tmp_path)
+    cuts = [(0, 12000, 'b.csv'), (12500, 30000, 'a.csv')]
+    write_passes(tmp_path / 'archive' / 'sat-m', tele, cuts)
+    reference = detect_events(joined(tele, cuts, tmp_path / 'joined.csv'), config=config)
+    assert reference
+    result = run_archive(tmp_path / 'archive', client=client, config=config, task_bytes=1)
+    assert events_of(result, 'sat-m') == reference
+
+
+def test_limits_from_the_config_reach_summary(archive, client, tmp_path):
     """The fleet block's limits: each wheel's trend in summary.json; detectors unchanged."""
-    from rwa_monitor.fleet.report import wheel_trends
+    from rwa_monitor.fleet.trends import wheel_trends
     folder, reference, _ = archive
-    kept = tmp_path / 'state'
-    run_archive(folder, client=client, state_dir=kept, commit=False)
     config = tmp_path / 'limits.yaml'
     config.write_text('fleet:\n  ros__parameters:\n    dry_limit: 2.0e-4\n'
                       '    viscous_limit: 3.0e-6\n')
-    result = run_archive(folder, client=client, state_dir=kept, config=config)
+    result = run_archive(folder, client=client, config=config)
     limits = {'dry': 2.0e-4, 'viscous': 3.0e-6}
     assert result.summary['trend_limits'] == limits
     for craft, events in reference.items():
-        assert events_of(result.events, craft) == events
-    expected = wheel_trends(result.trend, limits)
+        assert events_of(result, craft) == events
+    expected = wheel_trends([r.fields() for r in result.trend], limits)
     assert len(expected) == 4
     for entry in expected:
         shown = result.summary['spacecraft'][entry['spacecraft']]['components'][
@@ -249,23 +279,26 @@ def test_limits_from_the_config_reach_summary_and_leave_the_state(archive, clien
             want = entry[key]
             assert value == (None if isinstance(want, float) and want != want else want) \
                 or abs(want) == float('inf') and value is None
-    json.dumps(result.summary, allow_nan=False, default=str)      # valid JSON: no NaN
     bad = tmp_path / 'bad.yaml'
     bad.write_text('fleet:\n  ros__parameters:\n    dry_limit: -1.0\n')
     with pytest.raises(ConfigError, match='dry_limit'):
+        run_archive(folder, client=client, config=bad)
+    bad.write_text('fleet:\n  ros__parameters:\n    epoch_utc: yesterday\n')
+    with pytest.raises(ConfigError, match='epoch_utc'):
         run_archive(folder, client=client, config=bad)
 
 
 def test_calibrated_levels_use_only_the_samples_the_detector_tests(archive):
     """Speeds outside the calibrated range: NaN for the trend fit too, dropped and counted."""
-    import numpy as np
     from rwa_monitor.core.trend import pass_levels
-    from rwa_monitor.fleet import components as comp
-    from rwa_monitor.telemetry import Telemetry
-    folder, _, _ = archive
+    from rwa_monitor.fleet.archive import PassFile
+    from rwa_monitor.fleet.chain import setup_of, SpacecraftSpec, step
+    from rwa_monitor.fleet.records import Chain
+    from rwa_monitor.pipelines.llr import DEFAULTS
+    folder, _, work = archive
     cal = str(folder / 'sat-b' / 'calibration.yaml')
-    spec = comp.ComponentSpec('sat-b', 'rw1', {'calibration_file': cal})
-    detector, nominal = comp.build(spec)
+    spec = SpacecraftSpec('sat-b', ('rw1',), False, {**DEFAULTS, 'calibration_file': cal})
+    nominal = setup_of(spec).runner('rw1').nominal
     rng = np.random.default_rng(3)
     lo, hi = nominal.speed_range
     inside = rng.uniform(max(nominal.band_rad_s, 2.0), 0.9 * min(hi, -lo), 3000)
@@ -275,21 +308,22 @@ def test_calibrated_levels_use_only_the_samples_the_detector_tests(archive):
     t = 0.1 * np.arange(w.size)
     f = np.concatenate([nominal.nominal(inside) + rng.normal(0, 5e-5, inside.size),
                         np.full(outside.size, 0.5)])   # far off: would wreck a fit
-    chain = comp.new_chain()
-    tele = Telemetry.from_columns({'time': t, 'rw1_speed': w, 'rw1_friction': f})
-    comp._feed_wheel(spec, detector, nominal, tele, chain, 'p1')
-    row = chain['trend'][0]
-    alone = pass_levels(t[:inside.size], inside, f[:inside.size] - nominal.nominal(inside))
-    assert row['samples'] == alone.samples == inside.size
-    assert row['dry'] == pytest.approx(alone.dry, rel=1e-9, abs=1e-15)
-    assert row['viscous'] == pytest.approx(alone.viscous, rel=1e-9, abs=1e-18)
-    assert abs(row['dry']) < 5 * row['dry_se'] + 1e-9 and row['relative_to'] == 'nominal'
-    assert chain['not_tested']['outside_calibrated_range'] == outside.size
+    from rwa_monitor.telemetry import Telemetry
+    path = work / 'levels.csv'
+    write_telemetry(path, Telemetry.from_columns({'time': t, 'rw1_speed': w,
+                                                  'rw1_friction': f}))
+    chain = step(spec, Chain(-np.inf, {}), [PassFile('p1', str(path), 1, 0.0, ())])
+    row = chain.trend[0]
+    f = np.loadtxt(path, delimiter=',', skiprows=1, usecols=2)[:inside.size]
+    alone = pass_levels(t[:inside.size], inside, f - nominal.nominal(inside))
+    assert row.samples == alone.samples == inside.size
+    assert row.dry == pytest.approx(alone.dry, rel=1e-6, abs=1e-12)
+    assert abs(row.dry) < 5 * row.dry_se + 1e-9 and row.relative_to == 'nominal'
+    assert chain.facts['rw1'].not_tested['outside_calibrated_range'] == outside.size
 
 
 def test_not_examined_follows_detect_coverage_rule(client, tmp_path):
     """A wheel whose friction is mostly missing is ``unknown`` as in detect, with its counts."""
-    import numpy as np
     from rwa_monitor.pipelines import detect
     from rwa_monitor.telemetry import read_telemetry, Telemetry
     tele = simulate_friction(duration_s=1200, rate_hz=10, wheels=('rw1', 'rw2'), seed=7)
@@ -306,10 +340,10 @@ def test_not_examined_follows_detect_coverage_rule(client, tmp_path):
     wheels = result.summary['spacecraft']['sat-u']['components']
     for wheel in ('rw1', 'rw2'):
         expected = reference[wheel]
-        for key in ('verdict', 'samples', 'usable_samples', 'needed_samples'):
+        for key in ('verdict', 'samples', 'usable_samples', 'needed_samples', 'rejected'):
             assert wheels[wheel][key] == expected[key], (wheel, key)
-    assert wheels['rw1']['verdict'] == 'examined' and wheels['rw1']['not_examined'] is None
-    assert wheels['rw2']['verdict'] == 'unknown'
-    assert wheels['rw2']['not_examined'] == (
-        f'llr: rw2 unknown: {reference["rw2"]["verdict_reason"]}')
+    assert wheels['rw1']['verdict'] == 'examined'
+    assert wheels['rw2']['verdict'] == 'unknown' and wheels['rw2']['health'] == 'unknown'
+    missing = result.summary['spacecraft']['sat-u']['not_examined']
+    assert missing == {'rw2': f'llr: unknown: {reference["rw2"]["verdict_reason"]}'}
     assert result.incomplete

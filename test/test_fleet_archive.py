@@ -48,7 +48,8 @@ def test_scan_orders_by_first_stamp_and_names_components(record, tmp_path):
     scans = [archive.scan_pass(str(tmp_path / n)) for n in ('a.parquet', 'b.csv')]
     assert [s.first for s in scans] == [30.0, 0.0]
     assert archive.components(scans[0].columns) == ['rw1', 'rw2']
-    assert archive.scan_pass(str(tmp_path / 'missing.csv')).startswith('FileNotFoundError')
+    assert archive.scan_pass(str(tmp_path / 'missing.csv')).startswith(
+        'unreadable: FileNotFoundError')
 
 
 def test_rows_at_or_before_the_last_time_are_dropped(record):
@@ -59,11 +60,12 @@ def test_rows_at_or_before_the_last_time_are_dropped(record):
     assert same is record and none == 0
 
 
-def test_events_parquet_takes_fields_of_mixed_types():
+def test_events_parquet_takes_fields_of_mixed_types_and_of_every_row():
     import io
-    from rwa_monitor.fleet.outputs import _parquet
+    from rwa_monitor.fleet.history import parquet
     rows = [{'spacecraft': 'a', 'x': 1.5, 'y': None}, {'spacecraft': 'b', 'x': 'text',
-                                                       'y': [1, 2]}]
-    table = pq.read_table(io.BytesIO(_parquet(rows, {})))
+                                                       'y': [1, 2], 'final': True}]
+    table = pq.read_table(io.BytesIO(parquet(rows, {})))
     assert table.column('x').to_pylist() == ['1.5', '"text"']
     assert table.column('y').to_pylist() == [None, '[1, 2]']
+    assert table.column('final').to_pylist() == [None, True]   # a field the first row lacks

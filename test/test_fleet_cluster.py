@@ -98,4 +98,4 @@ def test_worker_killed_mid_run_gives_the_same_events(cluster, tmp_path):
         assert 'error' not in outcome, outcome.get('error')
         assert victim not in client.scheduler_info()['workers']
     for craft, events in reference.items():
-        assert events_of(outcome['result'].events, craft) == events
+        assert events_of(outcome['result'], craft) == events

@@ -1,14 +1,23 @@
 """The fleet's report.html (rwa_monitor/fleet/report.py): self-contained, every wheel shown."""
 
 import base64
+import datetime as dt
 import re
 
 import numpy as np
 import pytest
 
 from rwa_monitor.core.trend import SECONDS_PER_DAY
-from rwa_monitor.fleet.engine import add_trends, trend_limits
-from rwa_monitor.fleet.report import wheel_trends, write_report
+from rwa_monitor.fleet.report import render
+from rwa_monitor.fleet.trends import add_trends, trend_limits, wheel_trends
+
+
+def write_report(path, events, summary, rows, limits=None, epoch=None):
+    """Write the page of these inputs at ``path`` (the trends fitted once, as a run does)."""
+    trends = wheel_trends(rows, limits if limits is not None else
+                          summary.get('trend_limits') or {})
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(render(events, summary, rows, trends, epoch))
 
 
 def rows_of(craft, wheel, wear_per_day, seed, passes=30):
@@ -28,13 +37,26 @@ def rows_of(craft, wheel, wear_per_day, seed, passes=30):
 def fleet_inputs():
     rows = (rows_of('sc1', 'rw1', 0.0, 1) + rows_of('sc1', 'rw2', 2e-6, 2)
             + rows_of('sc<2>', 'rw1', 0.0, 3) + rows_of('sc<2>', 'rw2', 0.0, 4))
-    events = [{'spacecraft': 'sc<2>', 'component': 'rw1', 'kind': 'dry',
-               'time': 4.5 * SECONDS_PER_DAY, 'detector': 'llr'},
-              {'spacecraft': 'sc1', 'component': 'gyro_y', 'kind': 'drift',
-               'time': 2.25 * SECONDS_PER_DAY, 'detector': 'vsadc'}]
-    summary = {'spacecraft': {'sc1': {'components': {}, 'not_examined': {}},
-                              'sc<2>': {'components': {'rw2': {'not_examined': 'no rows'}},
-                                        'not_examined': {'pass x.csv': 'unreadable'}}},
+    events = [{'spacecraft': 'sc<2>', 'component': 'rw1', 'kind': 'dry', 'index': 7,
+               'time': 4.5 * SECONDS_PER_DAY, 'declared_time': 4.6 * SECONDS_PER_DAY,
+               'detector': 'llr', 'p_value': 0.0, 'delta_dry_nm': 1.5e-4, 'revision': 1,
+               'final': True, 'new': True},
+              {'spacecraft': 'sc<2>', 'component': 'rw1', 'kind': 'both', 'index': 7,
+               'time': 4.5 * SECONDS_PER_DAY, 'declared_time': 4.6 * SECONDS_PER_DAY,
+               'detector': 'llr', 'p_value': 1e-9, 'revision': 0},
+              {'spacecraft': 'sc1', 'component': 'gyro_y', 'kind': 'drift', 'index': 3,
+               'time': 2.25 * SECONDS_PER_DAY, 'declared_time': 2.3 * SECONDS_PER_DAY,
+               'detector': 'vsadc', 'p_value': None, 'revision': 0},
+              {'spacecraft': 'sc1', 'component': 'rw1', 'kind': 'viscous', 'index': 9,
+               'time': 1.0 * SECONDS_PER_DAY, 'declared_time': 1.1 * SECONDS_PER_DAY,
+               'detector': 'llr', 'p_value': 1e-5, 'revision': 0, 'superseded': True}]
+    summary = {'spacecraft': {'sc1': {'components': {'rw1': {'health': 'healthy'},
+                                                     'rw2': {'health': 'healthy'}},
+                                      'not_examined': {}},
+                              'sc<2>': {'components': {'rw1': {'health': 'dry'},
+                                                       'rw2': {'health': 'unknown'}},
+                                        'not_examined': {'pass x.csv': 'unreadable',
+                                                         'rw2': 'no rows'}}},
                'engine': {'wall_s': 12.5, 'workers': 2}}
     return events, summary, rows
 
@@ -68,10 +90,22 @@ def test_report_is_self_contained_and_shows_every_wheel(tmp_path):
     for craft, wheel in [('sc1', 'rw1'), ('sc1', 'rw2'), ('sc&lt;2&gt;', 'rw1')]:
         assert f'<td>{wheel}</td>' in text and craft in text
     assert 'sc<2>' not in text                       # names are escaped
-    assert 'trend (dry)' in text and 'events (dry)' in text
-    assert 'sc1 gyro_y: vsadc drift at day 2.250' in text
-    assert 'not examined: no rows' in text and 'pass x.csv: unreadable' in text
-    assert list(tmp_path.joinpath('out').iterdir()) == [path]   # atomic: no leftovers
+    assert 'healthy; trend (dry)' in text and '<td>dry</td>' in text
+    assert 'unknown (not examined)' in text
+    assert 'rw2: no rows' in text and 'pass x.csv: unreadable' in text
+    events = text.split('<h2>Events</h2>')[1].split('</table>')[0]
+    # One row per change at its latest revision; the superseded event is not shown.
+    assert events.count('<tr') == 3 and 'viscous' not in events and 'both' not in events
+    assert '&lt; 1e-300' in events and 'n/a' in events and '+1.50e-04 N m dry' in events
+    assert 'day 4.500' in events and 'the archive has no epoch' in text
+
+
+def test_report_gives_calendar_times_with_an_epoch(tmp_path):
+    events, summary, rows = fleet_inputs()
+    epoch = dt.datetime(2026, 1, 1, tzinfo=dt.timezone.utc)
+    write_report(tmp_path / 'report.html', events, summary, rows, epoch=epoch)
+    text = (tmp_path / 'report.html').read_text()
+    assert '2026-01-05 12:00:00 UTC' in text and 'Data from 2026-01-01 00:00:00 UTC' in text
 
 
 def test_report_of_an_empty_fleet_and_of_unusable_passes(tmp_path):
@@ -89,8 +123,8 @@ def test_summary_trends_are_the_report_numbers(tmp_path):
     events, summary, rows = fleet_inputs()
     summary['spacecraft']['sc1']['components'] = {'rw1': {}, 'rw2': {}}
     limits = trend_limits({'dry_limit': 2.3e-4, 'viscous_limit': 0.0})
-    assert limits == {'dry': 2.3e-4}
-    add_trends(summary, rows, limits)
+    assert limits.as_dict() == {'dry': 2.3e-4} and limits.viscous is None
+    add_trends(summary, wheel_trends(rows, limits), limits)
     assert summary['trend_limits'] == {'dry': 2.3e-4}
     wear = summary['spacecraft']['sc1']['components']['rw2']['trend']
     table = {(t['spacecraft'], t['wheel']): t for t in wheel_trends(rows, limits)}

@@ -1,127 +1,229 @@
-"""The fleet's detector state codec: saved mid-stream, restored, continued == uninterrupted.
+"""The fleet's state folder (format 2): checked whole, never trusted beyond its folder.
 
-Cuts fall in the noise-model fit (samples buffered), before and after a declaration and
-in the revision period of the LLR detector, and in the gyro diagnosis before and after
-its nominal class is learnt and after a fault. The tree goes through JSON and the arrays
-through .npz bytes, as on disk.
+A state that was edited, truncated, swapped, pointed outside its folder or replaced by a
+FIFO is refused with a StateError naming the file (exit 2 from the command) in every
+case; the unedited state resumes exactly; a commit cut short at any point leaves the old
+or the new state whole, and only files the fleet wrote are removed.
 """
 
-import io
 import json
+import os
+import shutil
 
-import numpy as np
+from distributed import Client, LocalCluster
+from fleet_archive import events_of, rows
+from hypothesis import given, HealthCheck, settings, strategies as st
 import pytest
 
-from rwa_monitor.core.llr import LLRDetector
-from rwa_monitor.core.schema import LLR, llr_kwargs, VSADC
-from rwa_monitor.exceptions import ConfigError
-from rwa_monitor.fleet import codec, state
-from rwa_monitor.pipelines import vsadc
-from rwa_monitor.sim.aocs import add_gyro_channels, named_fault
+from rwa_monitor.cli.main import main
+from rwa_monitor.fleet import state
+from rwa_monitor.fleet.engine import run_archive
 from rwa_monitor.sim.friction import parse_anomaly, simulate_friction
-
-
-def _through_disk(detector):
-    tree, arrays = codec.encode(detector)
-    buffer = io.BytesIO()
-    np.savez(buffer, **arrays)
-    with np.load(io.BytesIO(buffer.getvalue()), allow_pickle=False) as npz:
-        loaded = {k: npz[k] for k in npz.files}
-    return json.loads(json.dumps(tree)), loaded
-
-
-def _views(detector):
-    """Return the pairs of array attributes of ``detector`` that share memory."""
-    arrays = {k: v for k, v in vars(detector).items() if isinstance(v, np.ndarray)}
-    return {(a, b) for a in arrays for b in arrays
-            if a < b and np.shares_memory(arrays[a], arrays[b])}
+from rwa_monitor.telemetry import write_telemetry
 
 
 @pytest.fixture(scope='module')
-def wheel_rows():
-    tele = simulate_friction(duration_s=3000, rate_hz=10, wheels=('rw2',), seed=3,
-                             anomalies=[parse_anomaly('rw2:dry:1200:3e-4')])
-    w = tele.wheels['rw2']
-    return list(zip(tele.time.tolist(), w.speed.tolist(), w.friction.tolist()))
+def client():
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=True,
+                      dashboard_address=None) as cluster, Client(cluster) as c:
+        yield c
 
 
-@pytest.mark.parametrize('cut', [1, 150, 11000, 12400, 13500, 20000])
-def test_llr_state_round_trip_continues_identically(wheel_rows, cut):
-    kwargs = llr_kwargs(LLR.validate({}))
-    whole = LLRDetector('rw2', **kwargs)
-    expected = [e for row in wheel_rows for e in whole.update(*row)]
-    assert len(expected) >= 2          # a declaration and at least one revision
-    first = LLRDetector('rw2', **kwargs)
-    found = [e for row in wheel_rows[:cut] for e in first.update(*row)]
-    second = LLRDetector('rw2', **kwargs)
-    codec.restore(second, *_through_disk(first))
-    found += [e for row in wheel_rows[cut:] for e in second.update(*row)]
-    assert found == expected
-    assert second.counters == whole.counters
-    # Attributes that are views of one state array stay views after the restore.
-    assert _views(second) == _views(LLRDetector('rw2', **kwargs))
+@pytest.fixture(scope='module')
+def saved(tmp_path_factory, client):
+    """Return (archive, state folder after the first two passes, full run's events)."""
+    root = tmp_path_factory.mktemp('state')
+    tele = simulate_friction(duration_s=1500, rate_hz=10, wheels=('rw1', 'rw2'), seed=61,
+                             anomalies=[parse_anomaly('rw1:dry:1000:3e-4')])
+    craft = root / 'archive' / 'sat'
+    craft.mkdir(parents=True)
+    cuts = [(0, 4000, 'p1.csv'), (4000, 8000, 'p2.csv'), (8000, 15000, 'p3.csv')]
+    for first, end, name in cuts[:2]:
+        write_telemetry(craft / name, rows(tele, first, end))
+    kept = root / 'state'
+    run_archive(root / 'archive', client=client, state_dir=kept).commit()
+    write_telemetry(craft / cuts[2][2], rows(tele, cuts[2][0], cuts[2][1]))
+    full = run_archive(root / 'archive', client=client)
+    return root / 'archive', kept, events_of(full, 'sat')
 
 
-@pytest.mark.parametrize('cut', [300, 4000, 9000])
-def test_gyro_state_round_trip_continues_identically(cut):
-    tele = simulate_friction(duration_s=1200, rate_hz=10, wheels=('rw1',), seed=4)
-    tele = add_gyro_channels(tele, fault=named_fault('fast', 0, 600.0), seed=5)
-    params = VSADC.validate({})
-    expected = vsadc.label_series(tele, params).events
-    assert expected
-    rows = list(zip(tele.time.tolist(), tele.gyro.tolist(), tele.attitude.tolist(),
-                    tele.reference_rate.tolist()))
-    first = vsadc.make_detector(params)
-    found = [e for i, r in enumerate(rows[:cut]) for e in first.update(*r, i)]
-    second = vsadc.make_detector(params)
-    codec.restore(second, *_through_disk(first))
-    found += [e for i, r in enumerate(rows[cut:], cut) for e in second.update(*r, i)]
-    # As JSON: a detail may be NaN, which never equals itself.
-    assert [e.to_json() for e in found] == [e.to_json() for e in expected]
+def _copy(kept, tmp):
+    target = tmp / 'state'
+    shutil.copytree(kept, target, symlinks=True)
+    return target
 
 
-def test_unknown_class_is_refused():
-    class Opaque:
-        pass
-
-    with pytest.raises(codec.StateError, match='allowlist'):
-        codec.encode({'x': Opaque()})
-    with pytest.raises(codec.StateError, match='allowlist'):
-        codec.restore(None, {'$object': 'os.system', 'attrs': {}}, {})
+def _generation(folder):
+    return folder / json.loads((folder / state.POINTER).read_text())['generation']
 
 
-def test_plain_values_round_trip():
-    value = {'a': (1, 2.5, float('inf'), None), 3: [np.float64(0.5), np.int64(7)],
-             'b': {1, 2}, 'c': float('nan')}
-    tree, arrays = codec.encode(value)
-    back = codec.restore(None, json.loads(json.dumps(tree)), arrays)
-    assert back['a'] == (1, 2.5, float('inf'), None)
-    assert back[3] == [0.5, 7] and type(back[3][1]) is np.int64
-    assert back['b'] == {1, 2} and np.isnan(back['c'])
+def _rehash(folder):
+    """Recompute the pointer's hash: an edit by someone who knows the format."""
+    gen = _generation(folder)
+    blobs = {name: (gen / name).read_bytes() for name in state.FILES}
+    pointer = json.loads((folder / state.POINTER).read_text())
+    pointer['sha256'] = state._digest(blobs)
+    (folder / state.POINTER).write_text(json.dumps(pointer))
 
 
-def _saved_chain(rows):
-    detector = LLRDetector('rw2', **llr_kwargs(LLR.validate({})))
-    for row in rows:
-        detector.update(*row)
-    return {'detector': codec.encode(detector), 'last_time': rows[-1][0], 'offset': 0,
-            'last_ref': None, 'not_tested': {}, 'history': [{'dry': float('nan')}]}
+def _edit_manifest(folder, edit):
+    path = _generation(folder) / 'state.json'
+    document = json.loads(path.read_text())
+    edit(document)
+    path.write_text(json.dumps(document))
+    _rehash(folder)
 
 
-def test_state_save_cut_short_keeps_the_previous_state(wheel_rows, tmp_path):
-    first = _saved_chain(wheel_rows[:2000])
-    state.save(tmp_path, 'sat', 'print', [{'name': 'p', 'size': 1}], {'rw2': first})
-    # A later save that wrote its arrays but not its JSON: the old state still loads.
-    state.save(tmp_path / 'next', 'sat', 'print', [], {'rw2': _saved_chain(wheel_rows)})
-    for npz in (tmp_path / 'next').glob('sat.*.npz'):
-        npz.rename(tmp_path / npz.name)
-    passes, chains = state.load(tmp_path, 'sat', 'print')
-    assert passes == [{'name': 'p', 'size': 1}]
-    assert chains['rw2']['last_time'] == first['last_time']
-    assert np.isnan(chains['rw2']['history'][0]['dry'])
-    # A completed save leaves one arrays file; a damaged one is refused.
-    state.save(tmp_path, 'sat', 'print', [], {'rw2': first})
-    (only,) = tmp_path.glob('sat.*.npz')
-    only.write_bytes(only.read_bytes()[:-1] + b'x')
-    with pytest.raises(ConfigError, match='does not match'):
-        state.load(tmp_path, 'sat', 'print')
+def _detector(document):
+    return document['spacecraft']['sat']['components']['rw1']['wheel']['detector']
+
+
+def test_unedited_state_resumes_exactly(saved, client, tmp_path):
+    archive, kept, full = saved
+    result = run_archive(archive, client=client, state_dir=_copy(kept, tmp_path))
+    assert events_of(result, 'sat') == full
+
+
+def _flip(path):
+    data = bytearray(path.read_bytes())
+    data[len(data) // 2] ^= 0x01
+    path.write_bytes(bytes(data))
+
+
+def _outside(tmp):
+    target = tmp / 'elsewhere.json'
+    target.write_text('{}')
+    return target
+
+
+CASES = {
+    'pointer truncated': lambda f, t: (f / state.POINTER).write_text('{"format": "rwa_'),
+    'pointer foreign': lambda f, t: (f / state.POINTER).write_text('{"format": "x"}'),
+    'pointer version': lambda f, t: (f / state.POINTER).write_text(json.dumps(
+        {**json.loads((f / state.POINTER).read_text()), 'version': 1})),
+    'generation outside': lambda f, t: (f / state.POINTER).write_text(json.dumps(
+        {**json.loads((f / state.POINTER).read_text()), 'generation': '../state2'})),
+    'generation missing': lambda f, t: shutil.rmtree(_generation(f)),
+    'generation a link': lambda f, t: (shutil.move(_generation(f), t / 'moved'),
+                                       os.symlink(t / 'moved', _generation(f))),
+    'pointer a FIFO': lambda f, t: ((f / state.POINTER).unlink(),
+                                    os.mkfifo(f / state.POINTER)),
+    'arrays a FIFO': lambda f, t: ((_generation(f) / 'arrays.npz').unlink(),
+                                   os.mkfifo(_generation(f) / 'arrays.npz')),
+    'manifest a link outside': lambda f, t: ((_generation(f) / 'state.json').unlink(),
+                                             os.symlink(_outside(t),
+                                                        _generation(f) / 'state.json')),
+    'history a folder': lambda f, t: ((_generation(f) / 'history.parquet').unlink(),
+                                      (_generation(f) / 'history.parquet').mkdir()),
+    'arrays truncated': lambda f, t: (_generation(f) / 'arrays.npz').write_bytes(
+        (_generation(f) / 'arrays.npz').read_bytes()[:100]),
+    'manifest byte flipped': lambda f, t: _flip(_generation(f) / 'state.json'),
+    'trend byte flipped': lambda f, t: _flip(_generation(f) / 'trend.parquet'),
+    'files swapped': lambda f, t: (
+        os.rename(_generation(f) / 'state.json', t / 'x'),
+        os.rename(_generation(f) / 'arrays.npz', _generation(f) / 'state.json'),
+        os.rename(t / 'x', _generation(f) / 'arrays.npz')),
+    'detector field added': lambda f, t: _edit_manifest(
+        f, lambda d: _detector(d).__setitem__('extra', 1)),
+    'record version': lambda f, t: _edit_manifest(
+        f, lambda d: d['records'].__setitem__('LLRState', 99)),
+    'fingerprint': lambda f, t: _edit_manifest(
+        f, lambda d: d['spacecraft']['sat'].__setitem__('fingerprint', '0' * 64)),
+    'unknown field': lambda f, t: _edit_manifest(
+        f, lambda d: d['spacecraft']['sat'].__setitem__('extra', 1)),
+    'wrong type': lambda f, t: _edit_manifest(
+        f, lambda d: d['spacecraft']['sat'].__setitem__('last_time', 'soon')),
+    'spacecraft renamed': lambda f, t: _edit_manifest(
+        f, lambda d: d['spacecraft'].__setitem__('other', d['spacecraft'].pop('sat'))),
+}
+
+
+@pytest.mark.parametrize('case', sorted(CASES))
+def test_a_deviating_state_is_refused_naming_the_file(saved, client, tmp_path, case):
+    archive, kept, _ = saved
+    folder = _copy(kept, tmp_path)
+    CASES[case](folder, tmp_path)
+    with pytest.raises(state.StateError) as caught:
+        run_archive(archive, client=client, state_dir=folder)
+    assert str(folder) in str(caught.value) or 'state of sat' in str(caught.value)
+
+
+def test_the_command_exits_2_with_one_line(saved, tmp_path, capsys):
+    archive, kept, _ = saved
+    folder = _copy(kept, tmp_path)
+    CASES['arrays a FIFO'](folder, tmp_path)
+    code = main(['fleet', str(archive), '-o', str(tmp_path / 'out'), '--state', str(folder),
+                 '--workers', '1'])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and 'arrays.npz' in err[0]
+
+
+@settings(max_examples=25, deadline=None,
+          suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(file=st.sampled_from(state.FILES + (state.POINTER,)), where=st.floats(0.0, 1.0),
+       byte=st.integers(0, 255), cut=st.booleans())
+def test_random_edits_and_truncations_are_refused(saved, tmp_path_factory, file, where,
+                                                  byte, cut):
+    _, kept, _ = saved
+    folder = _copy(kept, tmp_path_factory.mktemp('fuzz'))
+    path = folder / file if file == state.POINTER else _generation(folder) / file
+    data = bytearray(path.read_bytes())
+    at = min(int(where * len(data)), len(data) - 1)
+    if cut:
+        data = data[:at]
+    elif data[at] == byte:
+        return
+    else:
+        data[at] = byte
+    path.write_bytes(bytes(data))
+    try:
+        state.load(folder)
+    except state.StateError:
+        return
+    pytest.fail(f'an edit of {file} at {at} was accepted')
+
+
+def test_a_commit_cut_short_leaves_a_whole_state(saved, client, tmp_path, monkeypatch):
+    archive, kept, full = saved
+    before = _copy(kept, tmp_path / 'a')
+    result = run_archive(archive, client=client, state_dir=before)
+    calls = {'n': 0}
+    real = {'replace': os.replace, 'write': state._write, 'text': state.write_text_atomic}
+
+    def failing(name):
+        def call(*args, **kwargs):
+            calls['n'] += 1
+            if calls['n'] == limit:
+                raise OSError(28, 'No space left on device')
+            return real[name](*args, **kwargs)
+        return call
+
+    for limit in range(1, 8):
+        folder = _copy(kept, tmp_path / f'cut{limit}')
+        calls['n'] = 0
+        monkeypatch.setattr(state.os, 'replace', failing('replace'))
+        monkeypatch.setattr(state, '_write', failing('write'))
+        monkeypatch.setattr(state, 'write_text_atomic', failing('text'))
+        result.state_dir = folder
+        try:
+            result.commit()
+        except state.StateError:
+            pass
+        monkeypatch.undo()
+        loaded = state.load(folder)
+        assert loaded is not None and loaded.generation in (1, 2)
+        again = run_archive(archive, client=client, state_dir=folder)
+        assert events_of(again, 'sat') == full
+
+
+def test_commit_removes_only_what_it_wrote(saved, client, tmp_path):
+    archive, kept, _ = saved
+    folder = _copy(kept, tmp_path)
+    old = _generation(folder)
+    mine = [folder / 'sat.mybackup.npz', folder / 'notes.txt', old / 'notes.txt']
+    for path in mine:
+        path.write_text('user file')
+    run_archive(archive, client=client, state_dir=folder).commit()
+    assert all(path.read_text() == 'user file' for path in mine)
+    assert _generation(folder) != old and old.is_dir()     # kept: it holds a user file
+    assert sorted(p.name for p in old.iterdir()) == ['notes.txt']

@@ -77,8 +77,8 @@ def test_lemma1_nominal_statistic_follows_the_generalised_chi_square(k, w):
         u, v, e = fm @ h1[:m], fm @ h2[:m], np.einsum('ij,ij->i', fm, fm)
         return np.column_stack([np.full(runs, a), np.full(runs, b), np.full(runs, c), u, v, e])
 
-    cfg = {'min_excitation': 1e-6, 'noise_std': 1.0}
-    ok, testable, y, tr, dm = _stats(sums(k).T, sums(k + w).T, np.full(runs, float(k)), cfg)
+    ok, testable, y, tr, dm = _stats(sums(k).T, sums(k + w).T, np.full(runs, float(k)), 1e-6,
+                                     1.0)
     assert np.all(ok)
     half = 0.5 * tr[0]
     disc = math.sqrt(half * half - dm[0])
@@ -92,8 +92,8 @@ def test_lemma1_nominal_statistic_follows_the_generalised_chi_square(k, w):
     np.testing.assert_allclose(sorted(weights), sorted(lemma), rtol=1e-9)
     # The detector's default: sigma^2 estimated on the reference (k - 2 degrees of
     # freedom, independent of the statistic): studentised tail.
-    _, _, y_est, _, _ = _stats(sums(k).T, sums(k + w).T, np.full(runs, float(k)),
-                               {'min_excitation': 1e-6, 'noise_std': None})
+    _, _, y_est, _, _ = _stats(sums(k).T, sums(k + w).T, np.full(runs, float(k)), 1e-6,
+                               None)
     for level in (0.1, 0.01, 0.001):
         bound = 4.5 * math.sqrt(runs * level * (1.0 - level))
         # Binomial(runs, level): 4.5 standard deviations (false failure ~7e-6 per level).
@@ -459,7 +459,7 @@ def test_memory_is_bounded_by_the_windows():
     stream(det, t, w, f)
     # Rings of the last samples: the smallest power of two >= 2 w + k_verif + 2 (the kernel
     # indexes them by mask), whatever the length of the stream.
-    assert [len(ring) for ring in det._rings()] == [256] * 4
+    assert [len(ring) for ring in det._live.ring] == [256] * 4
 
 
 # -- parameter validation ------------------------------------------------------------------
@@ -482,6 +482,18 @@ def test_invalid_parameters_raise_naming_the_parameter(params, name):
         LLRDetector('rw1', **params)
     with pytest.raises(ValueError, match=name):
         detect_batch([0.0], [1.0], [1.0], **params)
+
+
+def test_keywords_and_defaults_are_the_schemas():
+    # The schema (core/schema.py) defines the parameters; the detector's keywords are its
+    # names with its defaults, and its checks are the schema's (test_schema: the edges).
+    import inspect
+    from rwa_monitor.core.schema import LLR
+    signature = inspect.signature(LLRDetector).parameters
+    assert [n for n in signature if n not in ('component', 'regressors')] == \
+        list(LLR.names(('all',)))
+    assert all(signature[p.name].default == p.default for p in LLR if p.scope == 'all')
+    assert LLRDetector('rw1').config.window == LLR['window'].default
 
 
 def test_invalid_component_and_unknown_parameter():
@@ -549,8 +561,7 @@ def test_bounds_never_change_a_decision():
         pref = np.cumsum(np.concatenate([np.zeros((6, 1)), terms[:, c:]], axis=1), axis=1)
         ks = np.arange(c + window + 1, t.size - window + 1)
         ok, testable, y, tr, dm = _stats(pref[:, ks - c], pref[:, ks + window - c],
-                                         (ks - c).astype(float),
-                                         {'min_excitation': 1e-6, 'noise_std': None})
+                                         (ks - c).astype(float), 1e-6, None)
         log_p_min, k_min = 0.0, c
         for i, k in enumerate(ks):
             if testable[i]:
@@ -642,12 +653,10 @@ def test_realistic_profile_unconfirmed_kind_is_reported_as_such_and_streaming_eq
 
 
 def test_state_restored_into_a_fresh_detector_continues_the_stream():
-    # The detector's state is its instance attributes, plain data (arrays, scalars, str,
-    # None, containers, NamedTuple, dataclass): copied into a fresh detector of the same
-    # parameters between two halves of a stream, it gives the events of one detector fed
-    # the whole stream (nothing hidden in views shared between attributes).
-    import copy
-    import dataclasses
+    # The detector's state is one typed record (core/llr_state.py): restored into a
+    # fresh detector of the same parameters between two halves of a stream, it gives
+    # the events of one detector fed the whole stream (test/test_llr_state.py: every
+    # split point, through the JSON and arrays of core/records.py).
     t, w, f = friction_signal(8000, 17, ((2500, 0.6, 0.0), (5200, 0.0, 0.03)),
                               profile='crossing')
     params = dict(window=150, noise_ar_max_order=2)
@@ -655,12 +664,7 @@ def test_state_restored_into_a_fresh_detector_continues_the_stream():
     first = LLRDetector('rw1', **params)
     events = stream(first, t[:4000], w[:4000], f[:4000], end=False)
     assert events   # the first change is declared before the cut
-    plain = (np.ndarray, int, float, str, bool, type(None), tuple, list, dict)
-    for name, value in vars(first).items():
-        assert name == '_cfg' or isinstance(value, plain) or dataclasses.is_dataclass(value), \
-            name
     second = LLRDetector('rw1', **params)
-    for name, value in vars(first).items():
-        setattr(second, name, copy.deepcopy(value))
+    second.restore(first.state())
     events += stream(second, t[4000:], w[4000:], f[4000:])
     assert len(whole) >= 2 and [e.to_json() for e in events] == [e.to_json() for e in whole]

@@ -248,7 +248,7 @@ def test_the_end_of_a_closed_change_never_adds_a_component(monkeypatch):
     det = LLRDetector('rw1', **PAPER)
     events = det.process_arrays(t, w, f)
     assert events[-1].kind == 'dry' and events[-1].details[keys.KIND_CONFIRMED]
-    assert det._cat.closed
+    assert det.state().change.closed
     real = llr_kinds.categorise
 
     def saying(kind, confirmed):

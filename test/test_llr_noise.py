@@ -12,7 +12,7 @@ import pytest
 from scipy import stats
 
 from rwa_monitor.core.llr import detect_batch, LLRDetector
-from rwa_monitor.core.llr_noise import fit_noise_model, SampleColumns, whiten
+from rwa_monitor.core.llr_noise import fit_noise_model, whiten
 
 
 def ar1(n: int, rho: float, rng: np.random.Generator) -> np.ndarray:
@@ -88,9 +88,9 @@ def test_whiten_matches_the_streaming_filter_and_inverts_ar():
 
 
 def test_buffered_arrays_are_the_samples_the_streaming_path_buffers():
-    # The batch path keeps the samples waiting for the fit as arrays; they read as the
-    # streaming path's tuples (row, t, f, (-sign w, -w), w), later samples after them,
-    # and the fit of either gives the same model and events.
+    # The batch path buffers the samples waiting for the fit as arrays, the streaming
+    # path one by one: the same record (row, t, f, speed, (-sign w, -w)), a mix of both
+    # too, and the fit of either gives the same model and events.
     rng = np.random.default_rng(36)
     n = 4000
     t, w, f = crossing_signal(n, ar1(n, 0.5, rng), ((2500, 0.8, 0.0),))
@@ -100,22 +100,27 @@ def test_buffered_arrays_are_the_samples_the_streaming_path_buffers():
     streamed = LLRDetector('rw1', window=200)   # the fit takes 2 w + 1 = 401 samples
     for a, b, c in zip(t[:400].tolist(), w[:400].tolist(), f[:400].tolist()):
         streamed.update(a, b, c)
-    expected = list(streamed._buffer)
-    columns = SampleColumns(np.arange(400, dtype=np.int64), t[:400], f[:400], w[:400])
-    assert len(expected) == 400 and list(columns) == expected and columns.complete()
-    assert expected[0][3] == (0.0, -0.0) and expected[1][3] == (1.0, 2.0)
-    columns.append(expected[0])
-    assert len(columns) == 401 and list(columns)[-1] == expected[0]
-    assert not columns.complete()
-    streamed.update(float(t[400]), float(w[400]), float(f[400]))
-    assert det.noise_model == streamed.noise_model == fit_noise_model(
-        np.array([e[3] for e in expected] + [(-np.sign(w[400]), -w[400])]), f[:401], 3)
-    streamed_events = []
-    for a, b, c in zip(t[401:].tolist(), w[401:].tolist(), f[401:].tolist()):
-        streamed_events.extend(streamed.update(a, b, c))
-    streamed_events.extend(streamed.finish())
-    assert len(batch) >= 1
-    assert [e.to_json() for e in batch] == [e.to_json() for e in streamed_events]
+    arrays = LLRDetector('rw1', window=200)
+    arrays.process_arrays(t[:150], w[:150], f[:150])
+    arrays.update(float(t[150]), float(w[150]), float(f[150]))
+    arrays.process_arrays(t[151:400], w[151:400], f[151:400])
+    expected = streamed.state().fit
+    assert expected.rows.tolist() == list(range(400))
+    assert expected.regressors[:2].tolist() == [[0.0, -0.0], [1.0, 2.0]]
+    for other in (arrays.state().fit,):
+        for name in ('rows', 'time', 'friction', 'speed', 'regressors'):
+            assert np.array_equal(getattr(other, name), getattr(expected, name)), name
+    for one in (streamed, arrays):
+        one.update(float(t[400]), float(w[400]), float(f[400]))
+    assert det.noise_model == streamed.noise_model == arrays.noise_model == fit_noise_model(
+        np.column_stack([-np.sign(w[:401]), -w[:401]]), f[:401], 3)
+    for one in (streamed, arrays):
+        events = []
+        for a, b, c in zip(t[401:].tolist(), w[401:].tolist(), f[401:].tolist()):
+            events.extend(one.update(a, b, c))
+        events.extend(one.finish())
+        assert len(batch) >= 1
+        assert [e.to_json() for e in batch] == [e.to_json() for e in events]
 
 
 def test_streaming_equals_batch_with_ar_noise_and_sliding_reference():

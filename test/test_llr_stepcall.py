@@ -62,8 +62,8 @@ def feed(det, rows, forms=None):
 
 def same_state(a, b):
     """Assert two detectors hold the same state arrays (bytes: NaN compared too)."""
-    assert a._fs.tobytes() == b._fs.tobytes()
-    assert a._ints.tobytes() == b._ints.tobytes()
+    assert a._live.floats.tobytes() == b._live.floats.tobytes()
+    assert a._live.ints.tobytes() == b._live.ints.tobytes()
     assert a.counters == b.counters
 
 
@@ -157,8 +157,8 @@ def test_golden_file_gives_the_same_events_on_both_paths_and_in_batch(config):
 
 def _zero_noise_level(det):
     """Make the next accepted sample divide by a zero noise level (state set by hand)."""
-    det._ints[layout.I_SPEED_MODEL] = 1
-    det._fs[layout.F_SPEED_A:layout.F_SPEED_FLOOR + 1] = 0.0
+    det._live.ints[layout.I_SPEED_MODEL] = 1
+    det._live.floats[layout.F_SPEED_A:layout.F_SPEED_FLOOR + 1] = 0.0
 
 
 def test_a_step_that_raises_raises_on_both_paths_with_the_same_state():
@@ -183,7 +183,7 @@ def test_reset_arms_the_new_arrays():
     rows = list(zip((0.1 * k).tolist(), w.tolist(), f.tolist()))
     det = LLRDetector('rw1', window=60, noise_std=0.2)
     first = feed(det, rows)
-    old = weakref.ref(det._fs)
+    old = weakref.ref(det._live.floats)
     det.reset()
     assert old() is None   # the C side let go of the old arrays
     again = feed(det, rows)
@@ -193,7 +193,7 @@ def test_reset_arms_the_new_arrays():
 def test_an_armed_detector_is_freed():
     det = LLRDetector('rw1', window=20, noise_std=0.1)
     det.update(0.0, 5.0, 0.1)
-    ref, fs = weakref.ref(det), weakref.ref(det._fs)
+    ref, fs = weakref.ref(det), weakref.ref(det._live.floats)
     del det
     gc.collect()
     assert ref() is None and fs() is None
@@ -205,11 +205,11 @@ def test_arming_checks_the_arrays():
         pytest.skip('no C module')
     address = llr_cstep.step_address() or 1
     with pytest.raises(TypeError):
-        det._step_arm(address, det._ints, det._ints)
+        det._step_arm(address, det._live.ints, det._live.ints)
     with pytest.raises(ValueError):   # numpy refuses a contiguous view of a strided one
-        det._step_arm(address, det._fs[::2], det._ints)
+        det._step_arm(address, det._live.floats[::2], det._live.ints)
     with pytest.raises(ValueError):
-        det._step_arm(0, det._fs, det._ints)
+        det._step_arm(0, det._live.floats, det._live.ints)
     assert det._step_armed() == COMPILED   # a refused arming leaves the armed step as it was
 
 
@@ -224,7 +224,8 @@ def test_a_copied_detector_continues_as_the_original(how):
     for row in rows[:1000]:
         det.update(*row)
     twin = copy.deepcopy(det) if how == 'deepcopy' else pickle.loads(pickle.dumps(det))
-    assert twin._fs is not det._fs and twin._step_armed() == det._step_armed() == COMPILED
+    assert twin._live.floats is not det._live.floats
+    assert twin._step_armed() == det._step_armed() == COMPILED
     first, second = feed(det, rows[1000:]), feed(twin, rows[1000:])
     assert first and [e.to_json() for e in second] == [e.to_json() for e in first]
     same_state(det, twin)
@@ -243,7 +244,7 @@ det = LLRDetector('rw1', window=60, noise_std=0.2)
 assert det._fast and not det._step_armed()
 events = [e.to_json() for row in zip(t.tolist(), w.tolist(), f.tolist())
           for e in det.update(*row)] + [e.to_json() for e in det.finish()]
-print(json.dumps({'events': events, 'fs': det._fs.tobytes().hex()}))
+print(json.dumps({'events': events, 'fs': det._live.floats.tobytes().hex()}))
 '''
 
 
@@ -263,4 +264,4 @@ def test_without_the_c_module_the_python_update_gives_the_same_events(tmp_path):
     det = LLRDetector('rw1', window=60, noise_std=0.2)
     events = feed(det, [tuple(row) for row in stream.tolist()])
     assert events and [e.to_json() for e in events] == plain['events']
-    assert det._fs.tobytes().hex() == plain['fs']
+    assert det._live.floats.tobytes().hex() == plain['fs']

@@ -11,6 +11,7 @@ from ros_harness import Collector, RosWorld
 import yaml
 
 from rwa_monitor.core import keys
+from rwa_monitor.core.wheel_runner import WheelRunner
 from rwa_monitor.exceptions import ConfigError
 from rwa_monitor.nodes import messages
 from rwa_monitor.nodes.common import EVENTS_QOS
@@ -73,7 +74,7 @@ def test_node_with_calibration_equals_detect_and_keeps_the_last_good_file(tmp_pa
                          >= len(expected), 10.0, 'events')
         got = [messages.status_event(s) for m in anomalies.messages for s in m.status]
         assert [_key(e) for e in got] == [_key(e) for e in expected]
-        values = detector.calibration.values('rw1')
+        values = detector.calibration.values()
         assert values['calibration_file'] == str(cal)
         bad = tmp_path / 'bad.yaml'
         bad.write_text(yaml.safe_dump({'calibration': {'version': 1}}))
@@ -172,26 +173,34 @@ def test_fss_and_vsadc_nodes_announce_a_calibration_change(tmp_path, name):
 
 
 def test_samples_not_tested_are_counted_across_calibration_reloads(tmp_path):
-    from rwa_monitor.core.llr import LLRDetector
+    from rwa_monitor.core.schema import LLR
     from rwa_monitor.nodes.calibration import CalibrationInForce
+    from rwa_monitor.nodes.llr_detector import _Wheel
     cal, _, _ = _files(tmp_path)
     holder = CalibrationInForce(str(cal))
     low, high = holder.block('rw1')['speed_range_rad_s']
     inside = 0.5 * (low + high)
-    detector = LLRDetector('rw1', window=200)
+    values = {**LLR.defaults(), 'window': 200}
+
+    def runner():
+        return WheelRunner('rw1', values, nominal=holder.nominal('rw1'))
+
+    wheel = _Wheel(runner(), 1.0)
 
     def feed(start, speeds):
         for k, w in enumerate(speeds):
-            holder.update('rw1', detector, start + 0.1 * k, w, 1e-3)
+            wheel.runner.update(start + 0.1 * k, w, 1e-3)
 
     feed(0.0, [inside] * 5 + [high + 50.0] * 3 + [low - 50.0] * 4)
-    assert holder.not_tested('rw1') == {'low_speed_band': 0, 'outside_calibrated_range': 7}
-    holder.set(str(cal))    # a reload starts new tables; the counts go on
+    assert wheel.totals()[1] == {'low_speed_band': 0, 'outside_calibrated_range': 7}
+    holder.set(str(cal))    # a reload: a new runner; the wheel's counts go on
+    wheel.restart(runner())
     feed(10.0, [high + 50.0] * 2)
-    assert holder.not_tested('rw1') == {'low_speed_band': 0, 'outside_calibrated_range': 9}
-    assert holder.values('rw1')['not_tested_outside_calibrated_range'] == 9
-    assert detector.counters['non_finite'] == 9   # not tested = dropped as non-finite
+    rejected, untested = wheel.totals()
+    assert untested == {'low_speed_band': 0, 'outside_calibrated_range': 9}
+    assert rejected['non_finite'] == 0   # not tested is not counted again as non-finite
     holder.set('')          # no calibration: the friction itself is tested
+    wheel.restart(runner())
     feed(20.0, [high + 50.0] * 2)
-    assert holder.not_tested('rw1')['outside_calibrated_range'] == 9
-    assert detector.counters['non_finite'] == 9
+    assert wheel.totals()[1]['outside_calibrated_range'] == 9
+    assert wheel.totals()[0]['non_finite'] == 0

@@ -104,21 +104,21 @@ def test_detector_exception_is_caught_counted_and_restarts_only_that_wheel(tmp_p
     with RosWorld('events') as world:
         detector = _detector(world, tmp_path / 'j.jsonl', events_file='')
         broken = {'armed': True}
-        original = detector._new_detector
+        original = detector._new_runner
 
         def fragile(wheel_id):
-            det = original(wheel_id)
+            runner = original(wheel_id)
             if wheel_id == 'rw1' and broken['armed']:
                 broken['armed'] = False
-                real = det.update
+                real = runner.update
 
                 def update(t, w, f):
                     if t > 20.0:
                         raise ZeroDivisionError('injected')
                     return real(t, w, f)
-                det.update = update
-            return det
-        detector._new_detector = fragile
+                runner.update = update
+            return runner
+        detector._new_runner = fragile
         sink = world.node(Node, 'sink')
         diagnostics = Collector(sink, DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
         replay = world.node(TelemetryReplay, parameter_overrides=[
@@ -129,7 +129,7 @@ def test_detector_exception_is_caught_counted_and_restarts_only_that_wheel(tmp_p
         world.spin_for(0.5)
         assert detector.input_counters['detector_failures'] == 1
         assert detector.wheels['rw1'].samples == 3000
-        assert detector.wheels['rw1'].detector.n_samples > 2500   # restarted, running
+        assert detector.wheels['rw1'].runner.detector.n_samples > 2500   # restarted, running
         status = _latest(diagnostics, 'rw1')
         assert status.level == b'\x02' and 'detector failed' in status.message
         assert _latest(diagnostics, 'rw2').level != b'\x02' or \

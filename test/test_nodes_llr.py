@@ -115,7 +115,7 @@ def test_node_events_equal_detect_field_for_field(tmp_path):
         got = _events(anomalies)
         # What `rwa-monitor demo` does in-process once the replay is done: the wheels'
         # detectors finish as detect does at the end of the file.
-        finals = [e for w in ('rw1', 'rw2') for e in detector.wheels[w].detector.finish()]
+        finals = [e for w in ('rw1', 'rw2') for e in detector.wheels[w].runner.finish()]
     # Per wheel in order (across wheels the order of a row's events is not a contract).
     for wheel in ('rw1', 'rw2'):
         assert_same_fields([e for e in got if e.component == wheel],
@@ -179,7 +179,7 @@ def test_parameters_from_yaml_file(tmp_path, repo_root):
         assert node.get_parameter('use_sim_time').value is True
         assert node.params['window'] == 123 and node.params['k_verif'] == 7
         assert node.params['false_alarm_rate'] == 1.0e-3
-        kwargs = {k: node._kwargs[k] for k in ('window', 'k_verif', 'false_alarm_rate',
+        kwargs = {k: node._values[k] for k in ('window', 'k_verif', 'false_alarm_rate',
                                                'noise_std')}
         assert kwargs == {'window': 123, 'k_verif': 7, 'false_alarm_rate': 1.0e-3,
                           'noise_std': 2.5e-5}
@@ -226,7 +226,7 @@ def test_read_only_and_good_run_time_changes():
         node = _detector(world)
         assert not node.set_parameters([Parameter('max_wheels', value=3)])[0].successful
         assert node.set_parameters([Parameter('false_alarm_rate', value=1.0e-3)])[0].successful
-        assert node._kwargs['false_alarm_rate'] == 1.0e-3
+        assert node._values['false_alarm_rate'] == 1.0e-3
         assert node.set_parameters([Parameter('wheels', value='rw9')])[0].successful
         assert node._allowed == {'rw9'}
 
@@ -304,8 +304,8 @@ def test_bad_messages_are_counted_and_never_poison(tmp_path):
         assert wheels[w].counters['duplicate_stamp'] == k
         assert wheels[w].counters['out_of_order'] == k
     # non_finite: one per wheel per injection, plus the NaN rw1 of the duplicate-name message
-    assert wheels['rw1'].rejected()['non_finite'] == 2 * k
-    assert wheels['rw2'].rejected()['non_finite'] == k
+    assert wheels['rw1'].totals()[0]['non_finite'] == 2 * k
+    assert wheels['rw2'].totals()[0]['non_finite'] == k
     assert health['rw1']['rejected_non_finite'] == 2 * k
     assert health['rw2']['out_of_order'] == k
     assert health['telemetry/wheels']['length_mismatch'] == k

@@ -37,9 +37,9 @@ def test_auto_and_floats_without_a_dot_on_the_command_line():
             '--ros-args', '-p', 'k_verif:=auto', '-p', 'noise_std:=auto',
             '-p', 'false_alarm_rate:=1e-4', '-p', 'window:=300'])
         assert node.params['k_verif'] == 'auto' and node.params['false_alarm_rate'] == 1e-4
-        assert node._kwargs['k_verif'] == 'auto' and node._kwargs['window'] == 300
+        assert node._values['k_verif'] == 'auto' and node._values['window'] == 300
         assert node.set_parameters([Parameter('k_verif', value=40)])[0].successful
-        assert node._kwargs['k_verif'] == 40
+        assert node._values['k_verif'] == 40
 
 
 @pytest.mark.parametrize('node_class', [LLRDetectorNode, VsadcDetectorNode])

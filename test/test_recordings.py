@@ -217,16 +217,18 @@ def test_multi_rate_recording_with_other_topic_names(tmp_path, storage):
 
 
 def test_multi_rate_pipelines_use_each_stream_at_its_own_rate(tmp_path):
+    from rwa_monitor.core.gyro_runner import pair_rows
     from rwa_monitor.pipelines import llr, vsadc
+    from rwa_monitor.pipelines.runners import gyro_columns
     path = tmp_path / 'rec'
     wheel_ns, gyro_ns, _ = _multi_rate(path, seconds=60.0)
     tele = read_telemetry(path, TOPICS)
     _, summary = llr.run_with_summary(tele, {'window': 50})
     assert summary['rw1']['samples'] == len(wheel_ns)
     assert not any(summary['rw1']['rejected'].values())
-    rows, quats, _ = vsadc.paired_gyro(tele, np.zeros(3), 1e-3)
+    rows, quats, _ = pair_rows(gyro_columns(tele), np.zeros(3), 1e-3)
     assert len(rows) == len(gyro_ns) and all(q is None for q in quats)  # 10 ms apart
-    rows, quats, _ = vsadc.paired_gyro(tele, np.zeros(3), 0.02)
+    rows, quats, _ = pair_rows(gyro_columns(tele), np.zeros(3), 0.02)
     assert all(q == [0.0, 0.0, 0.0, 1.0] for q in quats)
     _, vs = vsadc.run_with_summary(tele, {'pair_tolerance': 0.02, 'window': 20})
     assert vs['counters']

@@ -11,8 +11,8 @@ import pytest
 from bench.faults_verdicts import CASES
 from rwa_monitor.cli.cmd_dashboard import unexamined_note
 from rwa_monitor.core.coverage import judge, llr_samples_needed, MOSTLY_UNTESTED_SHARE
+from rwa_monitor.core.gyro_runner import axis_coverage
 from rwa_monitor.core.schema import LLR
-from rwa_monitor.pipelines.vsadc import axis_coverage
 
 
 @pytest.mark.parametrize('case', [c for _, c in CASES], ids=[n for n, _ in CASES])

@@ -157,3 +157,18 @@ def test_two_healthy_hours_give_no_event():
     events, det = _events(tele, config=pipeline.DEFAULTS)
     assert events == []
     assert all(ch.ready for ch in det.channels)
+
+
+def test_huge_finite_rates_are_counted_on_their_axis_never_overflow():
+    """A reference or gyro value of 1e308 is no rate: counted per axis, the rest runs on."""
+    from rwa_monitor.core.vsadc import VsadcDetector
+    det = VsadcDetector(window=20)
+    q = [0.0, 0.0, 0.0, 1.0]
+    for k in range(6000):
+        ref = [1e308, 0.0, 0.0] if k % 3 == 0 else [0.0, 0.0, 0.0]
+        gyro = [0.0, -1e308 if k % 5 == 0 else 0.0, 0.0]
+        det.update(0.1 * k, gyro, q, ref)
+    counters = det.counters
+    # Row 0 has no star-tracker rate yet (held): counted there, not on the axes.
+    assert counters['bad_axis_x'] == 1999 and counters['bad_axis_y'] == 1199
+    assert counters['bad_axis_z'] == 0 and det.channels[2].samples > 5000

@@ -15,8 +15,8 @@ import pathlib
 import sys
 
 from rwa_monitor.cli.main import EXIT_NOT_EXAMINED
+from rwa_monitor.cli.options import add_topics, read_input
 from rwa_monitor.exceptions import ConfigError, NotExaminedError
-from rwa_monitor.telemetry import read_telemetry
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -27,7 +27,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                      'its low-speed band) and speed range from fault-free telemetry of one '
                      'spacecraft; write DIR/calibration.yaml and DIR/report.md.'))
     parser.add_argument('files', nargs='+', type=pathlib.Path, metavar='FILE',
-                        help='fault-free telemetry files (.csv or .mcap) of one spacecraft')
+                        help='fault-free telemetry files of one spacecraft (CSV, Parquet, '
+                             'recordings, or CCSDS space packets with --xtce and '
+                             '--telemetry-map)')
+    add_topics(parser)
     parser.add_argument('-o', '--output', required=True, type=pathlib.Path, metavar='DIR',
                         help='output directory')
     parser.add_argument('--strict', action='store_true',
@@ -41,7 +44,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     """Read the files, calibrate, write the outputs."""
     from rwa_monitor.pipelines import calibrated
-    records = [read_telemetry(path) for path in args.files]
+    records = [read_input(path, args) for path in args.files]
     document, warnings, arrays = calibrated.commission(records)
     for message in warnings:
         print(f'rwa-monitor calibrate: warning: {message}', file=sys.stderr)

@@ -231,7 +231,7 @@ def run_demo(path: pathlib.Path, *, domain_id: int = 0, executor: str = 'events'
             # The file has ended: each wheel's open declaration gets its final kind
             # (LLRDetector.finish, as `rwa-monitor detect` does at the end of the file).
             for wheel in llr.wheels.values():
-                events.extend(wheel.detector.finish())
+                events.extend(wheel.runner.finish())
     finally:
         if runner is not None:
             runner.shutdown()

@@ -27,13 +27,12 @@ from typing import Any
 
 from rwa_monitor import pipelines
 from rwa_monitor.cli.main import EXIT_ANOMALY, EXIT_NOT_EXAMINED, EXIT_NOTHING_FOUND
-from rwa_monitor.cli.options import add_topics, INPUT_HELP
+from rwa_monitor.cli.options import add_topics, INPUT_HELP, read_input
 from rwa_monitor.cli.output import check_output, quiet_broken_pipe, STDOUT, write_output
 from rwa_monitor.core.coverage import EXAMINED, UNKNOWN
 from rwa_monitor.core.events import AnomalyEvent
 from rwa_monitor.core.schema import help_text, LLR, SCHEMAS, VSADC
 from rwa_monitor.pipelines import detect
-from rwa_monitor.telemetry import read_telemetry
 from rwa_monitor.telemetry.parameters_file import block_values, read_parameters_file
 
 
@@ -129,8 +128,9 @@ def exit_code(events: list[AnomalyEvent], summary: dict[str, Any]) -> int:
 
 def run(args: argparse.Namespace) -> int:
     """Read the file, detect, and write the JSON or print the table."""
-    check_output(args.output, args.file, args.config, args.friction_model)
-    tele = read_telemetry(args.file, args.topics)
+    check_output(args.output, args.file, args.config, args.friction_model, args.xtce,
+                 args.telemetry_map)
+    tele = read_input(args.file, args)
     config = load_config(args.config)
     if args.calibration is not None:
         for node in ('llr_detector', 'vsadc_detector'):

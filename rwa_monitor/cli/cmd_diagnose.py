@@ -13,11 +13,10 @@ import sys
 
 from rwa_monitor.cli.cmd_detect import verdict_text
 from rwa_monitor.cli.main import EXIT_NOT_EXAMINED
-from rwa_monitor.cli.options import add_topics, INPUT_HELP
+from rwa_monitor.cli.options import add_topics, INPUT_HELP, read_input
 from rwa_monitor.cli.output import check_output, quiet_broken_pipe, STDOUT, write_output
 from rwa_monitor.core.schema import FSS, fss_config, help_text
 from rwa_monitor.exceptions import ConfigError, RwaMonitorError
-from rwa_monitor.telemetry import read_telemetry
 from rwa_monitor.telemetry.parameters_file import load_block
 
 
@@ -66,7 +65,7 @@ def run(args: argparse.Namespace) -> int:
         model = load_model(args.model or params['model'] or None)
     except (ValueError, OSError) as err:
         raise ConfigError(str(err)) from None
-    tele = read_telemetry(args.file, args.topics).only('wheels')
+    tele = read_input(args.file, args).only('wheels')
     cal_path = args.calibration or params.get('calibration_file') or ''
     cal = None
     if cal_path:

@@ -25,13 +25,12 @@ import pathlib
 import sys
 
 from rwa_monitor.cli.main import EXIT_NOT_EXAMINED
-from rwa_monitor.cli.options import add_topics, INPUT_HELP
+from rwa_monitor.cli.options import add_topics, INPUT_HELP, read_input
 from rwa_monitor.core.schema import AUTO, default_text, help_text, IDENTIFY, Param
 from rwa_monitor.exceptions import NotExaminedError, RwaMonitorError
 from rwa_monitor.pipelines.identify import examinable, identify_wheel, identify_wheels
 from rwa_monitor.pipelines.identify_report import (OUTPUT_FILES, side_by_side, wheels_markdown,
                                                    write_outputs)
-from rwa_monitor.telemetry import read_telemetry
 from rwa_monitor.telemetry.atomic import child, FolderOutput, write_text_atomic
 from rwa_monitor.telemetry.coastdown import coastdown_folder, coastdown_runs
 from rwa_monitor.telemetry.coastdown import pendulum_inertia, read_coastdown
@@ -108,7 +107,7 @@ def run(args: argparse.Namespace) -> int:
         inertia = _given(args.inertia) or pendulum_inertia(coastdown_folder(args.file), body)
         wheels = [body]
     else:
-        tele = read_telemetry(args.file, args.topics).only('wheels')
+        tele = read_input(args.file, args).only('wheels')
         inertia = _given(args.inertia)
         wheels = list(tele.wheels) if args.wheel == 'all' else [args.wheel]
         if args.wheel == 'all' and not wheels:

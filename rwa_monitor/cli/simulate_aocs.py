@@ -5,11 +5,10 @@ from __future__ import annotations
 import argparse
 from dataclasses import replace
 
-from rwa_monitor.cli.options import OUTPUT_HELP
+from rwa_monitor.cli.options import add_format, OUTPUT_HELP, write_output_telemetry
 from rwa_monitor.exceptions import ConfigError
 from rwa_monitor.sim.aocs import (AocsConfig, AXES, DEFAULT_LEVEL, DRIFT_SLOPES, FAULT_NAMES,
                                   GyroFault, named_fault, simulate_aocs)
-from rwa_monitor.telemetry import write_telemetry
 
 _SLOPES = ', '.join(f'{k} {v:g}' for k, v in DRIFT_SLOPES.items())
 EPILOG = f'''\
@@ -47,6 +46,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help='probability that a star-tracker sample is output as -q')
     parser.add_argument('--seed', type=int, default=0, help='random seed (default 0)')
     parser.add_argument('-o', '--output', required=True, metavar='PATH', help=OUTPUT_HELP)
+    add_format(parser)
     parser.set_defaults(func=run)
 
 
@@ -64,8 +64,8 @@ def run(args: argparse.Namespace) -> int:
         tele = simulate_aocs(args.seconds, fault=fault, config=config, seed=args.seed)
     except ValueError as err:
         raise ConfigError(str(err)) from None
-    write_telemetry(args.output, tele)
-    print(f'wrote {args.output}: {len(tele)} samples at {config.rate_hz:g} Hz')
+    written = write_output_telemetry(args, tele)
+    print(f'wrote {written}: {len(tele)} samples at {config.rate_hz:g} Hz')
     if fault is not None:
         kind = 'bias step' if fault.slope == 0 else f'drift {fault.slope:g} rad/s per s'
         print(f'  gyro_{AXES[fault.axis]}: {kind} from t = {fault.time_s:g} s to '

@@ -5,11 +5,10 @@ from __future__ import annotations
 import argparse
 import sys
 
-from rwa_monitor.cli.options import OUTPUT_HELP
+from rwa_monitor.cli.options import add_format, OUTPUT_HELP, write_output_telemetry
 from rwa_monitor.exceptions import ConfigError
 from rwa_monitor.sim.basilisk_config import (BusConfig, describe, parse_fault, require,
                                              WHEEL_IDS)
-from rwa_monitor.telemetry import write_telemetry
 
 EPILOG = f'''\
 faults (repeatable --fault; TIME_S in seconds of simulation time):
@@ -54,6 +53,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                              f'{BusConfig.friction_noise_std:g} N m)')
     parser.add_argument('--seed', type=int, default=0, help='random seed (default 0)')
     parser.add_argument('-o', '--output', required=True, metavar='PATH', help=OUTPUT_HELP)
+    add_format(parser)
     parser.set_defaults(func=run)
 
 
@@ -85,8 +85,8 @@ def run(args: argparse.Namespace) -> int:
         print(f'\r  {100 * fraction:5.1f} %', end='', file=sys.stderr, flush=True)
 
     tele = bus.run(duration, progress if sys.stderr.isatty() else None)
-    write_telemetry(args.output, tele)
-    print(f'wrote {args.output}: {len(tele)} samples at {config.rate_hz:g} Hz '
+    written = write_output_telemetry(args, tele)
+    print(f'wrote {written}: {len(tele)} samples at {config.rate_hz:g} Hz '
           f'({duration:g} s)')
     for fault in faults:
         print(f'  {describe(fault)}')

@@ -3,19 +3,24 @@
 from __future__ import annotations
 
 import argparse
+import datetime as dt
 import pathlib
 import sys
 import time
 
+from rwa_monitor.cli.options import FORMATS
 from rwa_monitor.exceptions import ConfigError
 from rwa_monitor.sim.fleet import pass_telemetry, plan_fleet, write_fleet
 from rwa_monitor.telemetry.atomic import write_text_atomic
 
+EPOCH = '2026-01-01T00:00:00Z'
 EPILOG = '''\
 layout: DIR/<spacecraft>/<pass id>.csv (telemetry schema, random pass ids: names do not sort
 in time), DIR/truth.json (per spacecraft and wheel: base levels, wear rate, faults), and with
 --calibrate DIR/<spacecraft>/calibration.yaml from the spacecraft's commissioning passes (the
-first two days', fault-free).
+first two days', fault-free); DIR/archive.yaml gives time 0 as a calendar time (--epoch).
+--format ccsds: passes DIR/<spacecraft>/<pass id>.bin of CCSDS space packets, with
+telemetry.xml (XTCE) and telemetry_map.yaml beside them.
 example: rwa-monitor simulate fleet -o archive --spacecraft 20 --days 7 --rate 10 --seed 0
 '''
 
@@ -53,12 +58,18 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help='first passes kept fault-free and used by --calibrate '
                              '(default: two days of passes)')
     parser.add_argument('--seed', type=int, default=0, help='random seed (default 0)')
+    parser.add_argument('--epoch', default=EPOCH, metavar='UTC',
+                        help=f'calendar time of time 0, written to DIR/archive.yaml '
+                             f'(epoch_utc; default {EPOCH})')
+    parser.add_argument('--format', choices=FORMATS, default='auto',
+                        help='passes as CSV (auto, default) or as CCSDS space packets (ccsds)')
     parser.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     """Plan, write the passes and truth.json, optionally calibrate; print a summary."""
     out = args.output
+    epoch = _epoch(args.epoch)
     if out.exists() and (not out.is_dir() or any(out.iterdir())):
         raise ConfigError(f'{out}: exists and is not an empty folder')
     try:
@@ -70,14 +81,17 @@ def run(args: argparse.Namespace) -> int:
     except ValueError as err:
         raise ConfigError(str(err)) from None
     start = time.perf_counter()
-    files = write_fleet(out, plan)
+    suffix = '.bin' if args.format == 'ccsds' else '.csv'
+    files = write_fleet(out, plan, suffix, _write_packet_pass if suffix == '.bin' else None)
+    write_text_atomic(out / 'archive.yaml', f'# rwa-monitor simulate fleet, seed {args.seed}\n'
+                      f'epoch_utc: {epoch}\n')
     if args.calibrate:
         for craft in plan.spacecraft:
             folder = out / craft.name
             records = []
             for i in range(plan.commissioning_passes):
                 records.append(pass_telemetry(plan, craft, i))
-                records[-1].source = str(folder / f'{craft.passes[i].pass_id}.csv')
+                records[-1].source = str(folder / f'{craft.passes[i].pass_id}{suffix}')
             write_calibration(folder / 'calibration.yaml', records)
     n_pass = sum(len(c.passes) for c in plan.spacecraft)
     samples = n_pass * int(plan.pass_s * plan.rate_hz + 1e-9)
@@ -88,6 +102,24 @@ def run(args: argparse.Namespace) -> int:
           f'{len(files) - 1} files in {time.perf_counter() - start:.1f} s; truth in '
           f'{out / "truth.json"}')
     return 0
+
+
+def _epoch(text: str) -> str:
+    """Return the epoch as ISO 8601 UTC (ConfigError if it is not one)."""
+    try:
+        moment = dt.datetime.fromisoformat(text.replace('Z', '+00:00'))
+    except ValueError:
+        raise ConfigError(f'--epoch {text!r}: not an ISO 8601 time such as {EPOCH}') from None
+    if moment.tzinfo is None:
+        raise ConfigError(f'--epoch {text!r}: give the time zone (Z for UTC)')
+    return moment.astimezone(dt.timezone.utc).isoformat().replace('+00:00', 'Z')
+
+
+def _write_packet_pass(path: pathlib.Path, tele) -> None:
+    """Write one pass as packets; the folder's telemetry.xml and map describe every pass."""
+    from rwa_monitor.telemetry import ARCHIVE_MAP, ARCHIVE_XTCE
+    from rwa_monitor.telemetry.ccsds_write import write_packets
+    write_packets(path, tele, path.parent / ARCHIVE_XTCE, path.parent / ARCHIVE_MAP)
 
 
 def write_calibration(path: pathlib.Path, records: list) -> None:

@@ -4,11 +4,10 @@ from __future__ import annotations
 
 import argparse
 
-from rwa_monitor.cli.options import OUTPUT_HELP
+from rwa_monitor.cli.options import add_format, OUTPUT_HELP, write_output_telemetry
 from rwa_monitor.exceptions import ConfigError
 from rwa_monitor.sim.friction import parse_anomaly, REGIMES, simulate_friction_with_truth
 from rwa_monitor.sim.profiles import PROFILES
-from rwa_monitor.telemetry import write_telemetry
 
 _SI = REGIMES['si']
 _DRY, _VISC, _NOISE = _SI['dry_nm'], _SI['viscous_nms'], _SI['noise_std_nm']
@@ -51,6 +50,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help='step anomaly WHEEL:KIND:TIME_S:SIZE[:SIZE] (repeatable)')
     parser.add_argument('--seed', type=int, default=0, help='random seed (default 0)')
     parser.add_argument('-o', '--output', required=True, metavar='PATH', help=OUTPUT_HELP)
+    add_format(parser)
     parser.set_defaults(func=run)
 
 
@@ -67,8 +67,8 @@ def run(args: argparse.Namespace) -> int:
             seed=args.seed)
     except ValueError as err:
         raise ConfigError(str(err)) from None
-    write_telemetry(args.output, tele)
-    print(f'wrote {args.output}: {len(tele)} samples, wheels {", ".join(tele.wheels)}')
+    written = write_output_telemetry(args, tele)
+    print(f'wrote {written}: {len(tele)} samples, wheels {", ".join(tele.wheels)}')
     for c in changes:
         print(f'  {c.wheel} {c.kind} at t = {c.time_s:g} s (row {c.index}): '
               f'dry {c.delta_dry:+g}, viscous {c.delta_viscous:+g}')

@@ -4,11 +4,10 @@ from __future__ import annotations
 
 import argparse
 
-from rwa_monitor.cli.options import OUTPUT_HELP
+from rwa_monitor.cli.options import add_format, OUTPUT_HELP, write_output_telemetry
 from rwa_monitor.exceptions import ConfigError
 from rwa_monitor.sim.fss import (RATE_HZ, simulate_fss, SPEED_SCALE_RAD_S, STATUSES,
                                  TORQUE_SCALE_NM, WINDOW_SAMPLES)
-from rwa_monitor.telemetry import write_telemetry
 
 EPILOG = f'''\
 units: time in s, speed in rad/s, friction torque in N m (friction = -f_d sign(w) - f_v w
@@ -37,6 +36,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         default='realistic', help='spin-rate profile (default realistic)')
     parser.add_argument('--seed', type=int, default=0, help='random seed (default 0)')
     parser.add_argument('-o', '--output', required=True, metavar='PATH', help=OUTPUT_HELP)
+    add_format(parser)
     parser.set_defaults(func=run)
 
 
@@ -48,7 +48,7 @@ def run(args: argparse.Namespace) -> int:
                             profile=args.profile, seed=args.seed)
     except ValueError as err:
         raise ConfigError(str(err)) from None
-    write_telemetry(args.output, tele)
+    written = write_output_telemetry(args, tele)
     print(f'{len(tele)} samples of {", ".join(f"{w}={s}" for w, s in zip(tele.wheels, statuses))}'
-          f' written to {args.output}')
+          f' written to {written}')
     return 0

@@ -12,6 +12,8 @@ import math
 
 import numpy as np
 
+from rwa_monitor.core.gyro_state import (
+    check_counts, check_finite, check_type, require, StarTrackerState)
 from rwa_monitor.core.params import check_real
 
 #: A quaternion whose norm is outside ``[1 - tol, 1 + tol]`` is rejected, not normalised.
@@ -170,6 +172,30 @@ class StarTrackerRate:
             self.gaps += 1
             return None
         return _rate_scalar(prev, (x, y, z, w), dt)
+
+    def record(self) -> StarTrackerState:
+        """Return the last accepted quaternion (normalised), its stamp and the counters."""
+        return StarTrackerState(self._prev, self._prev_time, self.invalid,
+                                self.non_increasing_time, self.gaps)
+
+    def check_record(self, record: StarTrackerState, path: str) -> None:
+        """Refuse negative counters, a quaternion that is not unit, a stamp without one."""
+        check_type(record, StarTrackerState, path)
+        check_counts(record, ('invalid', 'non_increasing_time', 'gaps'), path)
+        if record.previous is None:
+            require(record.previous_time == -math.inf, f'{path}.previous_time',
+                    'a stamp without a quaternion')
+            return
+        check_finite(f'{path}.previous', record.previous, record.previous_time)
+        norm = math.sqrt(sum(v * v for v in record.previous))
+        require(abs(norm - 1.0) <= 1e-9, f'{path}.previous', f'norm {norm!r}, not 1')
+
+    def restore(self, record: StarTrackerState) -> None:
+        """Put ``record`` back (checked first: RecordError, and the differencer unchanged)."""
+        self.check_record(record, type(record).__name__)
+        self._prev, self._prev_time = record.previous, record.previous_time
+        self.invalid, self.gaps = record.invalid, record.gaps
+        self.non_increasing_time = record.non_increasing_time
 
 
 def _rate_scalar(p, q, dt: float) -> tuple[float, float, float]:

@@ -7,6 +7,7 @@ import math
 from typing import Any, Mapping
 
 from rwa_monitor.core import keys
+from rwa_monitor.core.records import Scalar
 
 
 @dataclass(frozen=True)
@@ -61,7 +62,7 @@ class AnomalyEvent:
     declared_index: int
     p_value: float = math.nan
     revision: int = 0
-    details: Mapping[str, Any] = field(default_factory=dict)
+    details: Mapping[str, Scalar] = field(default_factory=dict)
 
     def fields(self) -> dict[str, Any]:
         """Return the event as KeyValue key -> value (units in the key names)."""

@@ -16,6 +16,7 @@ from typing import Any, Mapping, Sequence
 from rwa_monitor.core.events import AnomalyEvent
 from rwa_monitor.core.gyro_residual import AXIS_DEFAULTS, ResidualAxis
 from rwa_monitor.core.gyro_rows import AXES, GyroAxes, GyroRows
+from rwa_monitor.core.gyro_state import check_keys, GyroDiagnosisState, require
 from rwa_monitor.core.params import check_real
 from rwa_monitor.core.schema import VSADC, vsadc_kwargs
 from rwa_monitor.core.vsadc import make_event, VsadcDetector
@@ -155,6 +156,46 @@ cusum_threshold, cusum_allowance
         if events:
             self._last_event = events[-1]
         return events
+
+    def state(self) -> GyroDiagnosisState:
+        """Return the detector's state as a typed record (core/gyro_state.py).
+
+        ``records.encode(det.state())``, then ``records.decode`` and :meth:`restore` into
+        a detector built with the same parameters and calibration, resumes exactly where
+        this one stands.
+        """
+        return GyroDiagnosisState(
+            self._state_parameters(), self._axis_records(), self._rows.record(),
+            self._last_event, dict(self.saturated), dict(self.saturated_now),
+            self._prev_gyro, self._prev_time)
+
+    def restore(self, state: GyroDiagnosisState) -> None:
+        """Resume from ``state``, checked whole first.
+
+        A state of other parameters, calibration, axes or block lengths, or inconsistent
+        with itself, raises :class:`~rwa_monitor.core.records.RecordError` naming the
+        field, and the detector is left as it was.
+        """
+        self._check_state(state, GyroDiagnosisState)
+        path = 'GyroDiagnosisState'
+        for name in ('saturated', 'saturated_now'):
+            check_keys(getattr(state, name), self.axes, f'{path}.{name}')
+        for axis in self.axes:
+            n = state.saturated[axis]
+            require(type(n) is int and n >= 0, f'{path}.saturated[{axis}]',
+                    f'expected a count >= 0, got {n!r}')
+            require(type(state.saturated_now[axis]) is bool, f'{path}.saturated_now[{axis}]',
+                    'expected true or false')
+        require(state.previous_time == state.rows.last_time, f'{path}.previous_time',
+                'differs from rows.last_time (the stamp of the last row taken)')
+        require((state.previous_gyro is None) == (state.previous_time == -math.inf),
+                f'{path}.previous_gyro', 'a previous gyro sample needs a stamp, and back')
+        if state.previous_gyro is not None:
+            require(len(state.previous_gyro) == 3, f'{path}.previous_gyro', 'expected 3')
+        self._restore_state(state)
+        self.saturated = {a: state.saturated[a] for a in self.axes}
+        self.saturated_now = {a: state.saturated_now[a] for a in self.axes}
+        self._prev_gyro, self._prev_time = state.previous_gyro, state.previous_time
 
 
 def gyro_diagnosis_kwargs(values: Mapping[str, Any]) -> dict[str, Any]:

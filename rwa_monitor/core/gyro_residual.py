@@ -17,9 +17,10 @@ per axis the residual ``e = (g_{k-1} + g_k)/2 - w_st,k``
 - Drift or bias (lines 27-34): instead of the spread of ``d`` against self-adapted sigma
   limits, a likelihood comparison on the half-block means of the last ``decide_blocks``
   blocks of a step (bias) and a ramp (drift), each with its onset fitted, whitened with
-  the calibrated noise model (:meth:`ResidualAxis._whitener`): the kind is declared when
-  one model explains the data better by ``decide_chi2`` (in block variances), or after
-  ``max_wait_blocks`` by the better one. The fitted onset is the event's change time.
+  the calibrated noise model (:mod:`rwa_monitor.core.gyro_decision`): the kind is
+  declared when one model explains the data better by ``decide_chi2`` (in block
+  variances), or after ``max_wait_blocks`` by the better one. The fitted onset is the
+  event's change time.
 - While faulty: drift becomes bias when the least-squares slope over the last
   ``fit_blocks`` blocks falls below half the slope threshold; bias becomes drift only
   when the level has also moved from the held bias level by the level threshold and the
@@ -42,9 +43,13 @@ from typing import Any, Mapping
 import numpy as np
 
 from rwa_monitor.core import gyro_calibration as gc
+from rwa_monitor.core.gyro_decision import step_or_ramp, whitener
+from rwa_monitor.core.gyro_state import (
+    check_counts, check_finite, check_label, check_stamps, check_type, require,
+    ResidualAxisState, ResidualThresholds, stamp_list, stamps_record)
 from rwa_monitor.core.params import check_int, check_real
 from rwa_monitor.core.schema import RESIDUAL_PARAMETERS, VSADC
-from rwa_monitor.core.vsadc import BIAS, DRIFT, HEALTHY, Transition
+from rwa_monitor.core.vsadc_axis import BIAS, DRIFT, HEALTHY, Transition
 
 #: Block-mean spread without a calibration (rad/s): the largest of the three axes measured
 #: by calibrate_gyro on the bus development seeds 1-3 (docs/vsadc.md), rounded up.
@@ -115,7 +120,9 @@ class ResidualAxis:
         self.cusum_threshold = check_real('cusum_threshold', p['cusum_threshold'], 0.0)
         self.cusum_allowance = check_real('cusum_allowance', p['cusum_allowance'], 0.0)
         self._calibrated = bool(calibration)
-        self._set_thresholds(axis_thresholds(calibration, self.block, self.fit_blocks))
+        self._calibration_thresholds = axis_thresholds(calibration, self.block, self.fit_blocks)
+        self._set_thresholds(self._calibration_thresholds)
+        self._sample_s: float | None = None     # the step the defaults were scaled to
         rho = float((calibration or {}).get('block_lag1_correlation', 0.0))
         self.lag1_correlation = min(max(rho, MIN_LAG1) if math.isfinite(rho) else 0.0, 0.0)
         self._whiteners: dict[int, np.ndarray] = {}
@@ -193,6 +200,7 @@ class ResidualAxis:
             step = (block[1][-1] - block[1][0]) / (self.block - 1)
             if step > 0:
                 self._set_thresholds(axis_thresholds(None, self.block, self.fit_blocks, step))
+                self._sample_s = float(step)
         return self._on_block(block)
 
     def _on_block(self, block: tuple) -> Transition | None:
@@ -288,73 +296,105 @@ class ResidualAxis:
         t = t - t.mean()
         return float(np.dot(t, y - y.mean()) / np.dot(t, t))
 
-    def _whitener(self, k: int) -> np.ndarray:
-        """Return ``W`` (k, k) with ``W C W^T = I``, C the covariance of k half-block means.
-
-        Noise model (docs/vsadc.md): a mean over a span is white gyro noise plus the
-        difference of the star-tracker angle noise at its two ends divided by the span. In
-        block variances, with ``rho`` the calibrated lag-1 correlation of block means
-        (clipped to [MIN_LAG1, 0]), ``s_a = -rho`` and ``s_g = 1 + 2 rho``; halving the
-        span doubles the gyro part and quadruples the star-tracker part:
-        ``C = 2 s_g I + 4 s_a (2 I - offdiag)``. A step or a ramp lives at low
-        frequencies, where the telescoping star-tracker noise is small: whitened, they
-        stand out earlier than under a white-noise model.
-        """
-        w = self._whiteners.get(k)
-        if w is None:
-            s_a = -self.lag1_correlation
-            s_g = 1.0 - 2.0 * s_a
-            off = np.eye(k, k=1) + np.eye(k, k=-1)
-            cov = 2.0 * s_g * np.eye(k) + 4.0 * s_a * (2.0 * np.eye(k) - off)
-            w = np.linalg.inv(np.linalg.cholesky(cov))
-            self._whiteners[k] = w
-        return w
-
     def _decide(self, force: bool) -> tuple[int | None, Any]:
-        """Step or ramp: the better fit of the recent distances, and its onset stamp.
+        """Return the kind and onset stamp of the last ``decide_blocks`` blocks, or None.
 
-        On the half-block means of the last ``decide_blocks`` blocks (half blocks: twice
-        the time resolution of the level test), per onset candidate (every quarter
-        block) the regressor of a step is the share of each half block's samples after
-        the onset, that of a ramp the half-block mean of ``max(0, t - onset)``. Data and
-        regressors are whitened (:meth:`_whitener`); the explained sum of squares
-        ``(x.d)^2 / x.x`` of the best onset of each model is compared in block variances.
+        Step or ramp: :func:`~rwa_monitor.core.gyro_decision.step_or_ramp`, on the
+        half-block means, whitened (the whiteners cached per size).
         """
         blocks = list(self._blocks)[-self.decide_blocks:]
-        d = np.array([h for b in blocks for h in b[3]]) - self.nominal
-        times = np.stack([b[1] for b in blocks])            # (K, block)
-        half = self.block // 2
-        step = max(self.block // 4, 1)
-        candidates = times.ravel()[::step]
-
-        def regressors(t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-            rel = t[None, :, :] - candidates[:, None, None]
-            return (rel >= 0).mean(axis=2), np.maximum(rel, 0.0).mean(axis=2)
-
-        s1, r1 = regressors(times[:, :half])
-        s2, r2 = regressors(times[:, half:])
-        x_step = np.stack([s1, s2], axis=2).reshape(len(candidates), -1)
-        x_ramp = np.stack([r1, r2], axis=2).reshape(len(candidates), -1)
-        whiten = self._whitener(len(d))
-        d = whiten @ d
-
-        def best(x: np.ndarray) -> tuple[float, int]:
-            x = x @ whiten.T
-            xx = np.einsum('ck,ck->c', x, x)
-            xd = x @ d
-            with np.errstate(invalid='ignore', divide='ignore'):
-                explained = np.where(xx > 0, xd * xd / np.where(xx > 0, xx, 1.0), 0.0)
-            i = int(np.argmax(explained))
-            return float(explained[i]), i
-
-        step_fit, i_step = best(x_step)
-        ramp_fit, i_ramp = best(x_ramp)
-        margin = (ramp_fit - step_fit) / self.block_std ** 2
-        if margin > self.decide_chi2 or (force and margin > 0):
-            kind, i = DRIFT, i_ramp
-        elif margin < -self.decide_chi2 or force:
-            kind, i = BIAS, i_step
-        else:
+        k = 2 * len(blocks)                                 # half-block means
+        whiten = self._whiteners.get(k)
+        if whiten is None:
+            whiten = self._whiteners[k] = whitener(k, self.lag1_correlation)
+        kind, i = step_or_ramp(np.array([h for b in blocks for h in b[3]]) - self.nominal,
+                               np.stack([b[1] for b in blocks]), whiten,
+                               self.block_std, self.decide_chi2, force)
+        if kind is None:
             return None, None
-        stamps = [s for b in blocks for s in b[2]]
-        return kind, stamps[i * step]
+        return kind, [s for b in blocks for s in b[2]][i]
+
+    def record(self) -> ResidualAxisState:
+        """Return the axis's state (core/gyro_state.py); stamps must be ``(time, row)``."""
+        blocks, where = list(self._blocks), 'ResidualAxisState'
+        k = len(blocks)
+        return ResidualAxisState(
+            samples=self._n, blocks_seen=self._nb, partial_sum=self._sum,
+            first_half_sum=self._first_half,
+            partial_times=np.array(self._times, dtype=np.float64),
+            partial_stamps=stamps_record(self._stamps, f'{where}.partial_stamps'),
+            block_means=np.array([b[0] for b in blocks], dtype=np.float64),
+            block_halves=np.array([b[3] for b in blocks], dtype=np.float64).reshape(k, 2),
+            block_times=np.array([b[1] for b in blocks],
+                                 dtype=np.float64).reshape(k, self.block),
+            block_stamps=stamps_record([s for b in blocks for s in b[2]],
+                                       f'{where}.block_stamps'),
+            nominal_sum=self._nominal_sum, nominal=self.nominal, label=self._state,
+            pending=self._pending, pending_run=self._pending_run, over=self._over,
+            waited=self._waited, fault_blocks=self._fault_blocks, level_sum=self._level_sum,
+            level_blocks=self._level_n, distance=self.distance, slope=self.slope,
+            cusum=(self.cusum[0], self.cusum[1]), calibrated=self._calibrated,
+            lag1_correlation=self.lag1_correlation,
+            thresholds=ResidualThresholds(self.block_std, self.level_threshold,
+                                          self.quiet_level, self.slope_threshold),
+            threshold_sample_s=self._sample_s)
+
+    def _expected_thresholds(self, sample_s: float | None) -> dict[str, float]:
+        if sample_s is None:
+            return self._calibration_thresholds
+        return axis_thresholds(None, self.block, self.fit_blocks, sample_s)
+
+    def check_record(self, record: ResidualAxisState, path: str) -> None:
+        """Refuse a record of other parameters or calibration, or inconsistent with itself."""
+        check_type(record, ResidualAxisState, path)
+        check_counts(record, ('samples', 'blocks_seen', 'pending_run', 'over', 'waited',
+                              'fault_blocks', 'level_blocks'), path)
+        n, nb, b = record.samples, record.blocks_seen, self.block
+        p, k = len(record.partial_times), min(nb, self._blocks.maxlen)
+        require(p < b and n == nb * b + p, f'{path}.partial_times',
+                f'{p} samples in the block being filled: not {n} - {nb} blocks of {b}')
+        check_stamps(record.partial_stamps, p, f'{path}.partial_stamps')
+        for name, shape in (('block_means', (k,)), ('block_halves', (k, 2)),
+                            ('block_times', (k, b))):
+            require(getattr(record, name).shape == shape, f'{path}.{name}',
+                    f'expected shape {shape} ({nb} blocks seen, {self._blocks.maxlen} kept)')
+        check_stamps(record.block_stamps, k * b, f'{path}.block_stamps')
+        check_finite(path, record.partial_times, record.partial_sum, record.first_half_sum,
+                     record.block_means, record.block_halves, record.block_times,
+                     record.nominal_sum, record.level_sum, record.cusum)
+        require(min(record.cusum) >= 0.0, f'{path}.cusum', 'negative')
+        require(math.isfinite(record.nominal) == (nb >= self.nominal_blocks),
+                f'{path}.nominal', f'must be a number once {self.nominal_blocks} blocks are seen')
+        for name in ('label', 'pending'):
+            check_label(getattr(record, name), f'{path}.{name}')
+        require(record.calibrated == self._calibrated and record.lag1_correlation
+                == self.lag1_correlation, f'{path}.calibrated',
+                'the state was made with another calibration')
+        s = record.threshold_sample_s
+        require(s is None or (not self._calibrated and math.isfinite(s) and s > 0),
+                f'{path}.threshold_sample_s', f'expected None or a step > 0 s, got {s!r}')
+        require(record.thresholds == ResidualThresholds(**self._expected_thresholds(s)),
+                f'{path}.thresholds', 'the state was made with another calibration')
+
+    def restore(self, record: ResidualAxisState) -> None:
+        """Resume from ``record`` (checked first: RecordError, and the axis unchanged)."""
+        self.check_record(record, type(record).__name__)
+        self._n, self._nb = record.samples, record.blocks_seen
+        self._sum, self._first_half = record.partial_sum, record.first_half_sum
+        self._times = record.partial_times.tolist()
+        self._stamps = stamp_list(record.partial_stamps)
+        stamps, b = stamp_list(record.block_stamps), self.block
+        self._blocks = deque(
+            ((mean, np.array(times), stamps[i * b:(i + 1) * b], tuple(halves))
+             for i, (mean, times, halves) in enumerate(zip(
+                record.block_means.tolist(), record.block_times,
+                record.block_halves.tolist()))), maxlen=self._blocks.maxlen)
+        self._nominal_sum, self.nominal = record.nominal_sum, record.nominal
+        self._state, self._pending = record.label, record.pending
+        self._pending_run, self._over = record.pending_run, record.over
+        self._waited, self._fault_blocks = record.waited, record.fault_blocks
+        self._level_sum, self._level_n = record.level_sum, record.level_blocks
+        self.distance, self.slope = record.distance, record.slope
+        self.cusum = list(record.cusum)
+        self._set_thresholds(self._expected_thresholds(record.threshold_sample_s))
+        self._sample_s = record.threshold_sample_s

@@ -7,7 +7,8 @@ the row; a gyro (or reference) that is not three values, or a row no monitored a
 use, is ``bad_gyro``; a row without a star-tracker rate (invalid or missing quaternion,
 first quaternion after a gap) is ``held``: the axes keep their labels, so a star tracker
 that stops cannot turn into a fault. The rest is ``accepted``; an axis that cannot use an
-accepted row counts it in ``bad_axis_<a>``. :class:`GyroAxes` is what the gyro detectors
+accepted row (a value not finite or beyond MAX_ABS_RATE_RAD_S) counts it in
+``bad_axis_<a>``. :class:`GyroAxes` is what the gyro detectors
 share around it: one channel per axis and the protocol's properties.
 """
 
@@ -19,8 +20,17 @@ from typing import Any, Sequence
 from rwa_monitor.core import keys
 from rwa_monitor.core.attitude import StarTrackerRate
 from rwa_monitor.core.events import AnomalyEvent
+from rwa_monitor.core.gyro_state import (
+    check_counts, check_keys, check_parameters, check_type, GyroRowsState, require)
+from rwa_monitor.core.records import Scalar
+
+_BUCKETS = ('accepted', 'held', 'bad_gyro', 'non_finite', 'non_increasing_time')
 
 AXES = ('x', 'y', 'z')
+# A body rate at or beyond this is no measurement (gyro ranges end below 20 rad/s): the
+# axis does not use the row and counts it (``bad_axis_<a>``). A fixed rule, not a
+# parameter: its only job is to keep values of 1e300 from overflowing the windows' sums.
+MAX_ABS_RATE_RAD_S = 1.0e3
 
 
 def check_axes(axes: Sequence[str]) -> tuple[str, ...]:
@@ -83,12 +93,44 @@ class GyroRows:
                 'invalid_quaternions': st.invalid, 'star_tracker_gaps': st.gaps,
                 **{f'bad_axis_{a}': n for a, n in self.bad_axis.items()}}
 
+    def record(self) -> GyroRowsState:
+        """Return the filter's state: counters, last stamp, star-tracker differencer."""
+        return GyroRowsState(self.rows, self.accepted, self.held, self.bad_gyro,
+                             self.non_finite, self.non_increasing_time, dict(self.bad_axis),
+                             self.last_time, self.star_tracker.record())
+
+    def check_record(self, record: GyroRowsState, path: str) -> None:
+        """Refuse negative counters, rows not counted once each, other axes, a bad stamp."""
+        check_type(record, GyroRowsState, path)
+        check_counts(record, ('rows',) + _BUCKETS, path)
+        require(sum(getattr(record, b) for b in _BUCKETS) == record.rows, f'{path}.rows',
+                'differs from the sum of ' + ', '.join(_BUCKETS))
+        check_keys(record.bad_axis, self.axes, f'{path}.bad_axis')
+        for axis, n in record.bad_axis.items():
+            require(type(n) is int and n >= 0, f'{path}.bad_axis[{axis}]',
+                    f'expected a count >= 0, got {n!r}')
+        require(record.last_time < math.inf, f'{path}.last_time', 'expected -inf or finite')
+        self.star_tracker.check_record(record.star_tracker, f'{path}.star_tracker')
+        require(record.star_tracker.previous_time <= record.last_time,
+                f'{path}.star_tracker.previous_time', 'after the last row')
+
+    def restore(self, record: GyroRowsState) -> None:
+        """Put ``record`` back (checked first: RecordError, and the filter unchanged)."""
+        self.check_record(record, type(record).__name__)
+        self.star_tracker.restore(record.star_tracker)
+        for name in ('rows',) + _BUCKETS:
+            setattr(self, name, getattr(record, name))
+        self.bad_axis = {a: record.bad_axis[a] for a in self.axes}
+        self.last_time = record.last_time
+
 
 class GyroAxes:
     """A gyro detector's common part: the row filter, one channel per axis, the properties.
 
-    A subclass builds its channels (objects with ``reset()`` and ``state``) and writes
-    ``update`` (core/protocol.py ``GyroDetector``), setting ``_last_event``.
+    A subclass builds its channels (objects with ``reset()``, ``state``, ``record()``,
+    ``check_record`` and ``restore``) and writes ``update`` (core/protocol.py
+    ``GyroDetector``), setting ``_last_event``, and its ``state()`` / ``restore`` from the
+    parts below.
     """
 
     def __init__(self, rows: GyroRows, channels: list, params: dict[str, Any]) -> None:
@@ -123,3 +165,35 @@ class GyroAxes:
     def last_event(self) -> AnomalyEvent | None:
         """Return the last event returned by ``update`` (None before any)."""
         return self._last_event
+
+    def _state_parameters(self) -> dict[str, Scalar]:
+        """Return the checked parameters a state must have been made with (axes aside).
+
+        Each value as the part that uses it checked it: an axis, the star-tracker
+        differencer or the detector itself (``sigma_window: auto`` is the window length).
+        """
+        owners = (self.channels[0], self._rows.star_tracker, self)
+        return {name: getattr(next(o for o in owners if hasattr(o, name)), name)
+                for name in self._params if name != 'axes'}
+
+    def _axis_records(self) -> dict[str, Any]:
+        return {a: ch.record() for a, ch in zip(self.axes, self.channels)}
+
+    def _check_state(self, state: Any, cls: type) -> None:
+        """Refuse a state of another class, parameters or axes, or inconsistent parts."""
+        path = cls.__name__
+        check_type(state, cls, path)
+        check_parameters(state.parameters, self._state_parameters(), path)
+        check_keys(state.axes, self.axes, f'{path}.axes')
+        for axis, ch in zip(self.axes, self.channels):
+            ch.check_record(state.axes[axis], f'{path}.axes[{axis}]')
+        self._rows.check_record(state.rows, f'{path}.rows')
+        require(state.last_event is None or type(state.last_event) is AnomalyEvent,
+                f'{path}.last_event', 'expected an AnomalyEvent or None')
+
+    def _restore_state(self, state: Any) -> None:
+        """Put a state checked by :meth:`_check_state` back (cannot fail)."""
+        for axis, ch in zip(self.axes, self.channels):
+            ch.restore(state.axes[axis])
+        self._rows.restore(state.rows)
+        self._last_event = state.last_event

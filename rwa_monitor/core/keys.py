@@ -44,6 +44,7 @@ DETECTABLE_VISCOUS = 'detectable_viscous_nms'  # the change (inf: not separable)
 KIND_REASON = 'kind_reason'         # why the kind is 'undecided' (only then)
 FINAL = 'final'                     # the end-of-record categorisation (only then, True)
 FINAL_SAMPLES = 'final_samples'     # samples after the change it used (only then)
+AFTER_GAP = 'after_gap_s'           # a change in a gap: time since the last sample before it
 
 # Calibration in force (detector nodes' ``calibration_file``): event and health fields.
 CALIBRATION_FILE = 'calibration_file'

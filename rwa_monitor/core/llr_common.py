@@ -1,112 +1,38 @@
 """What the LLR detector's parts share (llr-realtime paper, Algorithm 1).
 
-Parameters and their validation, p_k of one candidate (eq. (7) with Algorithm 2's skip
-bound), the statistic vectorised (eq. (5)), the declaration (change time, categorisation,
-restart point), the revision rules and events. Imported by the detector
-(:mod:`rwa_monitor.core.llr_detector`), its rules (:mod:`rwa_monitor.core.llr_changes`)
-and the batch entry (:mod:`rwa_monitor.core.llr_batch`).
+p_k of one candidate (eq. (7) with Algorithm 2's skip bound), the statistic vectorised
+(eq. (5)), the declaration (change time, categorisation, restart point), the revision
+rules and events. Imported by the detector (:mod:`rwa_monitor.core.llr_detector`) and its
+rules (:mod:`rwa_monitor.core.llr_changes`); the parameters are core/llr_config.py.
 """
 
 from __future__ import annotations
 
 import math
-from typing import Any, Callable, Mapping, NamedTuple
+from typing import Callable, NamedTuple
 
 import numpy as np
 
 from rwa_monitor.core import keys, llr_kinds, llr_stats
 from rwa_monitor.core.events import AnomalyEvent
-from rwa_monitor.core.friction import coulomb_viscous, RegressorSet
 from rwa_monitor.core.gchi2 import log_lower_bound, log_sf2, log_sf2_t
-from rwa_monitor.core.llr_noise import AR_ORDER_LIMIT, DEFAULT_AR_ORDER
-from rwa_monitor.core.params import AUTO, check_int, check_real
+from rwa_monitor.core.llr_config import LLRConfig
 
-COUNTER_NAMES = ('non_finite', 'out_of_range', 'non_increasing_time', 'missing_aux',
-                 'ill_conditioned')
 _LN10 = math.log(10.0)
-
-
-def validate_parameters(component: str = 'rw1', *, window: int = 500,
-                        k_verif: int | str | None = AUTO, false_alarm_rate: float = 1e-5,
-                        noise_std: float | str | None = AUTO,
-                        regressors: RegressorSet | None = None,
-                        min_excitation: float = 1e-6, category_level: float = 1e-3,
-                        category_revisions: int = 3, refine_change: bool = True,
-                        max_abs_speed: float = 1e5, max_abs_friction: float = 1e3,
-                        noise_ar_max_order: int | str | None = AUTO,
-                        noise_fit_samples: int | str | None = AUTO,
-                        reference_max: int | None = 0,
-                        noise_speed_model: bool = False) -> dict[str, Any]:
-    """Check the detector's keyword parameters; return them normalised (ValueError if bad).
-
-    :data:`AUTO` (core/schema.py) or None: ``k_verif`` becomes ``window // 2``,
-    ``noise_std`` None (estimated), ``noise_ar_max_order`` 3 (0 with a given
-    ``noise_std``), ``noise_fit_samples`` ``2 window + 1``; ``reference_max`` 0 or None
-    becomes None (growing reference).
-    """
-    if not isinstance(component, str) or not component:
-        raise ValueError(f'component must be a non-empty string, got {component!r}')
-    if regressors is None:
-        regressors = coulomb_viscous()
-    if not isinstance(regressors, RegressorSet):
-        raise ValueError(f'regressors must be a RegressorSet or None, got {regressors!r}')
-    p = regressors.p
-    window = check_int('window', window, max(10, p + 2))
-    if k_verif is None or k_verif == AUTO:
-        k_verif = window // 2
-    k_verif = check_int('k_verif', k_verif, 0, window - 1)
-    r = check_real('false_alarm_rate', false_alarm_rate, 0.0, 1.0, True, True)
-    if noise_std == AUTO:
-        noise_std = None
-    if noise_std is not None:
-        noise_std = check_real('noise_std', noise_std, 0.0, math.inf, True, True)
-    min_excitation = check_real('min_excitation', min_excitation, 0.0, 1.0, False, True)
-    if category_level is None:
-        category_level = r
-    category_level = check_real('category_level', category_level, 0.0, 1.0, True, True)
-    category_revisions = check_int('category_revisions', category_revisions, 0, 60)
-    if not isinstance(refine_change, bool):
-        raise ValueError(f'refine_change must be True or False, got {refine_change!r}')
-    max_abs_speed = check_real('max_abs_speed', max_abs_speed, 0.0, math.inf, True, True)
-    max_abs_friction = check_real('max_abs_friction', max_abs_friction, 0.0, math.inf, True,
-                                  True)
-    if noise_ar_max_order is None or noise_ar_max_order == AUTO:
-        noise_ar_max_order = DEFAULT_AR_ORDER if noise_std is None else 0
-    noise_ar_max_order = check_int('noise_ar_max_order', noise_ar_max_order, 0, AR_ORDER_LIMIT)
-    if noise_std is not None and noise_ar_max_order > 0:
-        raise ValueError('noise_ar_max_order must be 0 when noise_std is given (a known noise '
-                         f'level means white noise), got {noise_ar_max_order}')
-    if noise_fit_samples is None or noise_fit_samples == AUTO:
-        noise_fit_samples = 2 * window + 1
-    noise_fit_samples = check_int('noise_fit_samples', noise_fit_samples,
-                                  max(p + 2 * noise_ar_max_order + 10, 20), 10**7)
-    if not isinstance(noise_speed_model, bool):
-        raise ValueError(f'noise_speed_model must be True or False, got {noise_speed_model!r}')
-    if noise_speed_model and noise_std is not None:
-        raise ValueError('noise_speed_model needs an estimated noise level (noise_std auto), '
-                         f'got noise_std={noise_std}')
-    if reference_max == 0:
-        reference_max = None
-    if reference_max is not None:
-        reference_max = check_int('reference_max', reference_max, window + 1, 10**7)
-    return dict(component=component, window=window, k_verif=k_verif,
-                false_alarm_rate=r, noise_std=noise_std, regressors=regressors,
-                min_excitation=min_excitation, category_level=category_level,
-                category_revisions=category_revisions, refine_change=refine_change,
-                max_abs_speed=max_abs_speed, max_abs_friction=max_abs_friction,
-                noise_ar_max_order=noise_ar_max_order, noise_fit_samples=noise_fit_samples,
-                reference_max=reference_max, noise_speed_model=noise_speed_model)
 
 
 def make_event(component: str, category: llr_kinds.Category, rows: tuple[int, int, int],
                times: tuple[float, float], log_p: float, revision: int,
-               final_samples: int | None = None) -> AnomalyEvent:
+               final_samples: int | None = None, after_gap_s: float = math.nan
+               ) -> AnomalyEvent:
     """Build the AnomalyEvent of a declaration or revision.
 
     ``rows = (change row, argmin row, declaration row)``, ``times = (change time,
     declaration time)``; ``category.confirmed``: the data tell the kind apart (docs/llr.md).
     An undecided kind carries its reason; ``final_samples``: the end-of-record
-    categorisation on that many samples after the change (``final`` True).
+    categorisation on that many samples after the change (``final`` True); ``after_gap_s``:
+    a change that fell in a gap of the samples, the time since the last sample before it
+    (the change lies in ``[time - after_gap_s, time]``).
     """
     dx, z = category.dx, category.z
     details = {keys.DELTA_DRY: float(dx[0]), keys.DELTA_VISCOUS: float(dx[1]),
@@ -119,6 +45,8 @@ def make_event(component: str, category: llr_kinds.Category, rows: tuple[int, in
                keys.DETECTABLE_VISCOUS: category.detectable[1]}
     if category.kind == llr_kinds.UNDECIDED:
         details[keys.KIND_REASON] = llr_kinds.REASONS.get(category.reason, category.reason)
+    if math.isfinite(after_gap_s):
+        details[keys.AFTER_GAP] = float(after_gap_s)
     if final_samples is not None:
         details[keys.FINAL] = True
         details[keys.FINAL_SAMPLES] = int(final_samples)
@@ -137,8 +65,8 @@ class Declaration(NamedTuple):
 
 
 def declaration(prefix: np.ndarray, first: int, c: int, k_min: int, n: int,
-                cfg: Mapping[str, Any], z_thr: float,
-                ramp_of: Callable[[int], np.ndarray] | None = None) -> Declaration:
+                config: LLRConfig, ramp_of: Callable[[int], np.ndarray] | None = None,
+                log_prior: Callable[[np.ndarray], np.ndarray] | None = None) -> Declaration:
     """Return the change position, restart position and category at a declaration.
 
     ``prefix[i]`` is the prefix-sum row (reference start ``c``) at position ``first + i``,
@@ -151,15 +79,15 @@ def declaration(prefix: np.ndarray, first: int, c: int, k_min: int, n: int,
     declared as the same change again). With a sliding reference (``reference_max``) the
     caller passes ``c`` = the start of the reference window and rows relative to it.
     ``ramp_of(tau)``: the :func:`llr_growth.ramp_sums` of ``[tau, n]`` (the kind of a
-    growing change, docs/llr.md "Kinds on ramps"); None: steps only.
+    growing change, docs/llr.md "Kinds on ramps"); None: steps only. ``log_prior``: the
+    positions' log prior for the refinement (:func:`llr_stats.refine_change`).
     """
-    p = cfg['regressors'].p
-    noise_var = None if cfg['noise_std'] is None else cfg['noise_std'] ** 2
+    p, noise_var, z_thr = config.p, config.noise_var, config.z_threshold
     tau = k_min
-    if cfg['refine_change']:
-        w = cfg['window']
+    if config.refine_change:
+        w = config.window
         tau = llr_stats.refine_change(prefix, first, c, n, k_min - w, k_min + w, p,
-                                      noise_var, z_thr, k_min)
+                                      noise_var, z_thr, k_min, log_prior)
     before = prefix[tau - first]
     after = prefix[n + 1 - first] - before
     ramp = None if ramp_of is None else ramp_of(tau)
@@ -260,11 +188,13 @@ def candidate_log_p2(y: float, tr: float, dm: float, log_p_min: float,
     return log_sf2_t(y, lam1, lam2, dof)
 
 
-def window_statistics(pp: np.ndarray, pt: np.ndarray, n_p: np.ndarray, cfg: Mapping[str, Any]):
+def window_statistics(pp: np.ndarray, pt: np.ndarray, n_p: np.ndarray, min_excitation: float,
+                      noise_std: float | None):
     """Return ``(ok, testable, y, tr, dm)`` of eq. (5) for stacked candidates (numpy).
 
     The operations of core/llr_kernel.py ``test``, vectorised: ``pp``, ``pt`` are the
-    prefix rows at ``k`` and ``k + w``, shape ``(6, n)``; ``n_p`` the lengths of P_k. For
+    prefix rows at ``k`` and ``k + w``, shape ``(6, n)``; ``n_p`` the lengths of P_k;
+    ``noise_std`` None when estimated on the reference. For
     :attr:`LLRDetector.last_statistic` and the tests of Lemma 1.
     """
     A, B, C, U, V, E = pp[0], pp[1], pp[2], pp[3], pp[4], pp[5]
@@ -272,16 +202,16 @@ def window_statistics(pp: np.ndarray, pt: np.ndarray, n_p: np.ndarray, cfg: Mapp
     ac = A * C
     det = ac - B * B
     dett = At * Ct - Bt * Bt
-    ok = (det > cfg['min_excitation'] * ac) & (dett > 0.0)
+    ok = (det > min_excitation * ac) & (dett > 0.0)
     with np.errstate(all='ignore'):
         x1 = (C * U - B * V) / det
         x2 = (A * V - B * U) / det
-        if cfg['noise_std'] is None:
+        if noise_std is None:
             s2 = (E - (x1 * U + x2 * V)) / (n_p - 2.0)
             floor = llr_stats.NOISE_FLOOR_REL * E / n_p + llr_stats.NOISE_FLOOR_ABS
             s2 = np.fmax(s2, floor)
         else:
-            s2 = cfg['noise_std'] ** 2
+            s2 = noise_std ** 2
         Aw = At - A
         Bw = Bt - B
         Cw = Ct - C

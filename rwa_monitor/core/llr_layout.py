@@ -77,6 +77,13 @@ EXACT = 4     # the exact tail is needed at candidate ints[I_K] (y, tr, dm in fs
 DECLARE = 8   # Algorithm 1 line 18: declare
 
 
+def take_flags(ints: np.ndarray) -> int:
+    """Return the flags a loop over arrays stopped at, and clear them (0 between calls)."""
+    flags = int(ints[I_FLAGS])
+    ints[I_FLAGS] = 0
+    return flags
+
+
 def allocate(length: int, width: int, term_width: int, ar_max: int
              ) -> tuple[np.ndarray, np.ndarray]:
     """Return zeroed ``(fs, ints)`` for a ring of ``length`` and AR order up to ``ar_max``.

@@ -4,24 +4,22 @@ Not in the paper (whose Lemma 1 assumes white noise of known level; docs/llr.md 
 beyond white", "Noise growing with speed"): the model is fitted on the first accepted
 samples (:func:`fit_noise_model`), which wait in a buffer meanwhile; every sample is then
 divided by the modelled level and AR-filtered before it enters the sums (for the paper's
-model in the compiled kernel, core/llr_kernel.py). :class:`NoiseFitting` is the buffering
-and replay, a base of :class:`rwa_monitor.core.llr_detector.LLRDetector`.
+model in the compiled kernel, core/llr_kernel.py). The buffering and replay are
+core/llr_samples.py; this module is the model's arithmetic only.
 """
 
 from __future__ import annotations
 
-from itertools import chain
+from dataclasses import dataclass
 import math
-from typing import NamedTuple
 
 import numpy as np
 
-from rwa_monitor.core import llr_kernel as kern, llr_layout as layout, llr_stats
-from rwa_monitor.core.events import AnomalyEvent
+from rwa_monitor.core import llr_stats
+from rwa_monitor.core.schema import LLR_AUTO_AR_ORDER
 
-# Largest autoregressive order of the noise model (docs/llr.md, "Noise beyond white").
-AR_ORDER_LIMIT = 10
-DEFAULT_AR_ORDER = 3
+# The order of ``noise_ar_max_order`` auto (its range: core/schema.py).
+DEFAULT_AR_ORDER = LLR_AUTO_AR_ORDER
 # Noise growing with speed (docs/llr.md "Noise growing with speed"): the fit segment is
 # extended until |w| spans at least this fraction of its largest value, or this many times
 # noise_fit_samples; the slope of the noise level is used only if its t value exceeds
@@ -33,8 +31,9 @@ SPEED_SLOPE_Z = 3.2905267314918945
 SPEED_FLOOR = 0.1
 
 
-class NoiseModel(NamedTuple):
-    """Autoregressive model of the friction residual fitted on the first reference.
+@dataclass(frozen=True)
+class NoiseModel:
+    """Autoregressive model of the friction residual fitted on the first reference (a record).
 
     ``e_l = sum_i ar[i] e_(l-1-i) + u_l``; ``innovation_std`` = std of ``u``,
     ``residual_std`` = std of ``e``, ``long_run_ratio`` = long-run variance of ``e`` over
@@ -199,166 +198,3 @@ def whiten(values: np.ndarray, ar: tuple[float, ...]) -> np.ndarray:
     for i, a in enumerate(ar):
         out[i + 1:] -= a * values[:values.shape[0] - i - 1]
     return out
-
-
-class SampleColumns:
-    """Accepted samples of the paper's model waiting for the noise fit, held as arrays.
-
-    What :meth:`NoiseFitting._buffer_arrays` takes from the batch path: iterating gives the
-    ``(row, t, f, h, speed)`` tuples :meth:`LLRDetector.update` would have buffered (``h =
-    (-sign w, -w)``, the same floats), so it stands for the buffer list, and the fit reads
-    the arrays without those tuples. A sample appended later (a stream after a batch)
-    is kept in a list after them.
-    """
-
-    def __init__(self, rows: np.ndarray, t: np.ndarray, f: np.ndarray, speed: np.ndarray
-                 ) -> None:
-        self.rows, self.t, self.f, self.speed = rows, t, f, speed
-        self._later: list[tuple] = []
-
-    def regressors(self) -> tuple[np.ndarray, np.ndarray]:
-        """Return the two regressor columns of the arrays (``-sign w``, ``-w``)."""
-        w = self.speed
-        return np.where(w > 0.0, -1.0, np.where(w < 0.0, 1.0, 0.0)), -w
-
-    def complete(self) -> bool:
-        """Return True if no sample was appended after the arrays."""
-        return not self._later
-
-    def __len__(self) -> int:
-        return self.rows.size + len(self._later)
-
-    def __iter__(self):
-        h1, h2 = self.regressors()
-        yield from zip(self.rows.tolist(), self.t.tolist(), self.f.tolist(),
-                       zip(h1.tolist(), h2.tolist()), self.speed.tolist())
-        yield from self._later
-
-    def append(self, item: tuple) -> None:
-        self._later.append(item)
-
-    def extend(self, items) -> None:
-        self._later.extend(items)
-
-
-class NoiseFitting:
-    """Buffer the first samples, fit the noise model on them, then prewhiten every sample."""
-
-    def ingest_row(self, row: int, t: float, f: float, h, speed: float) -> list[AnomalyEvent]:
-        """Process an accepted sample whose regressor row ``h`` is already computed.
-
-        For :func:`detect_batch` with a model other than eq. (1): the rows are computed
-        once for the whole file and validated there (finite, increasing time). While the
-        noise model is being fitted the sample is buffered; once fitted the buffer is
-        replayed, and every sample is prewhitened (divided by the modelled noise level at
-        ``|speed|``, then AR-filtered) before it enters the sums.
-        """
-        if self._fitting:
-            self._buffer.append((row, t, f, h, speed))
-            if self._speed_model:
-                aw = abs(speed)
-                self._wlow = min(self._wlow, aw)
-                self._whigh = max(self._whigh, aw)
-                if self._next_fit is None:
-                    if not speed_fit_ready(len(self._buffer), self._fit_n, self._wlow,
-                                           self._whigh):
-                        return []
-                elif len(self._buffer) < self._next_fit:
-                    return []
-            elif len(self._buffer) < self._fit_n:
-                return []
-            return self._fit_and_replay()
-        return self._ingest_fitted(row, t, f, h, speed)
-
-    def _buffer_arrays(self, t: np.ndarray, w: np.ndarray, f: np.ndarray, start: int) -> int:
-        """Buffer the samples from ``start`` on (paper's model) up to the fit; return the next.
-
-        The acceptance loop compiled (core/llr_kernel.py ``accept_run``); the buffer holds
-        what :meth:`update` would have put in it, sample by sample (the regressors ``(-sign
-        w, -w)`` formed with numpy: the same floats).
-        """
-        rows = np.full(self._fit_n - len(self._buffer), -1, dtype=np.int64)
-        row0 = int(self._ints[layout.I_ROWS])
-        end = kern.accept_run(self._fs, self._ints, t, w, f, start, rows)
-        rows = rows[rows >= 0]
-        at = start + rows - row0
-        samples = SampleColumns(rows, t[at], f[at], w[at])
-        if not self._buffer and rows.size == self._fit_n:
-            self._buffer = samples   # the whole buffer at once: kept as arrays
-        else:
-            self._buffer.extend(samples)
-        return end
-
-    def _fit_and_replay(self) -> list[AnomalyEvent]:
-        """Fit the noise model on the buffered samples, then process them."""
-        buffer = self._buffer
-        if isinstance(buffer, SampleColumns) and buffer.complete():
-            rows, times, friction, speed = buffer.rows, buffer.t, buffer.f, buffer.speed
-            h = np.column_stack(buffer.regressors())
-        else:
-            rows, times, friction, regressors, speed = zip(*buffer)
-            h = np.fromiter(chain.from_iterable(regressors), float,
-                            len(buffer) * self._p).reshape(len(buffer), self._p)
-            friction = np.array(friction, dtype=float)
-            speed = np.array(speed, dtype=float)
-        speeds = np.abs(speed) if self._speed_model else None
-        model = fit_noise_model(h, friction, self._ar_max, speeds)
-        if self._speed_model and not speed_fit_done(len(buffer), self._fit_n, model):
-            self._next_fit = len(buffer) + self._fit_n
-            return []
-        self._buffer = []
-        self._fitting = False
-        self._noise = model
-        self._ar = model.ar
-        self._speed_std = model.speed_std
-        if self._p != 2:
-            events: list[AnomalyEvent] = []
-            for row, t, f, h_row, w in buffer:
-                events.extend(self._ingest_fitted(row, t, f, h_row, w))
-            return events
-        fs, ints = self._fs, self._ints
-        ints[layout.I_AR_ORDER] = len(model.ar)
-        fs[ints[layout.I_O_AR]:ints[layout.I_O_AR] + len(model.ar)] = model.ar
-        if model.speed_std is not None:
-            ints[layout.I_SPEED_MODEL] = 1
-            fs[layout.F_SPEED_A:layout.F_SPEED_FLOOR + 1] = model.speed_std
-            level = speed_scale(np.abs(speed), model.speed_std)
-            friction = friction / level
-            h = h / level[:, None]
-        self._fast = self._default
-        return self._replay(np.array(rows, dtype=np.int64), np.array(times, dtype=float),
-                            friction, np.ascontiguousarray(h[:, 0]),
-                            np.ascontiguousarray(h[:, 1]))
-
-    def _replay(self, rows: np.ndarray, t: np.ndarray, f: np.ndarray, h1: np.ndarray,
-                h2: np.ndarray) -> list[AnomalyEvent]:
-        """Feed the buffered samples of the paper's model, already scaled, to the kernel.
-
-        The loop compiled (core/llr_kernel.py ``ingest_run``: the AR filter, the sums and
-        the test of each sample in turn), Python at the samples whose flags need it: the
-        per-sample path of :meth:`_ingest_fitted`, over arrays.
-        """
-        events: list[AnomalyEvent] = []
-        i, n = 0, rows.size
-        while i < n:
-            i = kern.ingest_run(self._fs, self._ints, rows, t, f, h1, h2, i)
-            if i < n:
-                events.extend(self._after(int(self._ints[layout.I_FLAGS])))
-            i += 1
-        return events
-
-    def _ingest_fitted(self, row: int, t: float, f: float, h, speed: float
-                       ) -> list[AnomalyEvent]:
-        if self._speed_std is not None:
-            level = speed_scale(abs(speed), self._speed_std)
-            f = f / level
-            if self._p == 2:
-                h = (float(h[0]) / level, float(h[1]) / level)
-            else:
-                h = np.asarray(h, dtype=float) / level
-        if self._p == 2:
-            flags = kern.ingest(self._fs, self._ints, row, t, f, float(h[0]), float(h[1]))
-            return self._after(flags) if flags else []
-        if self._ar:
-            f, h = self._whiten(f, h)
-        return self._update_general(row, t, f, np.asarray(h, dtype=float))

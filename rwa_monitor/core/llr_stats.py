@@ -21,6 +21,8 @@ from __future__ import annotations
 
 import math
 
+from typing import Callable
+
 import numpy as np
 
 # Relative floor of the estimated noise variance (std >= 1e-10 x rms friction): a
@@ -161,7 +163,8 @@ def change_fits(before: np.ndarray, after: np.ndarray, p: int
 
 
 def refine_change(prefix: np.ndarray, first: int, c: int, n: int, lo: int, hi: int, p: int,
-                  noise_var: float | None, z_threshold: float, fallback: int) -> int:
+                  noise_var: float | None, z_threshold: float, fallback: int,
+                  log_prior: Callable[[np.ndarray], np.ndarray] | None = None) -> int:
     """Return the maximum-likelihood single change position in ``[lo, hi]``.
 
     Not in the paper: after a declaration, the data of the reference segment ``[c, n]``
@@ -176,6 +179,13 @@ def refine_change(prefix: np.ndarray, first: int, c: int, n: int, lo: int, hi: i
     parameters) and the position is not identifiable. ``prefix[i]`` is the prefix-sum row
     (from ``c``) at position ``first + i`` and must cover ``[lo, n + 1]``. O(hi - lo) once
     per declaration; ``fallback`` (the argmin of p_k) is returned when no split exists.
+
+    ``log_prior(taus)``: a log prior of each position, added to its log-likelihood
+    ``explained / (2 sigma^2)`` once the hypothesis is chosen (maximum a posteriori). The
+    detector gives the log of the time between a position's sample and the one before:
+    a change equally likely at any time, so a split across a gap of hours, which holds
+    that much more time, is preferred unless the data favour another split by as much
+    (docs/llr.md "Changes in a gap"); with evenly spaced samples the position is the ML one.
     """
     lo = max(lo, c + p + 1)
     hi = min(hi, n - p)
@@ -196,7 +206,9 @@ def refine_change(prefix: np.ndarray, first: int, c: int, n: int, lo: int, hi: i
                         NOISE_FLOOR_REL * e_total / (n + 1 - c) + NOISE_FLOOR_ABS)
     single = 0 if top[0] >= top[1] else 1
     h = 2 if (top[2] - top[single]) / noise_var > z_threshold * z_threshold else single
-    return int(taus[int(best[h])])
+    if log_prior is None:
+        return int(taus[int(best[h])])
+    return int(taus[int(np.argmax(explained[:, h] / (2.0 * noise_var) + log_prior(taus)))])
 
 
 def z_threshold(level: float) -> float:

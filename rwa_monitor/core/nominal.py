@@ -214,6 +214,13 @@ class NominalWheel:
                 for code, name in enumerate(_REASONS) if code}
 
 
+def tested_text(intervals: Any) -> str:
+    """Return tested speed intervals as text: ``tested at -250.0..-3.0, 3.0..240.0 rad/s``."""
+    if not intervals:
+        return 'no speed tested'
+    return 'tested at ' + ', '.join(f'{a:.1f}..{b:.1f}' for a, b in intervals) + ' rad/s'
+
+
 def _lookup(grid: np.ndarray, values: np.ndarray, slope: np.ndarray) -> tuple:
     """Return one side's table with a bucket index for the binary search.
 

@@ -21,14 +21,19 @@ family's protocol.
 
 from __future__ import annotations
 
-from typing import Any, Mapping, Protocol, runtime_checkable, Sequence, TYPE_CHECKING
+from typing import (Any, Mapping, Protocol, runtime_checkable, Sequence, TYPE_CHECKING,
+                    TypeVar)
 
 from rwa_monitor.core.events import AnomalyEvent
 
 if TYPE_CHECKING:
     from rwa_monitor.core.fss.diagnoser import WindowDiagnosis
+    from rwa_monitor.core.runner_facts import ComponentFacts
 
-__all__ = ['GyroDetector', 'StreamingDetector', 'WheelDetector', 'WindowDiagnoser']
+S = TypeVar('S')
+
+__all__ = ['ComponentRunner', 'GyroDetector', 'StreamingDetector', 'WheelDetector',
+           'WindowDiagnoser']
 
 
 @runtime_checkable
@@ -182,3 +187,25 @@ class WindowDiagnoser(StreamingDetector, Protocol):
     @property
     def last_event(self) -> WindowDiagnosis | None:
         """Return the latest diagnosis, or None."""
+
+
+@runtime_checkable
+class ComponentRunner(Protocol[S]):
+    """What every runner has beside its family's ``feed`` and ``update`` (its state: ``S``).
+
+    The runners (core/wheel_runner.py, core/gyro_runner.py) are what detect, the nodes
+    and the fleet call (docs/architecture.md "Runners"); a detector family's runner owns
+    its state as the typed record ``S``.
+    """
+
+    def finish(self) -> list[AnomalyEvent]:
+        """End of record: the events of what is still open (usually none)."""
+
+    def facts(self) -> ComponentFacts:
+        """Return the counts, the coverage verdict and the detector's facts so far."""
+
+    def state(self) -> S:
+        """Return the runner's state as its family's typed record (a copy)."""
+
+    def restore(self, state: S) -> None:
+        """Resume from ``state``; RecordError (nothing changed) if it does not fit."""

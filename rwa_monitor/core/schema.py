@@ -256,9 +256,51 @@ def _time_jump(what: str) -> Param:
 
 # ---------------------------------------------------------------------------------- LLR
 
-def _llr_relations(values: dict[str, Any]) -> None:
-    from rwa_monitor.core.llr import validate_parameters
-    validate_parameters('rw1', **{n: values[n] for n in LLR.names(('all',))})
+#: ``noise_ar_max_order`` ``auto`` with an estimated noise level (docs/llr.md "Noise beyond
+#: white"); with ``noise_std`` given, 0 (white noise, the paper).
+LLR_AUTO_AR_ORDER = 3
+
+
+def llr_resolve(values: Mapping[str, Any], p: int = 2) -> dict[str, Any]:
+    """Return the LLR detector's parameters with ``auto`` resolved (ValueError if they conflict).
+
+    ``values``: the detector parameters (scope ``all``), each checked by its
+    :meth:`Param.check`; ``p``: the friction model's number of columns (2: eq. (1)). The
+    rules between them are the algorithm's (llr-realtime paper, Algorithm 1, and
+    docs/llr.md): ``window >= max(10, p + 2)``; ``k_verif`` in ``[0, window - 1]``
+    (``auto``: ``window // 2``, the paper's experiments); ``noise_std`` ``auto`` -> None
+    (estimated on the reference); ``noise_ar_max_order`` ``auto`` -> 3, or 0 with a given
+    ``noise_std`` (then it must be 0); ``noise_fit_samples`` ``auto`` -> ``2 window + 1``,
+    at least ``max(p + 2 noise_ar_max_order + 10, 20)``; ``noise_speed_model`` needs an
+    estimated noise level; ``reference_max`` 0 -> None (growing reference), else at least
+    ``window + 1``.
+    """
+    out = {name: values[name] for name in LLR.names(('all',))}
+    window = check_int('window', out['window'], max(10, p + 2))
+    k_verif = window // 2 if out['k_verif'] == AUTO else out['k_verif']
+    out['k_verif'] = check_int('k_verif', k_verif, 0, window - 1)
+    noise_std = None if out['noise_std'] == AUTO else out['noise_std']
+    out['noise_std'] = noise_std
+    order = out['noise_ar_max_order']
+    if order == AUTO:
+        order = LLR_AUTO_AR_ORDER if noise_std is None else 0
+    elif noise_std is not None and order > 0:
+        raise ValueError('noise_ar_max_order must be 0 when noise_std is given (a known noise '
+                         f'level means white noise), got {order}')
+    out['noise_ar_max_order'] = order
+    fit = 2 * window + 1 if out['noise_fit_samples'] == AUTO else out['noise_fit_samples']
+    high = int(LLR['noise_fit_samples'].high)
+    out['noise_fit_samples'] = check_int('noise_fit_samples', fit, max(p + 2 * order + 10, 20),
+                                         high)
+    if out['noise_speed_model'] and noise_std is not None:
+        raise ValueError('noise_speed_model needs an estimated noise level (noise_std auto), '
+                         f'got noise_std={noise_std}')
+    reference_max = out['reference_max'] or None
+    if reference_max is not None:
+        reference_max = check_int('reference_max', reference_max, window + 1,
+                                  int(LLR['reference_max'].high))
+    out['reference_max'] = reference_max
+    return out
 
 
 LLR = Schema('llr_detector', (
@@ -308,7 +350,7 @@ LLR = Schema('llr_detector', (
           'samples may be lost).', choices=('reliable', 'best_effort'), read_only=True,
           scope='node'),
 ), 'Online LLR friction-change detector (llr-realtime paper, Algorithm 1); docs/llr.md.',
-    _llr_relations)
+    llr_resolve)
 
 # ---------------------------------------------------------------------------------- FSS
 
@@ -484,19 +526,30 @@ def _limit(level: str, unit: str) -> Param:
                  unit=unit, scope='file')
 
 
-FLEET = Schema('fleet', (_limit('dry', 'N m'), _limit('viscous', 'N m s/rad')),
-               'Friction trend of `rwa-monitor fleet` (`--config`); docs/fleet.md.')
+FLEET = Schema('fleet', (
+    _limit('dry', 'N m'), _limit('viscous', 'N m s/rad'),
+    Param('epoch_utc', '', 'What time 0 of the archive is, as ISO 8601 UTC (e.g. '
+          '2026-01-01T00:00:00Z): the outputs give calendar times; empty = the epoch_utc of '
+          "the archive's archive.yaml, if any.", scope='file'),
+), 'Friction trend and times of `rwa-monitor fleet` (`--config`); docs/fleet.md.')
 
 # ------------------------------------------------------------------------------- replay
 
 REPLAY = Schema('telemetry_replay', (
-    Param('file', '', 'Telemetry to replay: CSV file, rosbag2 folder, or bare .mcap or .db3 '
-          'file; required, give it with -p file:=PATH (never in a parameters file, where it '
-          'would beat the command line).', read_only=True, required=True, scope='node'),
+    Param('file', '', 'Telemetry to replay: CSV or Parquet file, rosbag2 folder, bare .mcap or '
+          '.db3 file, or CCSDS space packets (.bin); required, give it with -p file:=PATH '
+          '(never in a parameters file, where it would beat the command line).',
+          read_only=True, required=True, scope='node'),
     Param('topics', '', 'Topics of the streams in a recording, as wheels=/a,gyro=/b,'
           'star_tracker=/c,reference_rate=/d; streams not named keep the DESIGN.md topics '
           '(/telemetry/wheels, /telemetry/gyro, /telemetry/star_tracker, '
           '/telemetry/reference_rate).', read_only=True, scope='node'),
+    Param('xtce_file', '', 'XTCE definition of a file of CCSDS space packets; empty: FILE.xml, '
+          'else telemetry.xml beside the file (docs/contracts.md); given, the file is read '
+          'as packets whatever its suffix.', read_only=True, scope='node'),
+    Param('telemetry_map_file', '', 'Map from XTCE parameters to telemetry columns of a '
+          'packet file; empty: FILE_map.yaml, else telemetry_map.yaml beside the file '
+          '(docs/contracts.md).', read_only=True, scope='node'),
     Param('rate', 1.0, 'Time factor: 1.0 real time, 40.0 forty times faster, 0.0 as fast as '
           'the subscribers take it without loss.', low=0.0, high=1.0e6, scope='node'),
     Param('start_offset', 0.0, 'Seconds from the first sample where the replay (and every '

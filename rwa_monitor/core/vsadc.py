@@ -1,345 +1,25 @@
-"""VSADC gyro drift/bias classifier, streaming, per axis (vsadc-gyro-drift paper, Alg. 1).
+"""VSADC on the three gyro axes from raw telemetry (vsadc-gyro-drift paper, ``feature: paper``).
 
-Per axis the feature is ``x = (res_sst, res_gyr)`` (eqs. (3), (7)); the nominal centre is
-the mean of the first ``window`` samples (Alg. 1 lines 9-13), the evolving centre the
-mean of the last ``window`` (lines 15-18), ``d`` their distance (eq. (8), line 20) and
-``sigma`` the standard deviation of the last ``sigma_window`` distances (line 22; the
-paper uses ``window``, the default). Labels: 0 healthy, 1 drift, 2 bias. Every choice the
-pseudo-code leaves open is argued in docs/vsadc.md; in short:
-
-- the sigma limits come from a *reference* set of sigmas, never from the window that
-  holds the current sigma (a max that includes the current value cannot be exceeded):
-  the last ``reference_window`` sigmas computed while the axis was healthy and ``d`` was
-  below ``freeze_fraction`` times the distance threshold;
-- ``sigma_lim1`` = ``margin`` times their max is the threshold to *enter* drift (line
-  28, "first occurrence"); ``sigma_lim2`` = ``exit_margin`` times their max (or mean,
-  ``exit_limit``) the threshold to *stay* in drift (line 30, "continuous"): hysteresis;
-- self-adaptation (``adaptive``): once a bias has lasted ``reference_window`` samples, the
-  threshold to enter drift from it is ``margin`` times the max of the bias's own sigmas
-  (the limit follows the occupied area of the feature space, paper section 3.3);
-- start-up: label 0 until the nominal batch, one independent evolving window, one
-  window of distances and ``reference_window`` reference sigmas exist;
-- a new label is adopted after ``hold`` consecutive samples agree (1 = Alg. 1 as is);
-- a fault ends when ``d`` falls below ``recovery_fraction`` times the threshold (1 = the
-  paper), so that a distance hovering at the threshold does not flicker;
-- beyond the paper, ``nominal_tracking`` > 0 keeps moving the nominal centre with the
-  samples that leave the evolving window (a running mean over that many samples), only
-  while the axis is healthy and ``d`` is below ``freeze_fraction`` times the threshold,
-  so a drift freezes the nominal before it is detected.
-
-The paper-literal reading is ``sigma_window=window, reference_window=window, margin=1,
-exit_limit='mean', exit_margin=1, adaptive=False, recovery_fraction=1``.
+:class:`VsadcDetector` feeds the rows accepted by the shared row filter
+(core/gyro_rows.py) to one :class:`~rwa_monitor.core.vsadc_axis.VsadcAxis` per axis (the
+algorithm, Alg. 1, and every choice it leaves open: that module and docs/vsadc.md);
+:func:`make_event` turns an axis's label change into an AnomalyEvent.
 """
 
 from __future__ import annotations
 
-from collections import deque
-from dataclasses import dataclass
-import math
-from typing import Any, Sequence
+from typing import Sequence
 
 from rwa_monitor.core import keys
 from rwa_monitor.core.events import AnomalyEvent
-from rwa_monitor.core.gyro_rows import AXES, GyroAxes, GyroRows
-from rwa_monitor.core.params import AUTO, check_choice, check_int, check_real
+from rwa_monitor.core.gyro_rows import AXES, GyroAxes, GyroRows, MAX_ABS_RATE_RAD_S
+from rwa_monitor.core.gyro_state import VsadcState
+from rwa_monitor.core.params import AUTO
+from rwa_monitor.core.vsadc_axis import (  # noqa: F401  (the labels, for importers)
+    BIAS, DRIFT, HEALTHY, STATE_NAMES, Transition, VsadcAxis)
 
-HEALTHY, DRIFT, BIAS = 0, 1, 2
-STATE_NAMES = keys.GYRO_STATES
 _NO_REFERENCE = (0.0, 0.0, 0.0)
 DETECTOR = 'vsadc'
-_RESUM_EVERY = 4096
-
-
-class _Window:
-    """A fixed-length window of floats with its running sum and sum of squares."""
-
-    __slots__ = ('size', 'values', 'pos', 'count', 'total', 'squares', 'updates')
-
-    def __init__(self, size: int) -> None:
-        self.size = size
-        self.values = [0.0] * size
-        self.pos = self.count = self.updates = 0
-        self.total = self.squares = 0.0
-
-    def push(self, x: float) -> float:
-        """Add ``x``; return the value that left (0.0 while the window fills)."""
-        old = self.values[self.pos]
-        self.values[self.pos] = x
-        self.pos = (self.pos + 1) % self.size
-        if self.count < self.size:
-            self.count += 1
-            old = 0.0
-        self.total += x - old
-        self.squares += x * x - old * old
-        self.updates += 1
-        if self.updates % _RESUM_EVERY == 0:   # bound the rounding drift of running sums
-            vals = self.values[:self.count]
-            self.total = math.fsum(vals)
-            self.squares = math.fsum(v * v for v in vals)
-        return old
-
-    def mean(self) -> float:
-        return self.total / self.count
-
-    def std(self) -> float:
-        m = self.total / self.count
-        return math.sqrt(max(self.squares / self.count - m * m, 0.0))
-
-
-class _SlidingMax:
-    """Max over the last ``size`` pushed values (monotonic deque, O(1) amortised)."""
-
-    __slots__ = ('size', 'items', 'n')
-
-    def __init__(self, size: int) -> None:
-        self.size = size
-        self.items: deque = deque()
-        self.n = 0
-
-    def push(self, x: float) -> None:
-        items = self.items
-        while items and items[-1][1] <= x:
-            items.pop()
-        items.append((self.n, x))
-        self.n += 1
-        if items[0][0] <= self.n - 1 - self.size:
-            items.popleft()
-
-    def max(self) -> float:
-        return self.items[0][1]
-
-
-@dataclass(frozen=True)
-class Transition:
-    """A change of an axis's label: ``onset`` and ``declared`` are the caller's stamps."""
-
-    previous: int
-    state: int
-    onset: Any
-    declared: Any
-    distance: float
-    sigma: float
-
-
-class VsadcAxis:
-    """Streaming VSADC on one gyro axis: ``update(res_sst, res_gyr, stamp)`` per sample.
-
-    ``stamp`` is any object (e.g. ``(time, row)``) returned in the transitions as the
-    declaration and the estimated onset; memory is O(``window`` + ``reference_window``).
-    """
-
-    def __init__(self, *, window: int = 200, distance_threshold: float = 1.5e-5,
-                 sigma_window: int | str = AUTO, reference_window: int | str = 1200,
-                 margin: float = 1.5, exit_limit: str = 'max', exit_margin: float = 1.25,
-                 hold: int = 1, nominal_tracking: int = 0,
-                 freeze_fraction: float = 0.5, adaptive: bool = True,
-                 recovery_fraction: float = 0.75) -> None:
-        self.window = check_int('window', window, 2, 100_000)
-        self.sigma_window = check_int(
-            'sigma_window', self.window if sigma_window in (None, AUTO) else sigma_window, 2,
-            100_000)
-        self.exit_limit = check_choice('exit_limit', exit_limit, ('mean', 'max'))
-        self.exit_margin = check_real('exit_margin', exit_margin, 0.0, low_open=True)
-        self.distance_threshold = check_real('distance_threshold', distance_threshold, 0.0,
-                                             low_open=True)
-        self.reference_window = check_int(
-            'reference_window',
-            self.window if reference_window in (None, AUTO) else reference_window,
-            1, 1_000_000)
-        self.margin = check_real('margin', margin, 0.0, low_open=True)
-        self.hold = check_int('hold', hold, 1, 100_000)
-        self.nominal_tracking = check_int('nominal_tracking', nominal_tracking, 0)
-        self.freeze_fraction = check_real('freeze_fraction', freeze_fraction, 0.0, 1.0)
-        self.recovery_fraction = check_real('recovery_fraction', recovery_fraction, 0.0, 1.0,
-                                            low_open=True)
-        if not isinstance(adaptive, bool):
-            raise ValueError(f'adaptive must be true or false, got {adaptive!r}')
-        self.adaptive = adaptive
-        self.reset()
-
-    def reset(self) -> None:
-        """Forget everything: the next sample starts a new nominal batch."""
-        w, m = self.window, self.sigma_window
-        self._buf1, self._buf2 = [0.0] * w, [0.0] * w       # feature windows (ring)
-        self._stamps: list[Any] = [None] * w
-        self._pos = 0
-        self._sum1 = self._sum2 = 0.0
-        self._dbuf = [0.0] * m                              # distance window (ring)
-        self._dpos = self._dcount = 0
-        self._dsum = self._dsq = 0.0
-        self._ready = False
-        self._ref_max = _SlidingMax(self.reference_window)
-        self._ref = _Window(self.reference_window)
-        self._new_regime()
-        self._n = 0
-        self._mu1 = self._mu2 = 0.0
-        self._state = HEALTHY
-        self._candidate, self._run = HEALTHY, 0
-        self._quiet_stamp: Any = None
-        self._d_mean = self._d_var = 0.0
-        self.distance = self.sigma = math.nan
-        self.sigma_lim1 = self.sigma_lim2 = math.nan
-
-    @property
-    def state(self) -> int:
-        """Return the current label (0 healthy, 1 drift, 2 bias)."""
-        return self._state
-
-    @property
-    def samples(self) -> int:
-        """Return the number of samples taken since the last reset."""
-        return self._n
-
-    @property
-    def ready(self) -> bool:
-        """Return True once start-up is over: ``reference_window`` sigmas were learnt."""
-        return (self._n >= 2 * self.window + self.sigma_window
-                and self._ref.count >= self.reference_window)
-
-    @property
-    def nominal_centre(self) -> tuple[float, float]:
-        """Return the nominal class centre (mean res_sst, mean res_gyr), rad/s."""
-        return self._mu1, self._mu2
-
-    def update(self, res_sst: float, res_gyr: float, stamp: Any = None) -> Transition | None:
-        """Take one feature sample; return a Transition when the label changes.
-
-        Alg. 1 lines 7-37 for one axis. Non-finite features must be filtered by the
-        caller (:class:`VsadcDetector` holds the axis instead).
-        """
-        w = self.window
-        pos = self._pos
-        old1, old2, old_stamp = self._buf1[pos], self._buf2[pos], self._stamps[pos]
-        self._buf1[pos], self._buf2[pos], self._stamps[pos] = res_sst, res_gyr, stamp
-        self._pos = pos + 1 if pos + 1 < w else 0
-        n = self._n = self._n + 1
-        self._sum1 += res_sst - old1                        # old values are 0.0 while filling
-        self._sum2 += res_gyr - old2
-        if n % _RESUM_EVERY == 0:                           # bound the running sums' rounding
-            self._sum1, self._sum2 = math.fsum(self._buf1), math.fsum(self._buf2)
-        if n < w:
-            return None
-        if n == w:                                          # Alg. 1 lines 12-13
-            self._mu1, self._mu2 = self._sum1 / w, self._sum2 / w
-        d1 = self._sum1 / w - self._mu1
-        d2 = self._sum2 / w - self._mu2
-        d = math.sqrt(d1 * d1 + d2 * d2)                    # eq. (8), line 20
-        self.distance = d
-        m = self.sigma_window
-        dpos = self._dpos
-        dold = self._dbuf[dpos]
-        self._dbuf[dpos] = d
-        self._dpos = dpos + 1 if dpos + 1 < m else 0
-        if self._dcount < m:
-            self._dcount += 1
-        self._dsum += d - dold
-        self._dsq += d * d - dold * dold
-        if n % _RESUM_EVERY == 0:
-            self._dsum = math.fsum(self._dbuf)
-            self._dsq = math.fsum(v * v for v in self._dbuf)
-        if n < w + m - 1:
-            return None
-        mean_d = self._dsum / m
-        var = self._dsq / m - mean_d * mean_d
-        sigma = math.sqrt(var) if var > 0.0 else 0.0        # line 22
-        self.sigma = sigma
-        if not self._ready:
-            self._ready = self.ready
-            if not self._ready:
-                if n >= 2 * w + m:
-                    self._learn_nominal(d, sigma, old1, old2, True)
-                return None
-        ref_max = self._ref_max.max()
-        lim1 = self.margin * ref_max                        # line 24, see module doc
-        lim2 = self.exit_margin * (self._ref.mean() if self.exit_limit == 'mean'
-                                   else ref_max)
-        self.sigma_lim1, self.sigma_lim2 = lim1, lim2
-        spread = math.sqrt(self._d_var)
-        quiet = d <= self._d_mean + 3.0 * spread
-        if quiet:
-            self._quiet_stamp = None
-        elif self._quiet_stamp is None:
-            self._quiet_stamp = stamp       # first sample above the quiet level: the onset
-        state = self._state
-        regime = self.adaptive and self._regime.count >= self.reference_window  # adapted
-        limit = self.distance_threshold                     # line 26, with hysteresis:
-        if state != HEALTHY:                                # a fault ends below a lower
-            limit *= self.recovery_fraction                 # distance (no flicker)
-        if d > limit:
-            if state == DRIFT:                              # lines 30-33
-                new = DRIFT if sigma > lim2 else BIAS
-            else:                                           # lines 28-29, 32-33
-                if state == BIAS and regime:
-                    lim1 = self.margin * self._regime_max.max()
-                    self.sigma_lim1 = lim1
-                new = DRIFT if sigma > lim1 else BIAS
-        else:
-            new = HEALTHY                                   # line 36
-        if new == state and self._run == 0:
-            transition = None
-        else:
-            transition = self._settle(new, d, sigma, stamp, old_stamp)
-        if transition is not None:
-            self._new_regime()
-        elif self._run == 0:
-            if self._state == HEALTHY:
-                self._learn_nominal(d, sigma, old1, old2, quiet)
-            else:
-                self._regime_max.push(sigma)
-                self._regime.push(sigma)
-        return transition
-
-    def _new_regime(self) -> None:
-        """Forget the sigmas of the fault regime just left (self-adaptive limits)."""
-        self._regime_max = _SlidingMax(self.reference_window)
-        self._regime = _Window(self.reference_window)
-
-    def _learn_nominal(self, d: float, sigma: float, old1: float, old2: float,
-                       quiet: bool) -> None:
-        """Feed the reference sigmas, the quiet-distance level and (option) the nominal.
-
-        Only samples with ``d`` below ``freeze_fraction`` times the threshold (and, once
-        ready, at the quiet level: within 3 standard deviations of the healthy distances)
-        teach: the rise of a fault towards the threshold must not raise the sigma limits.
-        """
-        if d >= self.freeze_fraction * self.distance_threshold:
-            return
-        if quiet:
-            self._ref_max.push(sigma)
-            self._ref.push(sigma)
-        a = 1.0 / (4 * self.window)
-        if self._ref.updates == 1:
-            self._d_mean, self._d_var = d, 0.0
-        else:
-            delta = d - self._d_mean
-            self._d_mean += a * delta
-            self._d_var = (1.0 - a) * (self._d_var + a * delta * delta)
-        if self.nominal_tracking:
-            a = 1.0 / self.nominal_tracking
-            self._mu1 += a * (old1 - self._mu1)
-            self._mu2 += a * (old2 - self._mu2)
-
-    def _settle(self, new: int, d: float, sigma: float, stamp: Any,
-                old_stamp: Any) -> Transition | None:
-        """Adopt ``new`` after ``hold`` agreeing samples; return the transition if any."""
-        if new == self._state:
-            self._candidate, self._run = new, 0
-            return None
-        if new == self._candidate:
-            self._run += 1
-        else:
-            self._candidate, self._run = new, 1
-        if self._run < self.hold:
-            return None
-        previous, self._state = self._state, new
-        self._candidate, self._run = new, 0
-        if previous == HEALTHY:
-            onset = stamp if self._quiet_stamp is None else self._quiet_stamp
-        elif new == HEALTHY:
-            onset = stamp
-        else:
-            onset = old_stamp           # kind changes show a window after they happen
-        return Transition(previous, new, onset, stamp, d, sigma)
 
 
 class VsadcDetector(GyroAxes):
@@ -411,8 +91,7 @@ exit_margin, hold, nominal_tracking, freeze_fraction, adaptive, recovery_fractio
         if not rows.accept(t, gyro, ref):
             return []
         g, r = gyro, _NO_REFERENCE if ref is None else ref
-        isfinite = math.isfinite
-        usable = [isfinite(g[i]) and isfinite(r[i]) for i in rows.index]
+        usable = [_plausible(g[i]) and _plausible(r[i]) for i in rows.index]
         if not any(usable):
             rows.bad_gyro += 1
             return []
@@ -422,7 +101,7 @@ exit_margin, hold, nominal_tracking, freeze_fraction, adaptive, recovery_fractio
         stamp = (t, index)
         events = []
         for axis, i, ch, ok in zip(self.axes, rows.index, self.channels, usable):
-            if not ok:
+            if not ok or not _plausible(rate[i]):
                 rows.bad_axis[axis] += 1
                 continue
             tr = ch.update(r[i] - rate[i], r[i] - g[i], stamp)
@@ -431,6 +110,30 @@ exit_margin, hold, nominal_tracking, freeze_fraction, adaptive, recovery_fractio
         if events:
             self._last_event = events[-1]
         return events
+
+    def state(self) -> VsadcState:
+        """Return the detector's state as a typed record (core/gyro_state.py).
+
+        ``records.encode(det.state())``, then ``records.decode`` and :meth:`restore` into
+        a detector built with the same parameters, resumes exactly where this one stands.
+        """
+        return VsadcState(self._state_parameters(), self._axis_records(),
+                          self._rows.record(), self._last_event)
+
+    def restore(self, state: VsadcState) -> None:
+        """Resume from ``state``, checked whole first.
+
+        A state of other parameters, axes or window lengths, or inconsistent with itself,
+        raises :class:`~rwa_monitor.core.records.RecordError` naming the field, and the
+        detector is left as it was.
+        """
+        self._check_state(state, VsadcState)
+        self._restore_state(state)
+
+
+def _plausible(value: float) -> bool:
+    """Return True for a finite rate below MAX_ABS_RATE_RAD_S (False for NaN too)."""
+    return abs(value) < MAX_ABS_RATE_RAD_S
 
 
 def make_event(axis: str, tr: Transition) -> AnomalyEvent:

@@ -1,11 +1,14 @@
 """A fleet archive on disk: one folder per spacecraft, its passes and its calibration.
 
 ``ARCHIVE/<spacecraft>/`` holds recordings in any number and names: CSV files
-(``.csv``), Parquet files (``.parquet``) with the same columns, rosbag2 folders and bare
-``.mcap`` / ``.db3`` files (:func:`rwa_monitor.telemetry.read_telemetry` reads them all),
-and optionally ``calibration.yaml`` (``rwa-monitor calibrate``). Anything else is listed
-as ignored. :func:`scan_pass` finds a pass's first stamp and columns cheaply (the first
-row of a CSV file, the time column of a Parquet file, the whole of a recording), so
+(``.csv``), Parquet files (``.parquet``) with the same columns, rosbag2 folders, bare
+``.mcap`` / ``.db3`` files, and files of CCSDS space packets (``.bin``) with their XTCE
+definition and telemetry map beside them, ``telemetry.xml`` and ``telemetry_map.yaml``
+for the whole folder or ``<pass>.xml`` and ``<pass>_map.yaml`` for one pass
+(:func:`rwa_monitor.telemetry.read_telemetry` reads them all), and optionally
+``calibration.yaml`` (``rwa-monitor calibrate``). Anything else is listed as ignored.
+:func:`scan_pass` finds a pass's first stamp and columns cheaply (the first row of a CSV
+file, the time column of a Parquet file, the whole of a recording or packet file), so
 that passes are ordered by time, never by name.
 """
 
@@ -17,11 +20,14 @@ import pathlib
 
 import numpy as np
 
-from rwa_monitor.exceptions import ConfigError, RwaMonitorError
-from rwa_monitor.telemetry import parquet_io, read_telemetry, rosbag_io, Telemetry, Wheel
+from rwa_monitor.exceptions import ConfigError
+from rwa_monitor.telemetry import ARCHIVE_MAP, ARCHIVE_XTCE, is_packets, parquet_io
+from rwa_monitor.telemetry import read_telemetry, rosbag_io, Telemetry, Wheel
+from rwa_monitor.telemetry.ccsds_write import sibling_paths
 from rwa_monitor.telemetry.schema import ATTITUDE, FRICTION_SUFFIX, GYRO, SPEED_SUFFIX, TIME
 
 CALIBRATION = 'calibration.yaml'
+METADATA = 'archive.yaml'
 GYRO_COMPONENT = 'gyro'
 
 
@@ -57,25 +63,50 @@ def list_archive(archive: str | os.PathLike) -> list[Spacecraft]:
                          and not p.name.startswith('.')):
         cal = folder / CALIBRATION
         craft = Spacecraft(folder.name, str(folder), str(cal) if cal.is_file() else None)
+        definitions = _packet_definitions(folder)
         for entry in sorted(folder.iterdir()):
-            if entry.name.startswith('.') or entry.name == CALIBRATION:
+            if entry.name.startswith('.') or entry.name == CALIBRATION \
+                    or entry.name in definitions:
                 continue
             if is_pass(entry):
                 craft.candidates.append(str(entry))
             else:
                 craft.ignored[entry.name] = ('not a recording (expected .csv, .parquet, '
-                                             '.mcap, .db3 or a rosbag2 folder)')
+                                             '.mcap, .db3, .bin or a rosbag2 folder)')
         fleet.append(craft)
     if not fleet:
         raise ConfigError(f'{root}: no spacecraft folder')
     return fleet
 
 
+def metadata(archive: str | os.PathLike) -> dict:
+    """Return ARCHIVE/archive.yaml (e.g. ``epoch_utc``), or {} if there is none."""
+    path = pathlib.Path(archive) / METADATA
+    if not path.is_file():
+        return {}
+    from rwa_monitor.telemetry.yaml_file import read_yaml
+    found = read_yaml(path)
+    if not isinstance(found, dict):
+        raise ConfigError(f'{path}: expected a mapping such as epoch_utc: '
+                          '2026-01-01T00:00:00Z')
+    return found
+
+
 def is_pass(path: pathlib.Path) -> bool:
     """Return True for a path the readers take as a pass."""
     if rosbag_io.is_recording(path):
         return True
-    return path.is_file() and (path.suffix.lower() == '.csv' or parquet_io.is_parquet(path))
+    return path.is_file() and (path.suffix.lower() == '.csv' or parquet_io.is_parquet(path)
+                               or is_packets(path))
+
+
+def _packet_definitions(folder: pathlib.Path) -> set[str]:
+    """Return the names of the XTCE and map files of the folder's packet passes."""
+    names = {ARCHIVE_XTCE, ARCHIVE_MAP}
+    for packets in folder.glob('*'):
+        if is_packets(packets) and packets.is_file():
+            names.update(p.name for p in sibling_paths(packets))
+    return names
 
 
 def size_of(path: str) -> int:
@@ -92,14 +123,14 @@ def scan_pass(path: str) -> PassFile | str:
     try:
         if parquet_io.is_parquet(path):
             first, columns = parquet_io.first_stamp(path)
-        elif rosbag_io.is_recording(path):
+        elif rosbag_io.is_recording(path) or is_packets(path):
             tele = read_telemetry(path)
             first, columns = float(tele.time[0]), list(tele.columns())
         else:
             first, columns = _csv_first(path)
         return PassFile(name, path, size_of(path), first, tuple(columns))
-    except (RwaMonitorError, OSError, ValueError, IndexError) as err:
-        return f'{type(err).__name__}: {err}'
+    except Exception as err:  # noqa: BLE001 - a pass is outside data: any failure is its own
+        return f'unreadable: {type(err).__name__}: {err}'
 
 
 def scan_passes(paths: list[str]) -> list[PassFile | str]:
@@ -134,8 +165,8 @@ def read_pass(path: str) -> Telemetry | str:
     """Return a pass's telemetry, or the reason it cannot be read (never raises on data)."""
     try:
         tele = read_telemetry(path)
-    except (RwaMonitorError, OSError, ValueError) as err:
-        return f'{type(err).__name__}: {err}'
+    except Exception as err:  # noqa: BLE001 - a pass is outside data: any failure is its own
+        return f'unreadable: {type(err).__name__}: {err}'
     if not len(tele):
         return 'no rows'
     return tele

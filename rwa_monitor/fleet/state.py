@@ -1,122 +1,316 @@
-"""Fleet state on disk: each spacecraft's detectors after the last pass processed.
+"""Fleet state, format 2: every spacecraft's runners after the last pass processed.
 
-``STATE/<spacecraft>.json`` (format, version, package version, configuration
-fingerprint, the passes processed, and per component the detector tree of
-:mod:`rwa_monitor.fleet.codec` with the last stamp and offsets, and the trend rows of
-the passes processed, non-finite values as null) and
-``STATE/<spacecraft>.<sha>.npz`` (the trees' arrays, ``<component>/<key>``; read with
-``allow_pickle=False``), named by the first 16 hex digits of its SHA-256, which the JSON
-holds in full. The ``.npz`` is written first, then the JSON atomically, then the older
-``.npz`` removed: a save cut short leaves the previous state whole. A state whose
-format, version or fingerprint differs from this run's is refused
-(:class:`StateMismatch`), never mixed (docs/contracts.md "Fleet state").
+Layout of a state folder (docs/contracts.md "Fleet state")::
+
+    STATE/current.json         the pointer: format, version, generation, sha256
+    STATE/gen-000007/          one generation, written whole before the pointer moves
+        state.json             records (core/records.py trees), versions, fingerprints
+        arrays.npz             every array of the records (no object arrays)
+        trend.parquet          every pass's friction levels so far (the trend's history)
+        history.parquet        the cumulative event history (fleet/history.py)
+
+``sha256`` in the pointer is the SHA-256 of the generation's four files, concatenated in
+that order with their names and sizes: one hash over the whole state, checked on load
+before anything in it is parsed. The records are read by their declared types only
+(:func:`rwa_monitor.core.records.decode`): a state names no class, module or function, and
+reading it imports and runs nothing it names. Every record's format version and every
+spacecraft's fingerprint (parameters, calibration, refined model) must equal this run's
+(the run's are authoritative). Files are opened only inside the state folder, by fixed
+names, as regular files (no links, FIFOs or devices). Any deviation is a
+:class:`StateError` (exit 2) naming the file and what is wrong.
+
+A commit writes a new generation in a hidden folder, renames it into place, then replaces
+the pointer atomically, then removes the previous generation: a crash at any point
+leaves the old or the new state whole, and only files this module wrote (by their fixed
+names, inside folders it named) are ever removed.
 """
 
 from __future__ import annotations
 
-import glob
 import hashlib
 import io
 import json
-import math
+import os
 import pathlib
-from typing import Any, Mapping
+import re
+import stat
+from typing import Any, Iterable, Mapping
 
 import numpy as np
 
 import rwa_monitor
+from rwa_monitor.core.gyro_runner import GyroRunnerState
+from rwa_monitor.core.records import decode, encode, RecordError
+from rwa_monitor.core.wheel_runner import WheelRunnerState
 from rwa_monitor.exceptions import ConfigError
-from rwa_monitor.telemetry.atomic import write_bytes_atomic, write_text_atomic
+from rwa_monitor.fleet.history import Entry, from_parquet
+from rwa_monitor.fleet.records import SpacecraftRecord, TrendRow
+from rwa_monitor.telemetry.atomic import write_text_atomic
 
 FORMAT = 'rwa_monitor.fleet.state'
-VERSION = 1
+VERSION = 2
+POINTER = 'current.json'
+FILES = ('state.json', 'arrays.npz', 'trend.parquet', 'history.parquet')
+GENERATION = re.compile(r'gen-(\d{6})')
+PARTIAL = re.compile(r'\.gen-(\d{6})\.partial')
+MAX_BYTES = 8 << 30
 
 
-class StateMismatch(ConfigError):
-    """A saved state that belongs to another format, version or configuration."""
+class StateError(ConfigError):
+    """A state folder that cannot be used: damaged, foreign, or of another configuration."""
+
+
+def record_versions() -> dict[str, int]:
+    """Return the format version of every record a state holds (core and fleet)."""
+    from rwa_monitor.core.gyro_state import GyroDiagnosisState, VsadcState
+    from rwa_monitor.core.llr_state import LLRState
+    classes = (SpacecraftRecord, WheelRunnerState, GyroRunnerState, LLRState,
+               GyroDiagnosisState, VsadcState)
+    return {cls.__name__: int(getattr(cls, 'VERSION', 1)) for cls in classes}
+
+
+class Loaded:
+    """A state read from its folder: its generation, records, trend rows, event history."""
+
+    def __init__(self, generation: int, records: dict[str, SpacecraftRecord],
+                 trend: list[TrendRow], history: list[Entry]) -> None:
+        self.generation = generation
+        self.records = records
+        self.trend = trend
+        self.history = history
 
 
 def fingerprint(parts: Mapping[str, Any]) -> str:
-    """Return the SHA-256 of the canonical JSON of ``parts`` (parameters, calibration)."""
+    """Return the SHA-256 of the canonical JSON of ``parts`` (parameters, file contents)."""
     text = json.dumps(parts, sort_keys=True, separators=(',', ':'), default=str)
     return hashlib.sha256(text.encode()).hexdigest()
 
 
-def save(folder: pathlib.Path, spacecraft: str, print_: str, passes: list[dict],
-         chains: Mapping[str, Mapping[str, Any]]) -> None:
-    """Write one spacecraft's state (``chains``: component -> persistent chain)."""
-    arrays: dict[str, np.ndarray] = {}
-    components = {}
-    for component, chain in chains.items():
-        entry = {k: v for k, v in chain.items() if k != 'detector'}
-        entry['last_time'] = _float(entry['last_time'])
-        entry['history'] = [{k: None if isinstance(v, float) and not np.isfinite(v) else v
-                             for k, v in row.items()} for row in entry.get('history', [])]
-        if chain['detector'] is not None:
-            tree, found = chain['detector']
-            arrays.update({f'{component}/{k}': v for k, v in found.items()})
-            entry['detector'] = tree
-        components[component] = entry
-    buffer = io.BytesIO()
-    np.savez(buffer, **arrays)
-    data = buffer.getvalue()
-    document = {'format': FORMAT, 'version': VERSION,
-                'package_version': rwa_monitor.__version__, 'spacecraft': spacecraft,
-                'fingerprint': print_, 'arrays_sha256': hashlib.sha256(data).hexdigest(),
-                'passes': passes, 'components': components}
-    arrays_file = f'{spacecraft}.{document["arrays_sha256"][:16]}.npz'
-    document['arrays_file'] = arrays_file
-    write_bytes_atomic(folder / arrays_file, data)
-    write_text_atomic(folder / f'{spacecraft}.json', json.dumps(document, indent=1) + '\n')
-    for old in folder.glob(f'{glob.escape(spacecraft)}.*.npz'):
-        if old.name != arrays_file:
-            old.unlink()
+def check_folders(state: pathlib.Path | None, output: pathlib.Path) -> None:
+    """Raise StateError if the state folder is the output folder or one holds the other."""
+    if state is None:
+        return
+    a, b = state.resolve(), output.resolve()
+    if a == b or a in b.parents or b in a.parents:
+        raise StateError(f'--state {state}: must not be the output folder {output}, nor '
+                         'inside it, nor hold it')
 
 
-def load(folder: pathlib.Path, spacecraft: str, print_: str
-         ) -> tuple[list[dict], dict[str, dict[str, Any]]] | None:
-    """Return (passes processed, component -> persistent chain), or None if never saved.
-
-    Raise StateMismatch for a state of another format, version or configuration, and
-    ConfigError for a damaged one.
-    """
-    path = folder / f'{spacecraft}.json'
-    if not path.exists():
+def load(folder: pathlib.Path) -> Loaded | None:
+    """Return the state in ``folder``, or None if it holds none yet (StateError if bad)."""
+    pointer = folder / POINTER
+    if not _exists(pointer):
+        if _exists(folder) and not _is_dir(folder):
+            raise StateError(f'{folder}: the state folder is not a folder')
         return None
     try:
-        document = json.loads(path.read_text())
-        data = (folder / str(document.get('arrays_file'))).read_bytes()
-    except (OSError, ValueError) as err:
-        raise ConfigError(f'{path}: cannot read the fleet state: {err}') from None
-    found = (document.get('format'), document.get('version'),
-             document.get('package_version'))
-    wanted = (FORMAT, VERSION, rwa_monitor.__version__)
-    if found != wanted:
-        raise StateMismatch(f'{path}: a fleet state of {found}, this is {wanted}; refusing '
-                            'to mix them (give a new --state folder)')
-    if document.get('fingerprint') != print_:
-        raise StateMismatch(f'{path}: saved with other parameters or calibration than this '
-                            'run; refusing to mix them (give a new --state folder, or the '
-                            'config and calibration it was made with)')
-    if hashlib.sha256(data).hexdigest() != document.get('arrays_sha256'):
-        raise ConfigError(f'{path}: its .npz does not match (damaged or from another save)')
-    with np.load(io.BytesIO(data), allow_pickle=False) as npz:
-        arrays = {k: npz[k] for k in npz.files}
-    chains = {}
-    for component, entry in document['components'].items():
-        chain = dict(entry)
-        chain['last_time'] = float(chain['last_time'])
-        chain['history'] = [{k: math.nan if v is None else v for k, v in row.items()}
-                            for row in chain.get('history', [])]
-        if 'detector' in entry:
-            prefix = f'{component}/'
-            chain['detector'] = (entry['detector'], {k[len(prefix):]: v for k, v in
-                                                     arrays.items() if k.startswith(prefix)})
-        else:
-            chain['detector'] = None
-        chains[component] = chain
-    return document['passes'], chains
+        document = json.loads(_read(pointer, 1 << 16))
+    except ValueError as err:
+        raise StateError(f'{pointer}: not a state pointer: {err}') from None
+    if not isinstance(document, dict) or document.get('format') != FORMAT:
+        raise StateError(f'{pointer}: not a {FORMAT} pointer')
+    if document.get('version') != VERSION:
+        raise StateError(f'{pointer}: state format version {document.get("version")!r}, '
+                         f'this is {VERSION}: give a new --state folder')
+    name = document.get('generation')
+    match = GENERATION.fullmatch(name) if isinstance(name, str) else None
+    if match is None:
+        raise StateError(f'{pointer}: generation {name!r} is not gen-NNNNNN')
+    gen = folder / name
+    if not _is_dir(gen):
+        raise StateError(f'{gen}: the generation the pointer names is not a folder')
+    blobs = {f: _read(gen / f, MAX_BYTES) for f in FILES}
+    if _digest(blobs) != document.get('sha256'):
+        raise StateError(f"{gen}: its files do not match the pointer's sha256 (damaged, "
+                         'edited or mixed with another state)')
+    records = _records(gen / FILES[0], blobs)
+    try:
+        trend = [TrendRow.from_fields(r) for r in _table(blobs[FILES[2]])]
+        events = from_parquet(blobs[FILES[3]])
+    except (ValueError, KeyError, TypeError, RecordError) as err:
+        raise StateError(f'{gen}: its trend or event history cannot be read: {err}') from None
+    return Loaded(int(match.group(1)), records, trend, events)
 
 
-def _float(value: float) -> float | str:
-    return value if np.isfinite(value) else repr(value)
+def _table(data: bytes) -> list[dict[str, Any]]:
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+    try:
+        return pq.read_table(io.BytesIO(data)).to_pylist()
+    except (pa.ArrowException, OSError) as err:
+        raise ValueError(str(err)) from None
+
+
+def _records(path: pathlib.Path, blobs: Mapping[str, bytes]) -> dict[str, SpacecraftRecord]:
+    try:
+        manifest = json.loads(blobs[FILES[0]])
+        with np.load(io.BytesIO(blobs[FILES[1]]), allow_pickle=False) as npz:
+            arrays = {k: npz[k] for k in npz.files}
+    except (ValueError, OSError, KeyError) as err:
+        raise StateError(f'{path}: cannot read: {err}') from None
+    if not isinstance(manifest, dict) or manifest.get('format') != FORMAT:
+        raise StateError(f'{path}: not a {FORMAT} file')
+    wanted = record_versions()
+    if manifest.get('records') != wanted:
+        raise StateError(f'{path}: records of versions {manifest.get("records")}, this '
+                         f'package writes {wanted}: give a new --state folder')
+    crafts = manifest.get('spacecraft')
+    if not isinstance(crafts, dict):
+        raise StateError(f'{path}: no spacecraft mapping')
+    out = {}
+    for craft, tree in crafts.items():
+        prefix = f'{craft}/'
+        mine = {k[len(prefix):]: v for k, v in arrays.items() if k.startswith(prefix)}
+        try:
+            record = decode(SpacecraftRecord, tree, mine)
+        except RecordError as err:
+            raise StateError(f'{path}: spacecraft {craft!r}: {err}') from None
+        if record.spacecraft != craft:
+            raise StateError(f'{path}: spacecraft {craft!r} holds the record of '
+                             f'{record.spacecraft!r}')
+        out[craft] = record
+    stray = [k for k in arrays if k.split('/', 1)[0] not in crafts]
+    if stray:
+        raise StateError(f'{path}: arrays of no spacecraft: {", ".join(stray[:3])}')
+    return out
+
+
+def commit(folder: pathlib.Path, previous: Loaded | None,
+           records: Mapping[str, SpacecraftRecord], trend: bytes, history: bytes) -> None:
+    """Write ``records`` (every spacecraft) as the next generation and switch to it."""
+    generation = (previous.generation if previous else 0) + 1
+    name = f'gen-{generation:06d}'
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        _remove_partials(folder)
+        work = folder / f'.{name}.partial'
+        work.mkdir()
+        blobs = _blobs(records, trend, history)
+        for file, data in blobs.items():
+            _write(work / file, data)
+        _sync(work)
+        if _is_dir(folder / name):      # written by a run that crashed before its pointer
+            _remove_generation(folder / name)
+        os.replace(work, folder / name)
+        _sync(folder)
+        write_text_atomic(folder / POINTER, json.dumps(
+            {'format': FORMAT, 'version': VERSION, 'generation': name,
+             'sha256': _digest(blobs)}, indent=1) + '\n')
+    except OSError as err:
+        raise StateError(f'{folder}: cannot write the state: {err.strerror or err}') from None
+    if previous is not None:
+        _remove_generation(folder / f'gen-{previous.generation:06d}')
+
+
+def _blobs(records: Mapping[str, SpacecraftRecord], trend: bytes, history: bytes
+           ) -> dict[str, bytes]:
+    arrays: dict[str, np.ndarray] = {}
+    trees = {}
+    for craft, record in sorted(records.items()):
+        tree, found = encode(record)
+        trees[craft] = tree
+        arrays.update({f'{craft}/{k}': v for k, v in found.items()})
+    manifest = {'format': FORMAT, 'version': VERSION,
+                'package_version': rwa_monitor.__version__, 'records': record_versions(),
+                'spacecraft': trees}
+    buffer = io.BytesIO()
+    np.savez(buffer, **arrays)
+    return {FILES[0]: (json.dumps(manifest, allow_nan=False) + '\n').encode(),
+            FILES[1]: buffer.getvalue(), FILES[2]: trend, FILES[3]: history}
+
+
+def _digest(blobs: Mapping[str, bytes]) -> str:
+    digest = hashlib.sha256()
+    for name in FILES:
+        data = blobs[name]
+        digest.update(f'{name}\0{len(data)}\0'.encode())
+        digest.update(data)
+    return digest.hexdigest()
+
+
+def _exists(path: pathlib.Path) -> bool:
+    try:
+        os.lstat(path)
+        return True
+    except FileNotFoundError:
+        return False
+    except OSError as err:
+        raise StateError(f'{path}: {err.strerror or err}') from None
+
+
+def _is_dir(path: pathlib.Path) -> bool:
+    try:
+        return stat.S_ISDIR(os.lstat(path).st_mode)
+    except OSError:
+        return False
+
+
+def _read(path: pathlib.Path, limit: int) -> bytes:
+    """Return a regular file's bytes (never following a link, never blocking on a FIFO)."""
+    try:
+        fd = os.open(path, os.O_RDONLY | os.O_NOFOLLOW | os.O_NONBLOCK)
+    except OSError as err:
+        raise StateError(f'{path}: cannot open as a regular file of the state: '
+                         f'{err.strerror or err}') from None
+    try:
+        info = os.fstat(fd)
+        if not stat.S_ISREG(info.st_mode):
+            raise StateError(f'{path}: not a regular file')
+        if info.st_size > limit:
+            raise StateError(f'{path}: {info.st_size} bytes, more than a state file holds')
+        with os.fdopen(fd, 'rb', closefd=False) as handle:
+            return handle.read(limit + 1)
+    except OSError as err:
+        raise StateError(f'{path}: cannot read: {err.strerror or err}') from None
+    finally:
+        os.close(fd)
+
+
+def _write(path: pathlib.Path, data: bytes) -> None:
+    """Write a new file of a partial generation (the folder's rename makes it atomic)."""
+    with open(path, 'xb') as handle:
+        handle.write(data)
+        handle.flush()
+        os.fsync(handle.fileno())
+
+
+def _sync(folder: pathlib.Path) -> None:
+    try:
+        fd = os.open(folder, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
+
+
+def _remove_generation(gen: pathlib.Path) -> None:
+    """Remove a generation this module wrote: its fixed files, then the folder if empty."""
+    for name in FILES:
+        path = gen / name
+        try:
+            if stat.S_ISREG(os.lstat(path).st_mode):
+                path.unlink()
+        except OSError:
+            pass
+    try:
+        gen.rmdir()            # fails, and is left, if anything else is in it
+    except OSError:
+        pass
+
+
+def _remove_partials(folder: pathlib.Path) -> None:
+    """Remove generations a crash left unfinished (``.gen-NNNNNN.partial``, ours only)."""
+    for entry in _entries(folder):
+        if PARTIAL.fullmatch(entry) and _is_dir(folder / entry):
+            _remove_generation(folder / entry)
+
+
+def _entries(folder: pathlib.Path) -> Iterable[str]:
+    try:
+        return os.listdir(folder)
+    except OSError:
+        return []

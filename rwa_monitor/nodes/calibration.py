@@ -26,13 +26,11 @@ from diagnostic_msgs.msg import DiagnosticStatus
 from rwa_monitor.core import keys
 from rwa_monitor.core.calibrate import NominalWheel
 from rwa_monitor.core.events import AnomalyEvent
-from rwa_monitor.core.llr import LLRDetector
 from rwa_monitor.telemetry.calibration_file import load
 from rwa_monitor.telemetry.codecs import key_values
 
 NAME = keys.CALIBRATION_FILE
 COMPONENT = 'calibration'   # the component of the change events and of the health status
-REASONS = ('low_speed_band', 'outside_calibrated_range')   # samples not tested
 
 
 def check(values: dict[str, Any]) -> None:
@@ -49,7 +47,11 @@ def _sha256(path: str) -> str:
 
 
 class CalibrationInForce:
-    """The loaded calibration and what it did: samples not tested, wheels refused."""
+    """The loaded calibration: its file, hash, load time and wheels; nominal models.
+
+    The samples a calibration leaves untested are counted by each wheel's runner
+    (core/wheel_runner.py) and shown by the node per wheel.
+    """
 
     def __init__(self, path: str = '') -> None:
         self.path = ''
@@ -58,8 +60,7 @@ class CalibrationInForce:
         self.loaded_unix_s = math.nan
         self.document: dict[str, Any] | None = None
         self.loads = 0
-        self._wheels: dict[str, NominalWheel] = {}
-        self._carried: dict[str, dict[str, int]] = {}   # counts of calibrations replaced
+        self._wheels: list[str] = []
         self.set(path)
 
     def set(self, path: str) -> str:
@@ -68,10 +69,7 @@ class CalibrationInForce:
         On an error nothing changes: the last good calibration stays in force.
         """
         document = load(path) if path else None
-        wheels = ({w: NominalWheel(b) for w, b in document['wheels'].items()}
-                  if document else {})
-        for wheel_id in self._wheels:
-            self._carried[wheel_id] = self.not_tested(wheel_id)
+        wheels = list(document['wheels']) if document else []
         self.previous = self.path
         self.path, self.document, self._wheels = path, document, wheels
         self.sha256 = _sha256(path) if path else ''
@@ -99,41 +97,21 @@ class CalibrationInForce:
         """Return the wheel's calibration block, or None (no calibration or wheel)."""
         return None if self.document is None else self.document['wheels'].get(wheel_id)
 
-    def update(self, wheel_id: str, detector: LLRDetector, t: float, speed: float,
-               friction: float) -> list[AnomalyEvent]:
-        """Give one sample to ``detector``: the friction itself, or its calibrated residual.
+    def nominal(self, wheel_id: str) -> NominalWheel | None:
+        """Return a fresh nominal model of ``wheel_id`` for its runner, or None (plain).
 
-        With a calibration of the wheel, the nominal lookup and the detector's sample are
-        one compiled call (``LLRDetector.update_nominal``; the same events as the residual
-        then ``update``). Samples inside the low-speed band or outside the calibrated speed
-        range are not tested; the nominal's table counts them per reason.
+        Each runner gets its own: the model's table counts the samples it leaves untested.
         """
-        nominal = self._wheels.get(wheel_id)
-        if nominal is None:
-            return detector.update(t, speed, friction)
-        return detector.update_nominal(nominal.table, t, speed, friction)
+        block = self.block(wheel_id)
+        return None if block is None else NominalWheel(block)
 
-    def not_tested(self, wheel_id: str) -> dict[str, int]:
-        """Return the wheel's samples not tested, per reason, over every calibration loaded."""
-        counts = dict(self._carried.get(wheel_id, dict.fromkeys(REASONS, 0)))
-        nominal = self._wheels.get(wheel_id)
-        if nominal is not None:
-            for reason, n in nominal.not_tested.items():
-                counts[reason] += n
-        return counts
-
-    def values(self, wheel_id: str | None = None) -> dict[str, Any]:
-        """Return the diagnostics KeyValues of the calibration (per wheel if given)."""
-        out: dict[str, Any] = {NAME: self.path or 'none',
-                               keys.CALIBRATION_SHA256: self.sha256 or 'none',
-                               keys.CALIBRATION_LOADED: self.loaded_unix_s,
-                               keys.CALIBRATION_LOADS: self.loads,
-                               keys.CALIBRATION_WHEELS: ','.join(self._wheels)}
-        if wheel_id is not None:
-            if wheel_id in self._wheels or wheel_id in self._carried:
-                for reason, n in self.not_tested(wheel_id).items():
-                    out[f'not_tested_{reason}'] = n
-        return out
+    def values(self) -> dict[str, Any]:
+        """Return the diagnostics KeyValues of the calibration in force."""
+        return {NAME: self.path or 'none',
+                keys.CALIBRATION_SHA256: self.sha256 or 'none',
+                keys.CALIBRATION_LOADED: self.loaded_unix_s,
+                keys.CALIBRATION_LOADS: self.loads,
+                keys.CALIBRATION_WHEELS: ','.join(self._wheels)}
 
     def change_event(self, detector: str, time_s: float) -> AnomalyEvent:
         """Return the event of the change just made (kind ``calibration_changed``).

@@ -6,7 +6,8 @@ every ``diagnostic_period`` s of the node clock: OK until an anomaly, then WARN 
 viscous) or ERROR (both) with the kind and change time; STALE when telemetry stops; with
 the counters of rejected samples. The detector is :class:`rwa_monitor.core.llr.LLRDetector`
 with the keywords of :func:`rwa_monitor.core.schema.llr_kwargs`, so the node, the
-``detect`` command and the benchmarks share one implementation and one parameter meaning.
+``detect`` command and the benchmarks share one implementation and one parameter meaning:
+each wheel has a runner (core/wheel_runner.py), as in ``detect`` and the fleet.
 
 Bad input (docs/nodes.md): a message whose arrays differ in length is dropped; entries
 with an empty or repeated name, or a name that is not a valid wheel id (the rule of
@@ -43,7 +44,8 @@ from sensor_msgs.msg import JointState
 
 from rwa_monitor.core import keys, streams
 from rwa_monitor.core.events import AnomalyEvent
-from rwa_monitor.core.schema import LLR, llr_kwargs
+from rwa_monitor.core.schema import LLR
+from rwa_monitor.core.wheel_runner import WheelRunner
 from rwa_monitor.nodes import calibration, common, messages, wheels_input
 from rwa_monitor.nodes.common import (declare_parameters, DiagnosticsPublisher, ERROR,
                                       EVENTS_QOS, node_help, OK, qos_event_callbacks,
@@ -61,10 +63,10 @@ PARAMETERS = LLR.for_node()
 
 
 class _Wheel:
-    """One monitored wheel: its detector, last stamp, counters and health."""
+    """One monitored wheel: its runner, last stamp, counters and health."""
 
-    def __init__(self, detector: Any, time_jump: float) -> None:
-        self.detector = detector
+    def __init__(self, runner: WheelRunner, time_jump: float) -> None:
+        self.runner = runner
         self.gate = streams.StampGate(time_jump)
         self.sensor = streams.SensorFaultMonitor()
         self.counters = self.gate.counters
@@ -72,27 +74,34 @@ class _Wheel:
         self.events = 0
         self.failures = 0
         self.last_failure: tuple[float, str] | None = None
-        self.earlier_rejects: dict[str, int] = {}
+        self.earlier: dict[str, dict[str, int]] = {'rejected': {}, 'not_tested': {}}
         self.last_event: AnomalyEvent | None = None
         self.health: Any = None
 
-    def restart(self) -> None:
-        """Reset the detector, keeping its counters of rejected samples in the totals."""
+    def restart(self, runner: WheelRunner) -> None:
+        """Give the wheel a new runner, keeping the old one's counts in the totals."""
         try:
-            for reason, count in self.detector.counters.items():
-                self.earlier_rejects[reason] = self.earlier_rejects.get(reason, 0) + count
-            self.detector.reset()
-        except Exception:  # noqa: BLE001 - a broken detector is replaced by the caller
+            facts = self.runner.facts()
+            _add(self.earlier['rejected'], facts.rejected)
+            _add(self.earlier['not_tested'], facts.not_tested)
+        except Exception:  # noqa: BLE001 - a broken runner's counts are lost, not the node
             pass
+        self.runner = runner
         self.gate.reset()
         self.last_event = None
 
-    def rejected(self) -> dict[str, int]:
-        """Return the detector's rejected samples by reason since the node started."""
-        out = dict(self.earlier_rejects)
-        for reason, count in self.detector.counters.items():
-            out[reason] = out.get(reason, 0) + count
-        return out
+    def totals(self) -> tuple[dict[str, int], dict[str, int]]:
+        """Return the rejected and the untested samples by reason since the node started."""
+        facts = self.runner.facts()
+        rejected, untested = dict(self.earlier['rejected']), dict(self.earlier['not_tested'])
+        _add(rejected, facts.rejected)
+        _add(untested, facts.not_tested)
+        return rejected, untested
+
+
+def _add(into: dict[str, int], counts: Any) -> None:
+    for reason, count in counts.items():
+        into[reason] = into.get(reason, 0) + int(count)
 
 
 class LLRDetectorNode(Node):
@@ -101,12 +110,10 @@ class LLRDetectorNode(Node):
     def __init__(self, **kwargs: Any) -> None:
         """Create the node (``kwargs`` go to rclpy's Node: context, cli_args, ...)."""
         super().__init__(NODE_NAME, **kwargs)
-        from rwa_monitor.core.llr import LLRDetector
-        self._detector_class = LLRDetector
         common.refuse_unknown_overrides(self, LLR)
         self.params = declare_parameters(self, PARAMETERS, self._on_parameter,
                                          self._check_detector)
-        self._kwargs = llr_kwargs(self._detector_config())
+        self._values = self._detector_config()
         self.calibration = calibration.CalibrationInForce(self.params[calibration.NAME])
         self.wheels: dict[str, _Wheel] = {}
         self.input_counters = {'messages': 0, 'length_mismatch': 0,
@@ -146,30 +153,29 @@ class LLRDetectorNode(Node):
         return {name: values[name] for name in DETECTOR_PARAMETERS}
 
     def _check_detector(self, values: dict[str, Any]) -> None:
-        """Build a detector from ``values`` (ValueError naming a parameter if it fails)."""
-        self._detector_class('check', **llr_kwargs(self._detector_config(values)))
+        """Build a runner from ``values`` (ValueError naming a parameter if it fails)."""
+        WheelRunner('check', self._detector_config(values))
         calibration.check(values)
 
     def _on_parameter(self, name: str, value: Any) -> None:
         if name in DETECTOR_PARAMETERS:
-            self._kwargs = llr_kwargs(self._detector_config())
+            self._values = self._detector_config()
             for wheel_id, wheel in self.wheels.items():
-                wheel.restart()
-                wheel.detector = self._new_detector(wheel_id)
+                wheel.restart(self._new_runner(wheel_id))
             self.get_logger().info(f'{name} = {value}: every wheel detector restarted '
                                    '(latched anomalies stay)')
         elif name == calibration.NAME:
             self.get_logger().info(self.calibration.set(value))
             for wheel_id, wheel in self.wheels.items():
-                wheel.restart()
-                wheel.detector = self._new_detector(wheel_id)
+                wheel.restart(self._new_runner(wheel_id))
             common.publish_calibration_change(self, self._anomaly_pub, self.calibration,
                                               'llr')
         elif name == 'wheels':
             self._allowed = common.wheel_names(self.params['wheels'])
 
-    def _new_detector(self, wheel_id: str) -> Any:
-        return self._detector_class(wheel_id, **self._kwargs)
+    def _new_runner(self, wheel_id: str) -> WheelRunner:
+        return WheelRunner(wheel_id, self._values,
+                           nominal=self.calibration.nominal(wheel_id))
 
     # ---------------------------------------------------------------------- input
     def _log_once(self, reason: str, subject: str, text: str) -> None:
@@ -230,7 +236,7 @@ class LLRDetectorNode(Node):
         if refusal is not None:
             self._reject(refusal[0], wheel_id, refusal[1])
             return None
-        wheel = self.wheels[wheel_id] = _Wheel(self._new_detector(wheel_id),
+        wheel = self.wheels[wheel_id] = _Wheel(self._new_runner(wheel_id),
                                                self.params['time_jump'])
         wheel.health = self.diagnostics.component(wheel_id, f'{wheel_id} friction')
         self.diagnostics.provide(wheel_id, f'{wheel_id} friction',
@@ -247,7 +253,7 @@ class LLRDetectorNode(Node):
         if verdict == streams.TIME_JUMP:
             self._log_once(verdict, wheel_id, f'{wheel_id}: time jumped back '
                            f'{last - seconds:.3f} s: detector restarted')
-            wheel.restart()
+            wheel.restart(self._new_runner(wheel_id))
             gate.check(seconds)
         elif verdict != streams.ACCEPT:
             self._log_once(verdict, wheel_id, f'{wheel_id}: dropped a sample: {verdict} '
@@ -255,7 +261,7 @@ class LLRDetectorNode(Node):
             return
         wheel.samples += 1
         try:
-            found = self.calibration.update(wheel_id, wheel.detector, seconds, speed, friction)
+            found = wheel.runner.update(seconds, speed, friction)
         except Exception as err:  # noqa: BLE001 - one wheel's failure never stops the node
             self._detector_failed(wheel_id, wheel, err)
             return
@@ -271,8 +277,7 @@ class LLRDetectorNode(Node):
             self.get_logger().error(
                 f'{wheel_id}: detector failed: {type(err).__name__}: {err}; detector '
                 'restarted (further failures are only counted)')
-        wheel.restart()
-        wheel.detector = self._new_detector(wheel_id)
+        wheel.restart(self._new_runner(wheel_id))
 
     def _free_silent_wheels(self) -> None:
         """Free the wheels silent for ``wheel_timeout`` s (timer on the steady clock)."""
@@ -303,7 +308,8 @@ class LLRDetectorNode(Node):
     def _wheel_health(self, wheel: _Wheel) -> tuple[bytes, str, dict[str, Any]]:
         values: dict[str, Any] = {'samples': wheel.samples, 'events': wheel.events}
         values.update(wheel.counters)
-        values.update({f'rejected_{k}': v for k, v in wheel.rejected().items()})
+        rejected, untested = wheel.totals()
+        values.update({f'rejected_{k}': v for k, v in rejected.items()})
         event = wheel.last_event
         if event is None:
             level, message = OK, 'no anomaly'
@@ -314,23 +320,23 @@ class LLRDetectorNode(Node):
             values.update({keys.KIND: event.kind, keys.CHANGE_TIME: event.time,
                            keys.P_VALUE: event.p_value})
         try:
-            values[keys.NOISE_STD] = float(wheel.detector.noise_std)
+            values[keys.NOISE_STD] = float(wheel.runner.detector.noise_std)
         except Exception:  # noqa: BLE001 - a health value never stops the node
             pass
         values['detector_failures'] = wheel.failures
-        rejected = wheel.rejected()
         fault = wheel.sensor.update(wheel.samples, rejected.get('out_of_range', 0)
                                     + rejected.get('non_finite', 0))
         if fault is not None:
             level, message = ERROR, f'{fault}; {message}'
             values['sensor_fault'] = True
-        values.update(self.calibration.values(wheel.detector.component))
+        values.update(self.calibration.values())
+        values.update({f'not_tested_{k}': v for k, v in untested.items()})
         if values.get('not_tested_outside_calibrated_range'):
             message += '; telemetry outside the calibrated speed range (not tested)'
         failure = wheel.last_failure
         if failure is not None and self.diagnostics.now() - failure[0] < ERROR_HOLD_S:
             level, message = ERROR, f'detector failed ({failure[1]}), restarted; {message}'
-        return self.alarms.merge(wheel.detector.component, level, message, values)
+        return self.alarms.merge(wheel.runner.component, level, message, values)
 
     def _input_health(self) -> tuple[bytes, str, dict[str, Any]]:
         rejected = sum(v for k, v in self.input_counters.items() if k != 'messages')

@@ -4,8 +4,10 @@ Topics (DESIGN.md): ``telemetry/wheels`` (JointState), ``telemetry/gyro`` (Imu),
 ``telemetry/star_tracker`` (QuaternionStamped), ``telemetry/reference_rate``
 (Vector3Stamped) for the channels the file has, every message stamped with the telemetry
 time; a recording's streams keep their own stamps and rates (parameter ``topics`` names
-the recording's topics); ``/clock`` (the telemetry time) for the sim-time detectors; progress on
-``/diagnostics``. Pacing uses the steady clock, never the sim time it publishes.
+the recording's topics), and so do the containers of a file of space packets (parameters
+``xtce_file`` and ``telemetry_map_file``); ``/clock`` (the telemetry time) for the
+sim-time detectors; progress on ``/diagnostics``. Pacing uses the steady clock, never the
+sim time it publishes.
 
 ``rate`` is the time factor (1.0 real time). At every rate the replay first waits for
 its subscribers (:mod:`rwa_monitor.nodes.subscriber_wait`: ``min_subscribers`` on
@@ -70,7 +72,10 @@ class TelemetryReplay(Node):
                 raise ConfigError('parameter file: a telemetry file is required '
                                   '(-p file:=PATH)')
             try:
-                telemetry = read_telemetry(self.params['file'], self.params['topics'])
+                telemetry = read_telemetry(
+                    self.params['file'], self.params['topics'],
+                    xtce=self.params['xtce_file'] or None,
+                    telemetry_map=self.params['telemetry_map_file'] or None)
             except RwaMonitorError as err:
                 raise ConfigError(f'parameter file: {err}') from None
         if len(telemetry) == 0:

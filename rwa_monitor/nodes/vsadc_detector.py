@@ -4,12 +4,12 @@ Subscribes ``telemetry/gyro`` (sensor_msgs/Imu, angular_velocity), ``telemetry/s
 (geometry_msgs/QuaternionStamped) and ``telemetry/reference_rate`` (Vector3Stamped; when
 it has sent nothing for ``reference_timeout`` s of data time, the ``reference_rate``
 parameter is used). Gyro and star-tracker samples are paired by stamp (within
-``pair_tolerance`` s) and fed in stamp order to the detector of
-:func:`rwa_monitor.core.gyro_diagnosis.make_gyro_detector` (``feature`` residual: the
+``pair_tolerance`` s) and fed in stamp order to the gyro runner
+(:class:`rwa_monitor.core.gyro_runner.GyroRunner`: ``feature`` residual, the
 gyro-minus-star-tracker diagnosis with the ``calibration_file`` thresholds; paper: VSADC
-as in Algorithm 1); one implementation and one parameter meaning for node, ``detect`` and
-benchmarks. A gyro rate at or above ``saturation_rad_s`` is held and the axis reported
-WARN "saturated", never diagnosed.
+as in Algorithm 1); one implementation and one parameter meaning for node, ``detect``,
+the fleet and benchmarks. A gyro rate at or above ``saturation_rad_s`` is held and the
+axis reported WARN "saturated", never diagnosed.
 
 Publishes an event on ``anomalies`` at every state change of an axis (kind ``drift``,
 ``bias``, or ``healthy`` for a recovery) and each axis's health on ``/diagnostics``:
@@ -42,7 +42,7 @@ from sensor_msgs.msg import Imu
 
 from rwa_monitor.core import keys, streams
 from rwa_monitor.core.events import AnomalyEvent
-from rwa_monitor.core.gyro_diagnosis import make_gyro_detector
+from rwa_monitor.core.gyro_runner import GyroRunner
 from rwa_monitor.core.schema import VSADC
 from rwa_monitor.core.vsadc import STATE_NAMES
 from rwa_monitor.exceptions import ConfigError
@@ -89,13 +89,12 @@ class VsadcDetectorNode(Node):
         self.events: deque[AnomalyEvent] = deque(maxlen=MAX_KEPT)
         self._last_event: dict[str, AnomalyEvent] = {}
         self.samples = 0
-        self.index = 0      # samples fed since the detector (re)started: the event index
         self._pairer = streams.StampPairer(self.params['pair_tolerance'],
                                            self.params['max_lag'], self.params['time_jump'])
         self._refs: deque = deque(maxlen=64)
         self._failure: tuple[float, str] | None = None
         try:
-            self.detector = self._make_detector(self._detector_config())
+            self.runner = self._make_runner(self._detector_config())
         except ValueError as err:
             raise ConfigError(f'parameter {err}') from None
         self.diagnostics = DiagnosticsPublisher(
@@ -122,14 +121,19 @@ class VsadcDetectorNode(Node):
         values = self.params if values is None else values
         return {name: values[name] for name in DETECTOR_PARAMETERS}
 
+    @property
+    def detector(self) -> Any:
+        """Return the gyro detector of the runner in force (its channels and counters)."""
+        return self.runner.detector
+
     @staticmethod
-    def _make_detector(config: dict[str, Any]) -> Any:
+    def _make_runner(config: dict[str, Any]) -> GyroRunner:
         calibration = (load_gyro_calibration(config['calibration_file'])
                        if config['calibration_file'] else None)
-        return make_gyro_detector(config, calibration)
+        return GyroRunner(config, calibration)
 
     def _check_detector(self, values: dict[str, Any]) -> None:
-        self._make_detector(self._detector_config(values))
+        self._make_runner(self._detector_config(values))
         calibration.check(values)
 
     def _on_parameter(self, name: str, value: Any) -> None:
@@ -143,8 +147,7 @@ class VsadcDetectorNode(Node):
         if name == 'reference_rate':
             self.reference = list(value)
         elif name in DETECTOR_PARAMETERS:
-            self.detector = self._make_detector(self._detector_config())
-            self.index = 0
+            self.runner = self._make_runner(self._detector_config())
             self._axis_checks()
             self.get_logger().info(f'{name} = {value}: detector restarted')
 
@@ -202,8 +205,7 @@ class VsadcDetectorNode(Node):
         if self._pairer.push_gyro(t, tuple(rate)):
             self.counters['time_jump_reset'] += 1
             self.get_logger().warning(f'gyro time jumped back to t={t:.3f} s: restart')
-            self.detector.reset()
-            self.index = 0
+            self.runner = self._make_runner(self._detector_config())
             for _ in range(len(self._refs)):        # keep the new pass's reference rates
                 stamp, ref = self._refs.popleft()
                 if stamp <= t + self.params['time_jump']:
@@ -257,13 +259,12 @@ class VsadcDetectorNode(Node):
         detector = self.detector
         before = [ch.samples for ch in detector.channels]
         try:
-            found = detector.update(t, rate, q, ref, self.index)
+            found = self.runner.update(t, rate, q, ref)
         except Exception as err:  # noqa: BLE001 - a detector failure never stops the node
             self._detector_failed(err)
             return
         finally:
             self.samples += 1
-            self.index += 1
         now = self.diagnostics.now()
         self.diagnostics.mark_input(INPUT_ID, 'input', now)
         for axis, ch, n in zip(detector.axes, detector.channels, before):
@@ -279,8 +280,7 @@ class VsadcDetectorNode(Node):
         if self.counters['detector_failures'] == 1:
             self.get_logger().error(f'detector failed: {self._failure[1]}; detector '
                                     'restarted (further failures are only counted)')
-        self.detector = self._make_detector(self._detector_config())
-        self.index = 0
+        self.runner = self._make_runner(self._detector_config())
         self._axis_checks()
 
     # --------------------------------------------------------------------- output

@@ -3,14 +3,13 @@
 ``commission(tele_list)`` calls core/calibrate.py per wheel on the concatenated records;
 ``write(cal, out_dir)`` writes ``calibration.yaml`` and ``report.md`` with plots;
 ``load(path)`` returns the checked ``calibration`` mapping (ConfigError naming the file
-and the key); ``run_llr`` runs the unchanged model-(1) detector on the residual against
-the calibrated nominal (docs/llr.md, section "Calibrated").
+and the key). The calibrated LLR run (model (1) on the residual against the calibrated
+nominal, docs/llr.md "Calibrated") is the wheel runner's (core/wheel_runner.py).
 """
 
 from __future__ import annotations
 
 import pathlib
-import time as _time
 from typing import Any, Mapping, Sequence
 
 import numpy as np
@@ -19,8 +18,8 @@ from rwa_monitor.core import calibrate as core
 from rwa_monitor.core.calibration_values import check_values
 from rwa_monitor.core.coverage import (Coverage, judge, llr_samples_needed,
                                        MOSTLY_UNTESTED_SHARE, NOT_EXAMINED)
-from rwa_monitor.core.events import AnomalyEvent
 from rwa_monitor.core.identify.model import plain
+from rwa_monitor.core.nominal import tested_text
 from rwa_monitor.exceptions import ConfigError, NotExaminedError
 from rwa_monitor.telemetry import Telemetry
 from rwa_monitor.telemetry.atomic import atomic_write, child, FolderOutput, write_text_atomic
@@ -285,53 +284,10 @@ def _plot(name: str, block: Mapping[str, Any], data: dict | None,
     plt.close(fig)
 
 
-def run_llr(tele: Telemetry, kwargs: Mapping[str, Any], path: str
-            ) -> tuple[list[AnomalyEvent], dict[str, Any]]:
-    """Run the model-(1) detector on the residual against each wheel's nominal model.
-
-    Every wheel of the record with a friction column must be calibrated (ConfigError
-    naming the others). Summary per wheel: events, samples, the detector's counters, the
-    samples not tested by reason (``low_speed_band``, ``outside_calibrated_range``) and a
-    note when telemetry leaves the calibrated speed range.
-    """
-    from rwa_monitor.core.llr import detect_batch_with_counters
-    cal = load(path)
-    wheels = [w for w, ch in tele.wheels.items() if ch.friction is not None]
-    core.check_wheels(cal, wheels, str(path))
-    events: list[AnomalyEvent] = []
-    summary: dict[str, Any] = {}
-    for wheel_id in wheels:
-        ch = tele.wheels[wheel_id]
-        start = _time.perf_counter()
-        nominal = core.NominalWheel(cal['wheels'][wheel_id])
-        residual, skipped = nominal.residual(tele.time, ch.speed, ch.friction)
-        found, counters = detect_batch_with_counters(
-            tele.time, ch.speed, residual, component=wheel_id, **kwargs)
-        counters = dict(counters)
-        counters['non_finite'] = counters.get('non_finite', 0) - sum(skipped.values())
-        entry = {'events': len(found), 'samples': len(tele), 'rejected': counters,
-                 'not_tested': skipped, 'calibration': str(path),
-                 'runtime_s': _time.perf_counter() - start}
-        if skipped['outside_calibrated_range']:
-            entry['warning'] = (f'{skipped["outside_calibrated_range"]} samples at speeds '
-                                f'the calibration did not determine its nominal at '
-                                f'({tested_text(nominal.tested)}): not tested')
-        summary[wheel_id] = entry
-        events.extend(found)
-    return events, summary
-
-
-def tested_text(intervals: Sequence[tuple[float, float]]) -> str:
-    """Return the tested speed intervals as text (``tested at -250.0..-3.0, 3.0..240.0 rad/s``)."""
-    if not intervals:
-        return 'no speed tested'
-    return 'tested at ' + ', '.join(f'{a:.1f}..{b:.1f}' for a, b in intervals) + ' rad/s'
-
-
 def diagnose_wheel(block: Mapping[str, Any], time: np.ndarray, speed: np.ndarray,
                    friction: np.ndarray, classifier: Any, config: Any) -> dict[str, Any]:
     """Return the window diagnosis of one wheel relative to its nominal (core function)."""
     return core.diagnose_fss(block, time, speed, friction, classifier, config)
 
 
-__all__ = ['commission', 'diagnose_wheel', 'load', 'run_llr', 'untested_shares', 'write']
+__all__ = ['commission', 'diagnose_wheel', 'load', 'untested_shares', 'write']

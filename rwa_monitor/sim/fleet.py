@@ -18,6 +18,7 @@ import json
 import math
 import os
 import pathlib
+from typing import Callable
 
 import numpy as np
 
@@ -235,17 +236,21 @@ def _fault(f: Fault, craft: Spacecraft, plan: FleetPlan) -> dict:
             'delta_dry_nm': f.delta_dry, 'delta_viscous_nms': f.delta_viscous}
 
 
-def write_fleet(out: str | os.PathLike, plan: FleetPlan) -> list[pathlib.Path]:
+def write_fleet(out: str | os.PathLike, plan: FleetPlan, suffix: str = '.csv',
+                writer: Callable[[pathlib.Path, Telemetry], None] | None = None
+                ) -> list[pathlib.Path]:
     """Write every pass of every spacecraft and truth.json under ``out``; return the paths.
 
-    Each file is written atomically; truth.json last, so a complete archive has it.
+    Each pass is ``<pass id><suffix>`` written by ``writer`` (default: write_telemetry,
+    the format by the suffix); each file atomically; truth.json last, so a complete archive
+    has it.
     """
     root = pathlib.Path(out)
     written = []
     for craft in plan.spacecraft:
         for i, p in enumerate(craft.passes):
-            path = root / craft.name / f'{p.pass_id}.csv'
-            write_telemetry(path, pass_telemetry(plan, craft, i))
+            path = root / craft.name / f'{p.pass_id}{suffix}'
+            (writer or write_telemetry)(path, pass_telemetry(plan, craft, i))
             written.append(path)
     truth = root / 'truth.json'
     write_text_atomic(truth, json.dumps(truth_document(plan), indent=1) + '\n')

@@ -1,0 +1,222 @@
+"""One spacecraft's runners carried through its passes: the fleet's ``step`` task.
+
+:func:`step` is a pure function of (spec, chain, passes): it makes the spacecraft's
+runners (core/wheel_runner.py, core/gyro_runner.py, through pipelines/runners.py, as
+``detect`` does), restores their states from the chain, feeds each pass's rows stamped
+after the last one fed, and returns a new chain with the runners' states; its inputs are
+never modified, so a task lost with a worker is simply run again with the same result.
+Event indices count rows from the spacecraft's first pass, as in its passes joined into
+one file, because the runners' row counts go on from pass to pass.
+
+One task feeds every component of a spacecraft: each pass is read once, and the
+spacecraft's chain is the unit of order (passes in time order). Spacecraft run in
+parallel.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+import functools
+import json
+import resource
+import time as _time
+from typing import Mapping, Sequence, TYPE_CHECKING
+
+import numpy as np
+
+from rwa_monitor.core.gyro_runner import GyroRunner
+from rwa_monitor.core.runner_facts import ComponentFacts
+from rwa_monitor.core.wheel_runner import WheelRunner
+from rwa_monitor.fleet.archive import after, PassFile, read_pass
+from rwa_monitor.fleet.records import (Chain, ComponentRecord, GYRO, PassFacts, TrendRow,
+                                       WorkFacts)
+
+if TYPE_CHECKING:
+    from rwa_monitor.pipelines.runners import WheelSetup
+
+# Checked parameter values (core/schema.py): what a YAML block holds once validated.
+Values = Mapping[str, object]
+
+
+@dataclass(frozen=True)
+class SpacecraftSpec:
+    """What a spacecraft's runners are made from: its components and checked blocks.
+
+    ``llr``/``vsadc``: the checked parameter blocks (``calibration_file`` and
+    ``friction_model_file`` included); ``aux``: the auxiliary channels of its passes (a
+    refined model must find those it reads).
+    """
+
+    spacecraft: str
+    wheels: tuple[str, ...]
+    gyro: bool
+    llr: Values = field(default_factory=dict)
+    vsadc: Values = field(default_factory=dict)
+    aux: tuple[str, ...] = ()
+
+    @property
+    def components(self) -> tuple[str, ...]:
+        """Return the component names: the wheels, then ``gyro`` if it has one."""
+        return self.wheels + ((GYRO,) if self.gyro else ())
+
+    @property
+    def calibrated(self) -> bool:
+        """Return True if the wheels are tested against a calibration."""
+        return bool(self.llr.get('calibration_file'))
+
+
+def _key(values: Values) -> str:
+    return json.dumps(values, sort_keys=True, default=str)
+
+
+@functools.lru_cache(maxsize=64)
+def _wheel_setup(llr: str, wheels: tuple[str, ...], aux: tuple[str, ...]) -> WheelSetup:
+    """Return the wheels' set-up (files read once per worker and configuration)."""
+    from rwa_monitor.pipelines.runners import wheel_setup
+    return wheel_setup(json.loads(llr), wheels, aux)
+
+
+@functools.lru_cache(maxsize=64)
+def _gyro_calibration(path: str) -> Mapping[str, Values]:
+    """Return the gyro block of a calibration file (read once per worker)."""
+    from rwa_monitor.telemetry.calibration_file import load_gyro_calibration
+    return load_gyro_calibration(path)
+
+
+def setup_of(spec: SpacecraftSpec) -> WheelSetup:
+    """Return the spacecraft's wheel set-up (pipelines/runners.py WheelSetup)."""
+    return _wheel_setup(_key(spec.llr), spec.wheels, spec.aux)
+
+
+@dataclass
+class Runners:
+    """A spacecraft's runners: one per wheel, and the gyro's if it has one."""
+
+    wheels: dict[str, WheelRunner]
+    gyro: GyroRunner | None = None
+
+    def all(self) -> dict[str, WheelRunner | GyroRunner]:
+        """Return component -> runner, the wheels first."""
+        out: dict[str, WheelRunner | GyroRunner] = dict(self.wheels)
+        if self.gyro is not None:
+            out[GYRO] = self.gyro
+        return out
+
+    def restore(self, states: Mapping[str, ComponentRecord]) -> None:
+        """Restore each runner from its component's record (RecordError if one differs)."""
+        from rwa_monitor.core.records import RecordError
+        for name, runner in self.wheels.items():
+            record = states.get(name)
+            if record is not None:
+                if record.wheel is None:
+                    raise RecordError(f'{name}: the state holds no wheel runner for it')
+                runner.restore(record.wheel)
+        record = states.get(GYRO)
+        if self.gyro is not None and record is not None:
+            if record.gyro is None:
+                raise RecordError('gyro: the state holds no gyro runner')
+            self.gyro.restore(record.gyro)
+
+    def records(self) -> dict[str, ComponentRecord]:
+        """Return each runner's state as its component's record (copies)."""
+        out = {name: ComponentRecord(wheel=r.state()) for name, r in self.wheels.items()}
+        if self.gyro is not None:
+            out[GYRO] = ComponentRecord(gyro=self.gyro.state())
+        return out
+
+
+def make_runners(spec: SpacecraftSpec) -> Runners:
+    """Return fresh runners of every component of the spacecraft."""
+    setup = setup_of(spec)
+    gyro = None
+    if spec.gyro:
+        path = str(spec.vsadc.get('calibration_file') or '')
+        gyro = GyroRunner(spec.vsadc, _gyro_calibration(path) if path else None)
+    return Runners({wheel: setup.runner(wheel) for wheel in spec.wheels}, gyro)
+
+
+def step(spec: SpacecraftSpec, chain: Chain, passes: Sequence[PassFile],
+         last: bool = False) -> Chain:
+    """Return the chain after ``passes`` (in time order).
+
+    ``last``: these are the run's last passes: the record ends here for now, so every
+    runner's open declaration gets its end-of-record categorisation (``finish``, as
+    ``detect`` gives at the end of a file; docs/llr.md "End of record"): the chain's
+    ``end_of_run`` events. The states kept are those before it, so that a later run with
+    new passes continues as a full run would, and its own end-of-record events supersede
+    these (fleet/history.py).
+    """
+    start = _time.process_time()
+    runners = make_runners(spec)
+    runners.restore(chain.states)
+    setup = setup_of(spec)
+    events = list(chain.events)
+    facts = list(chain.passes)
+    trend = list(chain.trend)
+    last_time = chain.last_time
+    for found in passes:
+        tele = read_pass(found.path)
+        if isinstance(tele, str):
+            facts.append(PassFacts(found.name, error=tele))
+            continue
+        kept, dropped = after(tele, last_time)
+        last_time = max(last_time, float(tele.time[-1]))
+        errors: dict[str, str] = {}
+        fed = 0
+        wheels = kept.only('wheels')
+        for name in spec.wheels:
+            channel = wheels.wheels.get(name)
+            if channel is None or channel.friction is None:
+                errors[name] = f'no {name}_speed and {name}_friction columns'
+                continue
+            runner = runners.wheels[name]
+            fed += len(wheels.time)
+            events.extend(runner.feed(wheels.time, channel.speed, channel.friction,
+                                      wheels.aux if setup.reads_aux(name) else None))
+            if len(wheels.time):
+                trend.append(_trend_row(spec, name, found.name, wheels.time, channel.speed,
+                                        runner.last_input))
+        if runners.gyro is not None and len(kept):
+            if kept.gyro is None or kept.attitude is None:
+                errors[GYRO] = 'no gyro_x/y/z and q_x/y/z/w columns'
+            else:
+                from rwa_monitor.pipelines.runners import gyro_columns
+                events.extend(runners.gyro.feed(gyro_columns(kept)))
+        facts.append(PassFacts(found.name, len(kept), dropped, fed, float(tele.time[-1]),
+                               None, errors))
+    states = runners.records()
+    component_facts: dict[str, ComponentFacts] = {n: r.facts()
+                                                  for n, r in runners.all().items()}
+    end_of_run = [e for r in runners.all().values() for e in r.finish()] if last else []
+    work = _account(chain.work, _time.process_time() - start)
+    return Chain(last_time, states, tuple(events), tuple(end_of_run), tuple(facts),
+                 tuple(trend), component_facts, work)
+
+
+def _trend_row(spec: SpacecraftSpec, wheel: str, name: str, t: np.ndarray, w: np.ndarray,
+               residual: np.ndarray) -> TrendRow:
+    """Return the pass's friction levels of the wheel (core/trend.py pass_levels).
+
+    ``residual``: what the detector was fed, friction minus the nominal with a calibration
+    (NaN where the detector does not test: the low-speed band and speeds outside the
+    calibrated range), so the levels use the detector's samples only; pass_levels drops
+    and counts the NaN (``nonfinite``).
+    """
+    from rwa_monitor.core.trend import pass_levels
+    levels = pass_levels(t, w, residual)
+    return TrendRow(spec.spacecraft, wheel, name, levels.t_start, levels.t_end,
+                    levels.samples, levels.dry, levels.dry_se, levels.viscous,
+                    levels.viscous_se, 'nominal' if spec.calibrated else 'zero')
+
+
+def _account(work: Mapping[str, WorkFacts], cpu_s: float) -> dict[str, WorkFacts]:
+    """Return the per-worker facts with this task's CPU time and peak memory added."""
+    try:
+        from distributed import get_worker
+        worker = get_worker().address
+    except (ImportError, ValueError):
+        worker = 'client'
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+    out = dict(work)
+    out[worker] = out.get(worker, WorkFacts()).plus(WorkFacts(cpu_s, 1, peak))
+    return out
