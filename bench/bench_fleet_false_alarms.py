@@ -132,9 +132,11 @@ def score_spacecraft(plan: Any, craft: Any, found: dict[str, Any]) -> dict[str, 
     starts = np.array(sorted(p.start_s for p in craft.passes))
     ends = starts + (int(math.floor(pass_s * plan.rate_hz + 1e-9)) - 1) / plan.rate_hz
     time = found['time']
+    # First declarations and end-of-record events (revisions in between are left out).
     out: dict[str, Any] = {'spacecraft': craft.name, 'wheels': {}, 'warnings':
                            found['warnings'],
-                           'events': [e.to_json() for e in found['events']]}
+                           'events': [e.to_json() for e in found['events']
+                                      if e.revision == 0 or e.details.get('final')]}
     for wheel in plan.wheels:
         events = [e for e in found['events'] if e.component == wheel]
         first = [e for e in events if e.revision == 0]
