@@ -15,6 +15,7 @@ $(STAMP): requirements.txt setup.py setup.cfg rwa_monitor/core/_stepcall.c \
 	$(PY) -m pip install --upgrade --quiet pip
 	$(PY) -m pip install --quiet -r requirements.txt
 	$(PY) -m pip install --quiet --no-deps -e .
+	$(PY) -m rwa_monitor.cli.compile_kernels   # once per machine: the first command answers at once
 	touch $(STAMP)
 
 demo: $(STAMP)

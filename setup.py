@@ -50,7 +50,8 @@ EXTRAS_REQUIRE = {
     # the spacecraft simulation bus (rwa-monitor-bus, simulate basilisk)
     'bsk': ['bsk>=2.12,<3'],
     # the live view (rwa-monitor-foxglove): the SDK's server and the WebSocket front
-    'foxglove': ['foxglove-sdk>=0.30.3,<0.31', 'websockets>=17.4,<18'],
+    'foxglove': ['foxglove-sdk>=0.30.3,<0.31', 'websockets>=17.4,<18',
+                 'cryptography>=50.0,<51'],
     # the operator's view server (rwa-monitor openmct); Open MCT itself comes from npm
     'openmct': ['tornado>=6.6,<7'],
     # the fleet engine

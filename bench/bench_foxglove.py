@@ -5,7 +5,8 @@ a foxglove-sdk server and counts the messages it receives while this process log
 samples (the bridge's ``/rwa_monitor/wheels`` payload, 4 wheels) at a fixed rate: once
 straight to the SDK's port (the client offers ``foxglove.sdk.v1``), once through
 :class:`~rwa_monitor.nodes.foxglove_front.WebSocketFront` (the client offers
-``foxglove.websocket.v1``), alternated ``repeats`` times in the same run. Reported: the
+``foxglove.websocket.v1``; the SDK's server behind TLS, as the bridge runs
+it), alternated ``repeats`` times in the same run. Reported: the
 messages delivered and this process's CPU time per message (producer, SDK and relay
 threads together; the producer's share is the same in both arms). Results:
 bench/results/foxglove.json and the ``foxglove`` section of docs/results.md.
@@ -61,12 +62,16 @@ def _sample(k: int) -> bytes:
 def _one_run(through_front: bool, rate: float, count: int) -> dict[str, Any]:
     import foxglove
 
-    from rwa_monitor.nodes.foxglove_front import WebSocketFront
+    from rwa_monitor.nodes.foxglove_front import loopback_certificate, trusting, WebSocketFront
     context = foxglove.Context()
     channel = foxglove.Channel('/rwa_monitor/wheels', schema={'type': 'object'},
                                context=context)
-    server = foxglove.start_server(host='127.0.0.1', port=0, context=context)
-    front = WebSocketFront('127.0.0.1', 0, server.port, [], print) if through_front else None
+    # The front arm as the bridge runs it: the SDK's server behind TLS (issue 36).
+    certificate, key = loopback_certificate() if through_front else (None, None)
+    server = foxglove.start_server(host='127.0.0.1', port=0, context=context,
+                                   tls_cert=certificate, tls_key=key)
+    front = WebSocketFront('127.0.0.1', 0, server.port, [], print,
+                           upstream_tls=trusting(certificate)) if through_front else None
     port, protocol = ((front.port, 'foxglove.websocket.v1') if front else
                       (server.port, 'foxglove.sdk.v1'))
     client = subprocess.Popen([sys.executable, '-c', CLIENT, f'ws://127.0.0.1:{port}',

@@ -263,6 +263,7 @@ def unwritable_journal(folder: pathlib.Path) -> str:
             return found[-1] if found else None
         world.wait_until(lambda: alarms() is not None, 30.0, 'the alarms status')
         assert alarms().level == OK, alarms().message
+        journal.unlink()                 # created at start with its header
         journals.rmdir()
         journals.write_text('')          # its folder is now a regular file: appends fail
         names = list(tele.wheels)

@@ -146,7 +146,7 @@ def test_a_fleet_of_packet_passes_equals_detect_on_the_joined_data(tmp_path):
     with LocalCluster(n_workers=1, threads_per_worker=1, processes=True,
                       dashboard_address=None) as cluster, Client(cluster) as client:
         result = run_archive(tmp_path / 'archive', client=client, task_bytes=1)
-    assert events_of(result.events, 'sat-p') == reference
+    assert events_of(result, 'sat-p') == reference
     summary = result.summary['spacecraft']['sat-p']
     assert summary['passes'] == names and summary['rows_dropped'] == 100
     assert not summary.get('ignored')

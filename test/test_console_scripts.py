@@ -75,7 +75,10 @@ def test_dashboard_stops_cleanly_on_signals(sig):
             if proc.poll() is None:
                 proc.kill()
     assert proc.returncode == 0 and err == '', err
-    assert out.rstrip().endswith('anomalies: 0')   # the last view was drawn
+    from rwa_monitor.cli.readable import levels_legend
+    last = out.rstrip()
+    assert last.endswith(levels_legend())           # the last view was drawn whole
+    assert last[:-len(levels_legend())].rstrip().endswith('anomalies: 0')
 
 
 def _latched_shown(board):
@@ -164,9 +167,9 @@ def test_killed_detector_restarted_shows_the_anomaly_to_a_late_subscriber(tmp_pa
         try:
             deadline = time.monotonic() + 90.0
             while time.monotonic() < deadline and not (
-                    journal.exists() and journal.read_text().strip()):
+                    journal.exists() and '"record": "event"' in journal.read_text()):
                 time.sleep(0.2)
-            assert journal.read_text().strip(), 'no declaration was journalled'
+            assert '"record": "event"' in journal.read_text(), 'no declaration was journalled'
             detector.kill()                                   # kill -9
             detector.wait(timeout=10)
         finally:

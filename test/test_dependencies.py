@@ -19,6 +19,7 @@ ROSDEP_KEYS = {
     'scikit-learn': 'python3-sklearn', 'matplotlib': 'python3-matplotlib',
     'pyyaml': 'python3-yaml', 'rosbags': 'python3-rosbags-pip',
     'mcap-ros2-support': 'mcap-ros2-support', 'websockets': 'python3-websockets',
+    'cryptography': 'python3-cryptography',
     'lxml': 'python3-lxml',
 }
 # Without a rosdep key: package.xml's comments name each (and what brings it in).

@@ -1,11 +1,15 @@
-"""Every shell command shown in README.md and docs/*.md runs as written.
+"""Every shell command shown in README.md and docs/*.md runs as written (clone and pip).
 
 The commands are the lines starting with a program (PROGRAMS) in the fenced blocks (no
-language, or sh/bash/console) of the documents. Each one is either run here (once), in a
-scratch folder beside a link to the repository's ``config/``, in the order of its
-document, or listed in EXCEPTIONS with the reason. The scratch folder also holds the
-inputs a command expects from the user: a recording from another system
-(``flight_bag``) and a classifier model (``model.json``).
+language, or sh/bash/console) of the documents. Each one is either run here (once), in
+the order of its document, or listed in EXCEPTIONS with the reason. They run twice: in a
+scratch folder beside a link to the repository's ``config/`` with this environment's
+programs (a clone), and in a bare scratch folder with the programs of a clean
+``pip install CLONE[foxglove,fleet]`` (test/pip_venv.py: no ``config/`` folder there, so
+``--params-file config/rwa_monitor.yaml`` must find the installed copy). The scratch
+folder also holds the one input a command expects from the user: a classifier model
+(``model.json``); the recording from another system (``flight_bag``) is made by a
+documented command.
 A new documented command fails :func:`test_every_documented_command_is_covered` until it
 is added to one of them. Long-running commands (nodes, the dashboard) run together until
 the replay's data reaches the dashboard, then are stopped with SIGINT, as a user would.
@@ -98,11 +102,9 @@ def test_every_documented_command_is_covered():
 
 @pytest.fixture(scope='module')
 def scratch(tmp_path_factory):
-    """Return a scratch folder with config/ linked and a recording from another system."""
-    from test_recordings import _multi_rate
+    """Return a scratch folder with config/ linked, as in a clone."""
     folder = tmp_path_factory.mktemp('docs')
     (folder / 'config').symlink_to(ROOT / 'config')
-    _multi_rate(folder / 'flight_bag', seconds=300.0)
     shutil.copy(ROOT / 'rwa_monitor' / 'data' / 'fss_model.json', folder / 'model.json')
     return folder
 
@@ -110,6 +112,17 @@ def scratch(tmp_path_factory):
 def _env():
     return {**os.environ, 'PATH': f'{BIN}{os.pathsep}{os.environ.get("PATH", "")}',
             'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST', 'PYTHONWARNINGS': 'ignore'}
+
+
+@pytest.fixture(scope='module')
+def pip_scratch(tmp_path_factory):
+    """Return (a bare scratch folder, the env of a clean pip install with the extras)."""
+    import pip_venv
+    bin_dir, env = pip_venv.clean_install(tmp_path_factory, 'foxglove,fleet')
+    folder = tmp_path_factory.mktemp('docs_pip')
+    shutil.copy(ROOT / 'rwa_monitor' / 'data' / 'fss_model.json', folder / 'model.json')
+    return folder, {**env, 'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST',
+                    'PYTHONWARNINGS': 'ignore'}
 
 
 # `detect` reports its finding in the exit code (its --help): 1 anomaly found, 3 not
@@ -126,21 +139,56 @@ def _run(command, cwd, env, timeout=600):
     return result
 
 
-@pytest.mark.slow
-@pytest.mark.timeout(1500)
-def test_documented_commands_run_as_written(scratch):
-    env = _env()
+def _run_every_command(folder, env):
     ran = []
     for _, command in documented_commands():
         if command in EXCEPTIONS or command in LONG_RUNNING or command in ran:
             continue
-        _run(command, scratch, env)
+        _run(command, folder, env)
         ran.append(command)
-    assert len(ran) == 18, ran
-    assert (scratch / 'run_bag' / 'metadata.yaml').is_file()
-    assert (scratch / 'id' / 'report.json').is_file()
-    assert (scratch / 'events_bag.json').is_file()
-    assert (scratch / 'pass.xml').is_file() and (scratch / 'events_pass.json').is_file()
+    assert len(ran) == 19, ran
+    assert (folder / 'run_bag' / 'metadata.yaml').is_file()
+    assert (folder / 'id' / 'report.json').is_file()
+    assert (folder / 'events_bag.json').is_file()
+    assert (folder / 'flight_bag' / 'metadata.yaml').is_file()
+    assert (folder / 'pass.xml').is_file() and (folder / 'events_pass.json').is_file()
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(1500)
+def test_documented_commands_run_as_written(scratch):
+    _run_every_command(scratch, _env())
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(3000)
+def test_documented_commands_run_as_written_after_pip_install(pip_scratch):
+    folder, env = pip_scratch
+    assert not (folder / 'config').exists()
+    _run_every_command(folder, env)
+
+
+@pytest.mark.slow
+@pytest.mark.ros
+@pytest.mark.timeout(3000)
+def test_documented_params_file_finds_the_installed_copy_after_pip_install(pip_scratch):
+    """Issue 36: ``--params-file config/rwa_monitor.yaml`` failed for a pip user."""
+    folder, env = pip_scratch
+    lease = DomainLease()
+    env = {**env, 'ROS_DOMAIN_ID': str(lease.domain_id)}
+    procs = {c: _Process(c, folder, env) for c in sorted(LONG_RUNNING)
+             if '--params-file config/rwa_monitor.yaml' in c}
+    try:
+        assert len(procs) == 2, procs
+        _wait(lambda: all('installed copy' in p.output and 'share/rwa_monitor/config' in
+                          p.output for p in procs.values()), list(procs.values()), 240,
+              'the note naming the installed parameters file')
+        time.sleep(3.0)         # the nodes run on it
+    finally:
+        codes = {c: p.stop() for c, p in procs.items()}
+        lease.release()
+    for command, code in codes.items():
+        assert code == 0, f'{command!r} ended with {code}:\n{procs[command].output[-3000:]}'
 
 
 class _Process:

@@ -118,8 +118,16 @@ def test_the_shipped_layout_uses_only_served_channels():
 
 @pytest.mark.parametrize('origin, allowed, loopback, expected', [
     (None, [], False, True),                       # not a browser: always served
-    ('https://viewer.example', [], True, True),    # empty list on a loopback host: any
-    ('https://viewer.example', [], False, False),  # empty list beyond it: none
+    ('https://viewer.example', [], True, False),   # empty list: pages of this machine only
+    ('https://evil.example', [], True, False),
+    ('http://localhost:3000', [], True, True),
+    ('https://127.0.0.1:8443', [], True, True),
+    ('http://[::1]:8080', [], True, True),
+    ('http://localhost.evil.example', [], True, False),
+    ('null', [], True, False),                     # a file:// or sandboxed page
+    ('file://', [], True, False),
+    ('http://localhost:3000', [], False, False),   # empty list beyond loopback: none
+    ('https://viewer.example', [], False, False),
     ('https://viewer.example', ['https://viewer.example'], False, True),
     ('https://other.example', ['https://viewer.example'], True, False),  # a list applies
     ('https://other.example', ['*'], False, True),
@@ -134,6 +142,43 @@ def test_origin_rule(origin, allowed, loopback, expected):
                                             ('ground-station', False)])
 def test_loopback_hosts(host, loopback):
     assert front.is_loopback(host) is loopback
+
+
+def test_by_default_only_pages_of_this_machine_connect():
+    """Issue 36: on main 91ca172 any web page open on the operator's machine connected."""
+    with RosWorld() as world:
+        bridge = start_bridge(world)[0]
+        url = f'ws://127.0.0.1:{bridge.port}'
+        with pytest.raises(InvalidStatus) as refused:
+            connect(url, subprotocols=['foxglove.sdk.v1'], open_timeout=5,
+                    origin='https://evil.example')
+        assert refused.value.response.status_code == 403
+        for origin in ('http://localhost:3000', 'http://127.0.0.1:8080', None):
+            with connect(url, subprotocols=['foxglove.sdk.v1'], open_timeout=5,
+                         origin=origin) as ws:
+                assert _text(ws, 'serverInfo')
+        assert bridge.front.refused == 1
+
+
+def test_the_sdk_port_serves_no_page_and_no_plain_client():
+    """The SDK's own loopback port: TLS under a certificate only the front trusts.
+
+    On main 91ca172 it accepted ``Origin: https://evil.example`` in the clear. A page (or
+    anything else) gets neither a plain WebSocket nor a verified TLS handshake.
+    """
+    import ssl
+    from websockets.exceptions import InvalidMessage
+    with RosWorld() as world:
+        bridge = start_bridge(world)[0]
+        sdk = bridge.server.port
+        assert sdk != bridge.port
+        for origin in ('https://evil.example', None):
+            with pytest.raises((InvalidMessage, OSError, EOFError)):
+                connect(f'ws://127.0.0.1:{sdk}', subprotocols=['foxglove.sdk.v1'],
+                        open_timeout=5, origin=origin)
+            with pytest.raises(ssl.SSLCertVerificationError):
+                connect(f'wss://127.0.0.1:{sdk}', subprotocols=['foxglove.sdk.v1'],
+                        open_timeout=5, origin=origin)
 
 
 @pytest.fixture
@@ -216,3 +261,105 @@ def test_a_port_in_use_is_a_config_error_naming_it():
         with RosWorld() as world:
             with pytest.raises(ConfigError, match=f'host/port: cannot serve on 127.0.0.1:{port}'):
                 world.node(fb.FoxgloveBridge, parameter_overrides=[Parameter('port', value=port)])
+
+
+IDLE_CLIENT = '''
+import json, sys, time
+from websockets.sync.client import connect
+ws = connect(sys.argv[1], subprotocols=['foxglove.sdk.v1'], ping_interval=None)
+while True:
+    frame = ws.recv()
+    if isinstance(frame, str) and json.loads(frame).get('op') == 'advertise':
+        channel = json.loads(frame)['channels'][0]['id']
+        ws.send(json.dumps({'op': 'subscribe', 'subscriptions': [
+            {'id': 1, 'channelId': channel}]}))
+        break
+print('subscribed', flush=True)
+time.sleep(600)   # reads nothing more and answers no ping: an idle client
+'''
+
+
+def _open_fds():
+    return len(list(pathlib.Path('/proc/self/fd').iterdir()))
+
+
+def _wait(condition, timeout, what):
+    deadline = time.monotonic() + timeout
+    while not condition():
+        assert time.monotonic() < deadline, what
+        time.sleep(0.1)
+
+
+def test_idle_clients_that_leave_release_their_descriptors_without_tracebacks(caplog):
+    """Issue 36: idle clients left 212 "keepalive ping failed" tracebacks and ~9 fds each.
+
+    Five clients subscribe to a busy channel, stop reading (SIGSTOP) until the front's
+    keepalive drops them, then are killed. The front held three descriptors per client
+    and none after; nothing was logged with a traceback, nothing printed on stderr.
+    """
+    import logging
+    import signal
+    import subprocess
+    import sys
+    import threading
+    import foxglove
+    caplog.set_level(logging.DEBUG)
+    context = foxglove.Context()
+    channel = foxglove.Channel('/busy', schema={'type': 'object'}, context=context)
+    server = foxglove.start_server(host='127.0.0.1', port=0, context=context)
+    gate = front.WebSocketFront('127.0.0.1', 0, server.port, [], print, keepalive=(0.5, 0.5))
+    stop = threading.Event()
+
+    def pump():
+        payload = b'{"x": "' + b'y' * 2000 + b'"}'
+        while not stop.is_set():
+            channel.log(payload)
+            time.sleep(0.0005)
+    threading.Thread(target=pump, daemon=True).start()
+    before = _open_fds()
+    clients = [subprocess.Popen([sys.executable, '-c', IDLE_CLIENT,
+                                 f'ws://127.0.0.1:{gate.port}'], stdout=subprocess.PIPE,
+                                stderr=subprocess.DEVNULL, text=True) for _ in range(5)]
+    try:
+        for client in clients:
+            assert client.stdout.readline().strip() == 'subscribed'
+            client.stdout.close()
+        held = _open_fds() - before
+        for client in clients:
+            client.send_signal(signal.SIGSTOP)
+        _wait(lambda: gate.clients == 0, 30.0, 'the idle clients to be dropped')
+    finally:
+        for client in clients:
+            client.kill()
+            client.wait()
+        stop.set()
+    _wait(lambda: _open_fds() <= before, 30.0, 'descriptors to be released')
+    gate.stop()
+    server.stop()
+    assert held <= 3 * 5, f'{held} descriptors for 5 clients'
+    assert not [r for r in caplog.records if r.exc_info or 'Traceback' in r.getMessage()]
+    assert not [r for r in caplog.records if r.levelno >= logging.WARNING]
+
+
+def test_clients_beyond_max_clients_are_refused_with_503():
+    import foxglove
+    context = foxglove.Context()
+    server = foxglove.start_server(host='127.0.0.1', port=0, context=context)
+    warnings = []
+    gate = front.WebSocketFront('127.0.0.1', 0, server.port, [], warnings.append,
+                                max_clients=2)
+    url = f'ws://127.0.0.1:{gate.port}'
+    try:
+        with connect(url, subprotocols=['foxglove.sdk.v1'], open_timeout=5) as one, \
+                connect(url, subprotocols=['foxglove.sdk.v1'], open_timeout=5) as two:
+            assert _text(one, 'serverInfo') and _text(two, 'serverInfo')
+            with pytest.raises(InvalidStatus) as refused:
+                connect(url, subprotocols=['foxglove.sdk.v1'], open_timeout=5)
+            assert refused.value.response.status_code == 503
+        assert gate.busy == 1 and '2 clients are connected' in warnings[0]
+        _wait(lambda: gate.clients == 0, 10.0, 'the two clients to leave')
+        with connect(url, subprotocols=['foxglove.sdk.v1'], open_timeout=5) as three:
+            assert _text(three, 'serverInfo')
+    finally:
+        gate.stop()
+        server.stop()

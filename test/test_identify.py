@@ -33,8 +33,8 @@ def test_undeclared_effect_is_found_and_held_out_rmse_reaches_noise_floor(effect
     # estimation error of p << n weights: RMSE ~ s (1 + p / 2n); the noise floor estimate
     # has a relative error ~ 1 / sqrt(n / 20) ~ 4 % for one block: 10 % cannot be missed by
     # accident, and without the effect the RMSE is 1.3 to 3.5 times the floor.
-    assert sel.final_fit.rmse_held_out <= 1.10 * data.noise_floor
-    assert sel.baseline_fit.rmse_held_out > 1.2 * data.noise_floor
+    assert sel.final_fit.rmse_test <= 1.10 * data.noise_floor
+    assert sel.baseline_fit.rmse_test > 1.2 * data.noise_floor
     assert sel.diagnostics_after['passes']
 
 
@@ -44,7 +44,7 @@ def test_no_effect_file_keeps_the_baseline_model():
     sel = identify(data)
     assert sel.effects == []
     assert sel.segments.starts == [0]
-    assert sel.final_fit.rmse_held_out == sel.baseline_fit.rmse_held_out
+    assert sel.final_fit.rmse_test == sel.baseline_fit.rmse_test
     assert abs(sel.final_fit.coef[0] - 1.0e-3) < 1e-5      # dry, N m (se ~ 7e-7)
     assert abs(sel.final_fit.coef[1] - 5.0e-6) < 1e-7      # viscous (se ~ 1e-8)
 
@@ -112,7 +112,7 @@ def _coast(drag: float, n_noise: float = 2e-3, seed: int = 0) -> Telemetry:
 def test_friction_from_speed_finds_drag_and_adds_nothing_without_it():
     found = identify(prepare(_coast(1e-7), inertia=0.01))
     assert [e.name for e in found.effects][:1] in (['drag'], ['smooth_speed'])
-    assert found.final_fit.rmse_held_out < 0.5 * found.baseline_fit.rmse_held_out
+    assert found.final_fit.rmse_test < 0.5 * found.baseline_fit.rmse_test
     plain = identify(prepare(_coast(0.0), inertia=0.01))
     assert plain.effects == []
 
@@ -197,4 +197,4 @@ def test_basilisk_friction_hysteresis_is_found_without_being_declared(tmp_path):
     sel = identify(prepare(read_telemetry(path), 'rw1'))
     assert [e.name for e in sel.effects][:1] == ['stribeck_hysteresis']
     assert 'smooth_speed' not in [e.name for e in sel.effects]
-    assert sel.final_fit.rmse_held_out < sel.baseline_fit.rmse_held_out
+    assert sel.final_fit.rmse_test < sel.baseline_fit.rmse_test

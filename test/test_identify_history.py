@@ -45,7 +45,7 @@ def test_hysteresis_is_named_and_its_stribeck_speed_recovered():
     assert names[:1] == ['stribeck_hysteresis']
     assert 'smooth_speed' not in names
     assert sel.effects[0].params['velocity_rad_s'] == pytest.approx(1.0, rel=0.25)
-    assert sel.final_fit.rmse_held_out < 1.05 * sel.data.noise_floor
+    assert sel.final_fit.rmse_test < 1.05 * sel.data.noise_floor
     before, after = (d['tests']['approach'] for d in (sel.diagnostics_before,
                                                       sel.diagnostics_after))
     assert after['statistic'] < before['statistic']

@@ -38,7 +38,7 @@ def test_identical_wheels_get_one_effect_set_and_reach_the_noise_floor(same_drag
     assert same_drag.consistency['consistent'] and same_drag.consistency['rule'] == 'joint'
     for wheel, sel in same_drag.selections.items():
         assert [e.name for e in sel.effects] == ['drag']
-        assert sel.final_fit.rmse_held_out <= 1.10 * sel.data.noise_floor
+        assert sel.final_fit.rmse_test <= 1.10 * sel.data.noise_floor
         own = sel.effects[0].evidence['own']
         assert own['p_value'] < 1e-6 and own['dof'] == 1
     exponents = {sel.effects[0].params['exponent'] for sel in same_drag.selections.values()}

@@ -8,7 +8,7 @@ from rwa_monitor.core.identify import report as rep
 from rwa_monitor.core.identify.backfit import prune
 from rwa_monitor.core.identify.baseline import Segments
 from rwa_monitor.core.identify.effects import FALLBACK
-from rwa_monitor.core.identify.fitting import Design, held_out_mask
+from rwa_monitor.core.identify.fitting import Design, split_rows
 from rwa_monitor.core.identify.joint import identify_joint
 from rwa_monitor.core.identify.scoring import AddedEffect, score_candidate
 from rwa_monitor.core.identify.select import identify
@@ -70,7 +70,7 @@ def test_drag_and_temperature_are_named_with_their_parameters_profiled_again():
     sel = identify(prepare(windage_file(2607)))
     assert named(sel) == TRUTH
     assert sel.diagnostics_after['passes']
-    assert sel.final_fit.rmse_held_out <= FLOOR_RATIO * sel.data.noise_floor
+    assert sel.final_fit.rmse_test <= FLOOR_RATIO * sel.data.noise_floor
     effects = {e.kind: e for e in sel.effects}
     assert effects['stribeck'].params['velocity_rad_s'] == pytest.approx(4.0, rel=0.1)
     assert effects['drag'].params['exponent'] == 2.0
@@ -94,7 +94,7 @@ def _stribeck_data(seed: int, n: int = 6000):
 
 def _design_with(data, effects):
     """Return a design of model (1) + the given (kind, params) effects, and AddedEffects."""
-    design = Design(data.friction, Segments().columns(data.speed), held_out_mask(len(data)))
+    design = Design(data.friction, Segments().columns(data.speed), split_rows(len(data)))
     added = []
     for kind, params in effects:
         start = design.X.shape[1]
@@ -125,13 +125,13 @@ def test_a_named_effect_is_not_fitted_with_its_unphysical_sign():
     # rising inside the band); that fit is not admissible, so on a Stribeck file the band
     # either fits with a positive weight or not at all.
     data = _stribeck_data(3331)
-    design = Design(data.friction, Segments().columns(data.speed), held_out_mask(len(data)))
+    design = Design(data.friction, Segments().columns(data.speed), split_rows(len(data)))
     scored = score_candidate(design, design.fit(), fx.presliding_candidate(data), data)
     assert scored is None or scored['fit'].coef[-1] > 0
     free = Design(data.friction, np.hstack([Segments().columns(data.speed),
                                             fx.evaluate('presliding', {'band_rad_s': 5.0,
                                                                        'shape': 'tanh'},
-                                                        data)]), held_out_mask(len(data)))
+                                                        data)]), split_rows(len(data)))
     assert free.fit().coef[-1] < 0   # unconstrained, the band takes the Stribeck curve
     assert not fx.physical_weights('presliding', free.fit().coef[-1:])
     # after a full selection the band is absent and the Stribeck term named
@@ -145,7 +145,7 @@ def test_no_spurious_effect_on_fresh_seeds(seed):
     # seeds"): the three effects of the file, no hysteresis term, no catch-all.
     sel = identify(prepare(windage_file(seed)))
     assert named(sel) == TRUTH
-    assert sel.final_fit.rmse_held_out <= FLOOR_RATIO * sel.data.noise_floor
+    assert sel.final_fit.rmse_test <= FLOOR_RATIO * sel.data.noise_floor
 
 
 @pytest.mark.slow
@@ -186,7 +186,7 @@ def test_identical_wheels_share_one_named_set_at_the_floor(seeds):
     assert joint.consistency['consistent']
     for sel in joint.selections.values():
         assert named(sel) == TRUTH
-        assert sel.final_fit.rmse_held_out <= FLOOR_RATIO * sel.data.noise_floor
+        assert sel.final_fit.rmse_test <= FLOOR_RATIO * sel.data.noise_floor
 
 
 @pytest.mark.slow

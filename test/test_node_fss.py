@@ -169,6 +169,9 @@ def test_bad_input_is_counted(tele):
         assert counters['non_increasing_time'] == 1
         rw1 = node.wheels['rw1']
         assert rw1.samples == 2 and rw1.window.non_finite == 1
+        level, message, values = node._wheel_health(rw1)   # filling its first window
+        assert values['waiting_samples'] == rw1.window.length - 2
+        assert 'waiting for a full window' in message
 
 
 def test_parameters(repo_root):

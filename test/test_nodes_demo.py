@@ -213,3 +213,43 @@ def test_dashboard_keeps_spacecraft_apart_and_shows_a_silent_node_as_lost():
         assert 'LOST' not in next(s for s in cmd_dashboard.render(board).split('== ')
                                   if s.startswith('/sat1 =='))
         del view
+
+
+def test_the_view_prints_readable_p_values_waiting_diagnosers_and_the_levels():
+    """Issue 36: the demo showed p=0, p=nan and a diagnoser filling its window as STALE."""
+    board = cmd_dashboard.Board()
+    events = DiagnosticArray()
+    events.status = [messages.event_status(AnomalyEvent('llr', 'rw2', 'dry', 120.5, 1205,
+                                                        150.0, 1500, 0.0), 'llr_detector'),
+                     messages.event_status(AnomalyEvent('fss', 'rw3', 'viscous', 10.0, 100,
+                                                        20.0, 200), 'fss_diagnoser')]
+    board.on_anomalies(events)
+    health = DiagnosticArray()
+    health.status = [DiagnosticStatus(
+        level=DiagnosticStatus.STALE, name='fss_diagnoser: rw1 window diagnosis',
+        hardware_id='rw1', message='unknown: not examined yet, waiting for a full window '
+        '(100/80000 samples)', values=[KeyValue(key='waiting_samples', value='79900')])]
+    board.on_diagnostics(health)
+    text = cmd_dashboard.render(board)
+    assert 'p=< 1e-300' in text and 'p=n/a' in text
+    assert 'p=0 ' not in text and 'nan' not in text
+    row = next(line for line in text.splitlines() if line.startswith('rw1'))
+    assert ' WAIT ' in row and 'STALE' not in row
+    assert 'levels: OK' in text and 'WAIT not examined yet' in text and 'ERROR a larger' in text
+
+
+def test_the_summary_lists_the_gyro_faults_against_their_detections():
+    result = cmd_demo.DemoResult(
+        rows=10, wall_s=1.0, executor='events', events=[], pipeline_events=[], changes=[],
+        matches=[], false_alarms=[], notes=[], other_detectors={'vsadc': 1},
+        other_events=[{'component': 'gyro_y', 'level': 2, 'fields': {
+            'detector': 'vsadc', 'kind': 'drift', 'change_time_s': 185.0,
+            'declaration_time_s': 230.0}}],
+        gyro_faults=[('gyro_y', 'drift', 180.0), ('gyro_x', 'bias', 300.0)])
+    report = cmd_demo.summary(result)
+    rows = report.splitlines()
+    assert any(line.startswith('gyro_y drift') and '|' in line and '185.0' in line
+               and '230.0' in line and '50.0' in line for line in rows), report
+    assert any(line.startswith('gyro_x bias') and 'MISSED' in line for line in rows)
+    assert 'gyro_y drift change t=185.0 s declared t=230.0 s (ERROR)' in report
+    assert 'levels: OK examined' in report

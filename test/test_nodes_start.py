@@ -97,14 +97,15 @@ def test_a_package_error_of_the_journal_opener_refuses_the_node(
 def test_a_journal_that_cannot_be_written_makes_the_alarms_status_error(tmp_path):
     folder = tmp_path / 'journals'
     folder.mkdir()
-    journal = folder / 'events.jsonl'     # a new journal: accepted at start
+    journal = folder / 'events.jsonl'     # a new journal: created at start with its header
     event = AnomalyEvent(detector='llr', component='rw1', kind='dry', time=1.0, index=10,
                          declared_time=2.0, declared_index=20, p_value=1e-9)
     with RosWorld() as world:
         node = world.node(LLRDetectorNode, parameter_overrides=[
             Parameter('events_file', value=str(journal))])
         level, message, _ = node.alarms._health()
-        assert level == OK
+        assert level == OK and journal.is_file()
+        journal.unlink()
         folder.rmdir()
         folder.write_text('')                 # its folder is now a regular file: writes fail
         node.alarms.record([event])

@@ -6,45 +6,20 @@ alone must bring everything the command line and the nodes need.
 """
 
 import json
-import os
 import pathlib
-import subprocess
-import sys
 
+import pip_venv
 import pytest
 from ros_harness import DomainLease
-from test_package import copy_sources
 
-# pip's words for an index it cannot reach (then the test is skipped, saying so)
-UNREACHABLE = ('NewConnectionError', 'Network is unreachable', 'Temporary failure in name '
-               'resolution', 'Max retries exceeded', 'ConnectTimeout', 'ProxyError')
-
-
-def _run(args, env, cwd, timeout=600):
-    return subprocess.run(args, env=env, cwd=cwd, capture_output=True, text=True,
-                          timeout=timeout)
+_run = pip_venv.run
 
 
 @pytest.fixture(scope='module')
 def clean_install(tmp_path_factory):
     """Return (bin folder, env, scratch folder) of a clean venv with the package installed."""
-    root = tmp_path_factory.mktemp('pip')
-    copy_sources(root / 'clone')
-    env = {k: v for k, v in os.environ.items()
-           if k not in ('PYTHONPATH', 'VIRTUAL_ENV', 'PYTHONHOME')}
-    venv = root / 'venv'
-    subprocess.run([sys.executable, '-m', 'venv', str(venv)], check=True, timeout=300)
-    python = str(venv / 'bin' / 'python')
-    install = _run([python, '-m', 'pip', 'install', '--quiet', str(root / 'clone')], env,
-                   root, timeout=1500)
-    log = install.stdout[-4000:] + install.stderr[-4000:]
-    if install.returncode != 0 and any(word in log for word in UNREACHABLE):
-        pytest.skip(f'the package index is unreachable from here: {log[-600:]}')
-    assert install.returncode == 0, log
-    check = _run([python, '-m', 'pip', 'check'], env, root)
-    assert check.returncode == 0, check.stdout + check.stderr
-    env['PATH'] = f'{venv / "bin"}{os.pathsep}{env["PATH"]}'
-    return venv / 'bin', env, root
+    bin_dir, env = pip_venv.clean_install(tmp_path_factory)
+    return bin_dir, env, tmp_path_factory.mktemp('pip')
 
 
 @pytest.mark.slow

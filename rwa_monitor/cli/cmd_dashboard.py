@@ -23,13 +23,18 @@ import sys
 import time
 from typing import Any, TextIO
 
+from rwa_monitor.cli.readable import levels_legend, p_value_text
+from rwa_monitor.core import keys
 from rwa_monitor.core.coverage import NOT_EXAMINED, UNKNOWN
 
-LEVEL_NAMES = {0: 'OK', 1: 'WARN', 2: 'ERROR', 3: 'STALE', 4: 'LOST'}
+LEVEL_NAMES = {0: 'OK', 1: 'WARN', 2: 'ERROR', 3: 'STALE', 4: 'LOST', 5: 'WAIT'}
+STALE = 3
 LOST = 4
+WAIT = 5     # shown for a STALE status of a window diagnoser filling its first window
 ROOT = '/'
 
-_COLOURS = {0: '\x1b[32m', 1: '\x1b[33m', 2: '\x1b[31m', 3: '\x1b[90m', 4: '\x1b[35m'}
+_COLOURS = {0: '\x1b[32m', 1: '\x1b[33m', 2: '\x1b[31m', 3: '\x1b[90m', 4: '\x1b[35m',
+            5: '\x1b[36m'}
 _RESET = '\x1b[0m'
 
 
@@ -103,6 +108,8 @@ class Board:
         if age > self.stale_timeout:
             return LOST, (f'LOST: no status for {age:.0f} s; last '
                           f'{LEVEL_NAMES.get(item["level"], "?")}: {item["message"]}')
+        if item['level'] == STALE and keys.WAITING_SAMPLES in item['fields']:
+            return WAIT, item['message']     # not examined yet: its first window fills
         return item['level'], item['message']
 
     def namespaces(self) -> list[str]:
@@ -117,10 +124,6 @@ def _paint(text: str, level: int, colour: bool) -> str:
 
 def _seconds(value: Any) -> str:
     return f'{value:.1f}' if isinstance(value, (int, float)) else str(value)
-
-
-def _number(value: Any) -> float:
-    return float(value) if isinstance(value, (int, float)) else float('nan')
 
 
 def unexamined_note(fields: dict[str, Any]) -> str | None:
@@ -172,8 +175,9 @@ def render(board: Board, *, title: str = 'rwa_monitor', progress: str | None = N
                     f'{str(f.get("kind", "")):<8} change '
                     f't={_seconds(f.get("change_time_s", "?"))} s  declared '
                     f't={_seconds(f.get("declaration_time_s", "?"))} s'
-                    f'  p={_number(f.get("p_value")):.3g}  rev {f.get("revision", 0)}')
+                    f'  p={p_value_text(f.get("p_value"))}  rev {f.get("revision", 0)}')
             lines.append(_paint(text, event['level'], colour))
+    lines += ['', levels_legend()]
     return '\n'.join(lines)
 
 

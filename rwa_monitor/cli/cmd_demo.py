@@ -21,6 +21,10 @@ from typing import Any, TextIO
 
 import numpy as np
 
+from rwa_monitor.cli.cmd_dashboard import LEVEL_NAMES
+from rwa_monitor.cli.readable import levels_legend
+from rwa_monitor.core import keys
+
 # Detector nodes the demo runs: one module name per line. A module that is not there
 # (yet) is skipped with a note. Each module names its node class in NODE_CLASS, or
 # defines exactly one rclpy Node subclass; the class takes rclpy Node keywords.
@@ -317,8 +321,8 @@ def kind_counts(result: DemoResult) -> dict[str, Any]:
 def summary(result: DemoResult) -> str:
     """Return the end-of-demo summary: events against the truth."""
     lines = ['', 'summary: events against the injected truth (detected: first declared '
-             'kind -> kind after the revisions)',
-             f'{"wheel":<6} {"injected":<8} {"at t s":>8} | {"detected":<8} '
+             'kind -> kind after the revisions; wheels by llr, gyro axes by vsadc)',
+             f'{"where":<6} {"injected":<8} {"at t s":>8} | {"detected":<8} '
              f'{"change t s":>10} {"declared t s":>12} {"delay s":>8}']
     for change, hit in result.matches:
         left = f'{change.wheel:<6} {change.kind:<8} {change.time_s:>8.1f} | '
@@ -329,6 +333,16 @@ def summary(result: DemoResult) -> str:
             kinds = hit.kind if final == hit.kind else f'{hit.kind}->{final}'
             lines.append(left + f'{kinds:<8} {hit.time:>10.1f} {hit.declared_time:>12.1f} '
                          f'{hit.declared_time - change.time_s:>8.1f}')
+    for axis, kind, start, hit in gyro_matches(result):
+        left = f'{axis:<6} {kind:<8} {start:>8.1f} | '
+        if hit is None:
+            lines.append(left + ('MISSED' if 'vsadc' in result.other_detectors
+                                 else 'not run (no vsadc detector)'))
+            continue
+        change, declared = hit.get(keys.CHANGE_TIME), hit.get(keys.DECLARATION_TIME)
+        lines.append(left + f'{hit.get(keys.KIND, "?"):<8} {_time_text(change):>10} '
+                     f'{_time_text(declared):>12} '
+                     f'{_time_text(declared - start if _is_time(declared) else None):>8}')
     lines.append(f'repeated declarations of an injected change (after the detector '
                  f'restarted; change estimate within [-1, +2] windows of it): '
                  f'{len(result.repeats)}')
@@ -357,7 +371,8 @@ def summary(result: DemoResult) -> str:
                              + (f' change t={change:.1f} s' if isinstance(change, float)
                                 else '')
                              + (f' declared t={declared:.1f} s'
-                                if isinstance(declared, float) else ''))
+                                if isinstance(declared, float) else '')
+                             + f' ({LEVEL_NAMES.get(event.get("level"), "?")})')
     counts = kind_counts(result)
     llr = counts['llr']
     lines.append(f'kinds against the truth: llr right {llr["right"]}/{len(result.changes)}, '
@@ -372,7 +387,35 @@ def summary(result: DemoResult) -> str:
                      f'not flagged: {missed}')
     for note in result.notes:
         lines.append(f'note: {note}')
+    lines.append(levels_legend())
     return '\n'.join(lines)
+
+
+def gyro_matches(result: DemoResult) -> list[tuple[str, str, float, dict[str, Any] | None]]:
+    """Return each injected gyro fault with the first VSADC event on its axis after it.
+
+    The first event of another kind than ``healthy`` whose declaration comes after the
+    fault began (fields of the anomalies topic), or None.
+    """
+    out = []
+    for axis, kind, start in result.gyro_faults:
+        if kind == 'healthy':
+            continue
+        hit = next((e['fields'] for e in result.other_events
+                    if e['fields'].get(keys.DETECTOR) == 'vsadc' and e['component'] == axis
+                    and e['fields'].get(keys.KIND) != 'healthy'
+                    and _is_time(e['fields'].get(keys.DECLARATION_TIME))
+                    and e['fields'][keys.DECLARATION_TIME] >= start), None)
+        out.append((axis, kind, start, hit))
+    return out
+
+
+def _is_time(value: Any) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+def _time_text(value: Any) -> str:
+    return f'{value:.1f}' if _is_time(value) else 'n/a'
 
 
 def run(args: argparse.Namespace) -> int:

@@ -20,7 +20,6 @@ Outputs never destroy data (:mod:`rwa_monitor.cli.output`).
 from __future__ import annotations
 
 import argparse
-import json
 import pathlib
 import sys
 from typing import Any
@@ -28,7 +27,9 @@ from typing import Any
 from rwa_monitor import pipelines
 from rwa_monitor.cli.main import EXIT_ANOMALY, EXIT_NOT_EXAMINED, EXIT_NOTHING_FOUND
 from rwa_monitor.cli.options import add_topics, INPUT_HELP, read_input
-from rwa_monitor.cli.output import check_output, quiet_broken_pipe, STDOUT, write_output
+from rwa_monitor.cli.output import (check_output, json_text, quiet_broken_pipe, STDOUT,
+                                    write_output)
+from rwa_monitor.cli.readable import number_text, p_value_text
 from rwa_monitor.core.coverage import EXAMINED, UNKNOWN
 from rwa_monitor.core.events import AnomalyEvent
 from rwa_monitor.core.schema import help_text, LLR, SCHEMAS, VSADC
@@ -145,7 +146,7 @@ def run(args: argparse.Namespace) -> int:
     with quiet_broken_pipe():
         if args.output is not None:
             document = {'events': [e.to_json() for e in events], 'summary': summary}
-            write_output(args.output, json.dumps(document, indent=2) + '\n')
+            write_output(args.output, json_text(document))
             if str(args.output) != STDOUT:
                 print(f'wrote {args.output}: {len(events)} events')
         else:
@@ -154,16 +155,19 @@ def run(args: argparse.Namespace) -> int:
 
 
 def print_table(events: list[AnomalyEvent], summary: dict[str, Any], out) -> None:
-    """Print the events one per line, then the per-pipeline summary."""
-    header = (f'{"time_s":>10} {"component":<9} {"detector":<8} {"kind":<8} {"rev":>3} '
+    """Print the events one per line, then each component's verdict and counts.
+
+    Numbers as a person reads them (cli/readable.py): p-values ``< 1e-300`` or ``n/a``,
+    three significant digits; the JSON of ``-o`` keeps the exact values.
+    """
+    header = (f'{"time_s":>10} {"component":<9} {"detector":<8} {"kind":<9} {"rev":>3} '
               f'{"p_value":>9} {"declared_s":>10}  details')
     print(header, file=out)
     for e in events:
-        details = ' '.join(f'{k}={v:.3g}' if isinstance(v, float) else f'{k}={v}'
-                           for k, v in e.details.items())
-        print(f'{e.time:>10.1f} {e.component:<9} {e.detector:<8} {e.kind:<8} '
-              f'{e.revision:>3} {e.p_value:>9.2g} {e.declared_time:>10.1f}  {details}',
-              file=out)
+        details = ' '.join(f'{k}={number_text(v)}' for k, v in e.details.items())
+        print(f'{e.time:>10.1f} {e.component:<9} {e.detector:<8} {e.kind:<9} '
+              f'{e.revision:>3} {p_value_text(e.p_value):>9} {e.declared_time:>10.1f}  '
+              f'{details}', file=out)
     if not events:
         print('(no anomaly declared)', file=out)
     print(f'{summary["samples"]} samples', file=out)
@@ -174,4 +178,32 @@ def print_table(events: list[AnomalyEvent], summary: dict[str, Any], out) -> Non
     for name, info in summary['pipelines'].items():
         print(f'{name}: {info["events"]} events in {info["runtime_s"]:.2f} s', file=out)
         for component, entry in info['components'].items():
-            print(f'  {component}: {json.dumps(entry)}', file=out)
+            print(f'  {component}: {component_text(entry)}', file=out)
+
+
+def component_text(entry: Any) -> str:
+    """Return one component's summary entry as a sentence (verdict, samples, rejections)."""
+    if not isinstance(entry, dict):
+        return _plain(entry)
+    parts = [str(entry['verdict']).replace('_', ' ')] if 'verdict' in entry else []
+    if 'samples' in entry:
+        usable = entry.get('usable_samples')
+        parts.append(f'{entry["samples"]} samples'
+                     + (f' ({usable} usable)' if usable is not None else ''))
+    if 'events' in entry:
+        parts.append(f'{entry["events"]} events')
+    rejected = {k: v for k, v in (entry.get('rejected') or {}).items() if v}
+    if rejected:
+        parts.append('not tested: ' + ', '.join(f'{k} {v}' for k, v in rejected.items()))
+    shown = {'verdict', 'samples', 'usable_samples', 'events', 'rejected', 'runtime_s',
+             'verdict_reason', 'needed_samples'}
+    parts += [f'{k} {_plain(v)}' for k, v in entry.items() if k not in shown]
+    return '; '.join(parts)
+
+
+def _plain(value: Any) -> str:
+    if isinstance(value, dict):
+        return ', '.join(f'{k} {_plain(v)}' for k, v in value.items()) or 'none'
+    if isinstance(value, (list, tuple)):
+        return ', '.join(_plain(v) for v in value) or 'none'
+    return number_text(value)

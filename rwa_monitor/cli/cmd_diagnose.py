@@ -8,13 +8,13 @@ friction column, too few tested samples, or most of its window not tested: ``sta
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 
 from rwa_monitor.cli.cmd_detect import verdict_text
 from rwa_monitor.cli.main import EXIT_NOT_EXAMINED
 from rwa_monitor.cli.options import add_topics, INPUT_HELP, read_input
-from rwa_monitor.cli.output import check_output, quiet_broken_pipe, STDOUT, write_output
+from rwa_monitor.cli.output import (check_output, json_text, quiet_broken_pipe, STDOUT,
+                                    write_output)
 from rwa_monitor.core.schema import FSS, fss_config, help_text
 from rwa_monitor.exceptions import ConfigError, RwaMonitorError
 from rwa_monitor.telemetry.parameters_file import load_block
@@ -97,7 +97,7 @@ def run(args: argparse.Namespace) -> int:
                          if 'coverage' in r})
     document = {'wheels': wheels, 'events': events, 'not_examined': not_examined}
     with quiet_broken_pipe():
-        write_output(args.output, json.dumps(document, indent=1) + '\n')
+        write_output(args.output, json_text(document, indent=1))
         out = sys.stderr if args.output == STDOUT else sys.stdout
         for wheel_id, result in wheels.items():
             if wheel_id in not_examined:

@@ -24,6 +24,8 @@ import json
 import pathlib
 import sys
 
+import numpy as np
+
 from rwa_monitor.cli.main import EXIT_NOT_EXAMINED
 from rwa_monitor.cli.options import add_topics, INPUT_HELP, read_input
 from rwa_monitor.core.schema import AUTO, default_text, help_text, IDENTIFY, Param
@@ -112,6 +114,7 @@ def run(args: argparse.Namespace) -> int:
         wheels = list(tele.wheels) if args.wheel == 'all' else [args.wheel]
         if args.wheel == 'all' and not wheels:
             _fail('the file has no <id>_speed column: nothing to identify')
+    _leave_out_implausible(tele, wheels)
     many = len(wheels) > 1
     not_examined: dict[str, str] = {}
     if many:     # a wheel with too few usable samples is left out (exit 3), the rest run
@@ -135,6 +138,11 @@ def run(args: argparse.Namespace) -> int:
     except ValueError as err:
         if isinstance(err, RwaMonitorError):
             raise
+        if isinstance(err, np.linalg.LinAlgError):    # said only "Singular matrix"
+            raise RwaMonitorError(
+                f'{", ".join(wheels)}: the least-squares fit has no unique solution ({err}): '
+                'the speed and friction columns do not determine the friction model; '
+                'check them and their units') from None
         raise RwaMonitorError(str(err)) from None
     with output as work:
         _write(args, found, many, title, work, results, agreement, not_examined)
@@ -164,6 +172,45 @@ def _write(args, found, many, title, work, results, agreement, not_examined) -> 
         write_text_atomic(work / 'wheels.json', json.dumps(summary, indent=2) + '\n')
         write_text_atomic(work / 'wheels.md', wheels_markdown(summary))
         print(wheels_markdown(summary))
+
+
+def _leave_out_implausible(tele, wheels: list[str]) -> None:
+    """Drop values beyond the detectors' plausibility limits; refuse a column of only those.
+
+    The limits are the LLR detector's ``max_abs_speed`` and ``max_abs_friction``
+    (core/schema.py), as in ``detect``, ``diagnose`` and ``calibrate``: a value no wheel
+    can produce (1e300 N m) is left out like a NaN (counted by the identification as a
+    non-finite row; a note says how many), and a column holding nothing else is refused
+    naming it (it used to end in "Singular matrix" or an infinite RMSE).
+    """
+    from rwa_monitor.core.schema import LLR
+    for wheel in (tele.wheels if wheels == [None] else wheels):   # None: the file's only one
+        channels = tele.wheels.get(wheel)
+        if channels is None:
+            continue        # an unknown wheel: the identification names it
+        for kind, unit in (('speed', 'rad/s'), ('friction', 'N m')):
+            values = getattr(channels, kind, None)
+            if values is None:
+                continue
+            limit = LLR[f'max_abs_{kind}'].default
+            values = np.asarray(values, dtype=float)
+            finite = np.isfinite(values)
+            with np.errstate(invalid='ignore'):
+                beyond = finite & ~(np.abs(values) < limit)
+            count = int(np.count_nonzero(beyond))
+            if not count:
+                continue
+            column = f'{wheel}_{kind}'
+            top = float(np.max(np.abs(values[beyond])))
+            if count == np.count_nonzero(finite):
+                raise RwaMonitorError(
+                    f'{column}: every value is at or beyond {limit:g} {unit} (up to {top:g}): '
+                    f'not physical (the detectors ignore |{kind}| >= {limit:g} {unit}); '
+                    'check the column and its unit')
+            setattr(channels, kind, np.where(beyond, np.nan, values))
+            print(f'rwa-monitor identify: {column}: {count} of {values.size} values at or '
+                  f'beyond {limit:g} {unit} (up to {top:g}) left out as not physical',
+                  file=sys.stderr)
 
 
 def _fail(message: str) -> int:

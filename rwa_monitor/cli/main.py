@@ -46,6 +46,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; return the process exit code."""
     parser = build_parser()
     args = parser.parse_args(argv)
+    from rwa_monitor.progress import KernelNotice
+    from rwa_monitor.core import jit
+    jit.set_reporter(KernelNotice())     # a first run says it compiles, and how far
     try:
         with quiet_broken_pipe():        # every command: ``rwa-monitor ... | head`` is quiet
             return int(args.func(args) or 0)

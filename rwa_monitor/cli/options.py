@@ -73,7 +73,7 @@ def output_path(args: argparse.Namespace) -> str:
 def write_output_telemetry(args: argparse.Namespace, tele: Telemetry) -> str:
     """Write a simulator's record to ``-o`` in ``--format``; return what was written."""
     path = output_path(args)
-    write_telemetry(path, tele)
+    write_telemetry(path, tele, getattr(args, 'topics', None) or None)
     if pathlib.Path(path).suffix.lower() == '.bin':
         from rwa_monitor.telemetry.ccsds_write import sibling_paths
         xml, yml = sibling_paths(path)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from dataclasses import replace
 
-from rwa_monitor.cli.options import add_format, OUTPUT_HELP, write_output_telemetry
+from rwa_monitor.cli.options import add_format, add_topics, OUTPUT_HELP, write_output_telemetry
 from rwa_monitor.exceptions import ConfigError
 from rwa_monitor.sim.aocs import (AocsConfig, AXES, DEFAULT_LEVEL, DRIFT_SLOPES, FAULT_NAMES,
                                   GyroFault, named_fault, simulate_aocs)
@@ -47,6 +47,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument('--seed', type=int, default=0, help='random seed (default 0)')
     parser.add_argument('-o', '--output', required=True, metavar='PATH', help=OUTPUT_HELP)
     add_format(parser)
+    add_topics(parser)
     parser.set_defaults(func=run)
 
 

@@ -10,6 +10,7 @@ import time
 
 from rwa_monitor.cli.options import FORMATS
 from rwa_monitor.exceptions import ConfigError
+from rwa_monitor.progress import Progress
 from rwa_monitor.sim.fleet import pass_telemetry, plan_fleet, write_fleet
 from rwa_monitor.telemetry.atomic import write_text_atomic
 
@@ -81,19 +82,26 @@ def run(args: argparse.Namespace) -> int:
     except ValueError as err:
         raise ConfigError(str(err)) from None
     start = time.perf_counter()
+    n_pass = sum(len(c.passes) for c in plan.spacecraft)
+    progress = Progress(f'rwa-monitor simulate fleet: passes written to {out}', n_pass)
     suffix = '.bin' if args.format == 'ccsds' else '.csv'
-    files = write_fleet(out, plan, suffix, _write_packet_pass if suffix == '.bin' else None)
+    files = write_fleet(out, plan, suffix, _write_packet_pass if suffix == '.bin' else None,
+                        progress.update)
+    progress.finish()
     write_text_atomic(out / 'archive.yaml', f'# rwa-monitor simulate fleet, seed {args.seed}\n'
                       f'epoch_utc: {epoch}\n')
     if args.calibrate:
-        for craft in plan.spacecraft:
+        progress = Progress('rwa-monitor simulate fleet: spacecraft commissioned',
+                            len(plan.spacecraft))
+        for done, craft in enumerate(plan.spacecraft):
             folder = out / craft.name
             records = []
             for i in range(plan.commissioning_passes):
                 records.append(pass_telemetry(plan, craft, i))
                 records[-1].source = str(folder / f'{craft.passes[i].pass_id}{suffix}')
             write_calibration(folder / 'calibration.yaml', records)
-    n_pass = sum(len(c.passes) for c in plan.spacecraft)
+            progress.update(done + 1, craft.name)
+        progress.finish()
     samples = n_pass * int(plan.pass_s * plan.rate_hz + 1e-9)
     faults = sum(len(c.faults) for c in plan.spacecraft)
     wearing = sum(r > 0 for c in plan.spacecraft for r in c.wear_per_day.values())

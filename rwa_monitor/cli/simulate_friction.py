@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from rwa_monitor.cli.options import add_format, OUTPUT_HELP, write_output_telemetry
+from rwa_monitor.cli.options import add_format, add_topics, OUTPUT_HELP, write_output_telemetry
 from rwa_monitor.exceptions import ConfigError
 from rwa_monitor.sim.friction import parse_anomaly, REGIMES, simulate_friction_with_truth
 from rwa_monitor.sim.profiles import PROFILES
@@ -51,6 +51,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument('--seed', type=int, default=0, help='random seed (default 0)')
     parser.add_argument('-o', '--output', required=True, metavar='PATH', help=OUTPUT_HELP)
     add_format(parser)
+    add_topics(parser)
     parser.set_defaults(func=run)
 
 

@@ -159,6 +159,8 @@ def diagnose_fss(block: Mapping[str, Any], time: np.ndarray, speed: np.ndarray,
                  friction: np.ndarray, classifier: Any, config: Any) -> dict[str, Any]:
     """Return the window diagnosis of one wheel relative to its calibrated nominal.
 
+    Samples beyond the plausibility limits are dropped first (core/fss/pipeline.py
+    ``plausible``, counted in ``rejected``), then
     :func:`fss_inputs` (nominal's non-model-(1) part removed, band and out-of-range
     samples skipped, scales from the reference), the four stages (core/fss/pipeline.py
     ``diagnose``), then core/fss/classify.py ``relative_verdict`` (``status``: nominal,
@@ -175,10 +177,12 @@ def diagnose_fss(block: Mapping[str, Any], time: np.ndarray, speed: np.ndarray,
 
     from rwa_monitor.core.fss.classify import (noise_ratio_bound, relative_verdict,
                                                viscous_significant, viscous_z)
-    from rwa_monitor.core.fss.pipeline import diagnose
+    from rwa_monitor.core.fss.pipeline import diagnose, plausible
+    speed, friction, rejected = plausible(speed, friction, config)
     given, scales = fss_inputs(block, speed, friction)
     result = diagnose(speed, given, time, classifier, replace(config, **scales))
-    skipped = int(np.sum(~np.isfinite(given) & np.isfinite(np.asarray(friction, float))))
+    result['rejected'] = rejected       # the reasons of the samples as given
+    skipped = int(np.sum(~np.isfinite(given) & np.isfinite(friction)))
     if result.get('status') == 'unknown':   # mostly not tested: no relative verdict
         result['calibration'] = {**scales, 'samples_not_tested': skipped}
         return result

@@ -60,6 +60,9 @@ WINDOW_END = 'window_end_s'
 BASE_DRY = 'base_dry_nm'
 VISCOUS = 'viscous_nms'
 SVM_DECISION = 'svm_decision'
+# A window diagnoser filling its first window: samples still missing (level STALE, shown
+# as waiting: not examined yet, not a lost input).
+WAITING_SAMPLES = 'waiting_samples'
 
 # VSADC gyro classifier (vsadc-gyro-drift paper): event details and axis health.
 GYRO_STATES = ('healthy', 'drift', 'bias')   # labels 0, 1, 2; events carry the new one

@@ -91,4 +91,6 @@ def _compile():
     signature = types.int64(types.CPointer(types.float64), types.int64,
                             types.CPointer(types.int64), types.int64,
                             types.float64, types.float64, types.float64)
-    return cfunc(signature, cache=True)(_step)
+    from rwa_monitor.core.jit import reporting
+    with reporting('llr_cstep.step', kern.step):   # llr_kernel.step compiled into it
+        return cfunc(signature, cache=True)(_step)

@@ -220,6 +220,14 @@ CALIBRATION_FILE = Param('calibration_file', '', 'Commissioning calibration (`rw
                          'nominal; empty = none. A missing or malformed file is refused '
                          'naming the key; a node keeps its last good one.', scope='node')
 
+# Plausibility limits of a wheel's samples: the LLR detector's and the window diagnoser's
+# (one definition, two blocks: a sample no wheel can produce is never tested by either).
+MAX_ABS_SPEED = Param('max_abs_speed', 1.0e5, 'Samples at or beyond this speed are dropped '
+                      'and counted out_of_range.', low=0.0, low_open=True, unit='rad/s')
+MAX_ABS_FRICTION = Param('max_abs_friction', 1.0e3, 'Samples at or beyond this friction are '
+                         'dropped and counted out_of_range.', low=0.0, low_open=True,
+                         unit='N m')
+
 # Names every node has or ROS adds: accepted in any block, used by none of the algorithms.
 SHARED_NAMES = frozenset({'use_sim_time'})
 
@@ -319,10 +327,8 @@ LLR = Schema('llr_detector', (
     Param('refine_change', True, 'Refine the change time by maximum likelihood.'),
     Param('min_excitation', 1.0e-6, 'Smallest det(corr(Pi_P)): below it a test is skipped '
           'and counted ill_conditioned.', low=0.0, high=1.0, high_open=True),
-    Param('max_abs_speed', 1.0e5, 'Samples at or beyond this speed are dropped and counted '
-          'out_of_range.', low=0.0, low_open=True, unit='rad/s'),
-    Param('max_abs_friction', 1.0e3, 'Samples at or beyond this friction are dropped and '
-          'counted out_of_range.', low=0.0, low_open=True, unit='N m'),
+    MAX_ABS_SPEED,
+    MAX_ABS_FRICTION,
     Param('noise_ar_max_order', AUTO, 'Largest order of the AR noise model fitted on the '
           'first samples and used to prewhiten them (docs/llr.md); auto = 3 with an '
           'estimated noise level, 0 with noise_std given (white noise, the paper).', low=0,
@@ -373,6 +379,8 @@ FSS = Schema('fss_diagnoser', (
           unit='N m'),
     Param('speed_scale_rad_s', 400.0, 'One normalised speed unit.', low=0.0, low_open=True,
           unit='rad/s'),
+    MAX_ABS_SPEED,
+    MAX_ABS_FRICTION,
     Param('model', '', 'Classifier model file (JSON from `rwa-monitor fss train`); empty = '
           'the shipped model.', read_only=True),
     CALIBRATION_FILE,

@@ -3,7 +3,9 @@
 A Foxglove WebSocket server (foxglove-sdk) on ``host``:``port`` (default 127.0.0.1:8765;
 port 0 takes a free one, see :attr:`FoxgloveBridge.port`), reached through a front that
 speaks both subprotocol names, ``foxglove.sdk.v1`` and ``foxglove.websocket.v1``, and
-refuses browser pages from origins not in ``allowed_origins``
+refuses browser pages from origins not in ``allowed_origins`` (default: only pages of
+this machine) and clients beyond ``max_clients``; the SDK's own server listens on
+loopback with TLS under a certificate only the front trusts
 (:mod:`rwa_monitor.nodes.foxglove_front`). Needs the extra ``foxglove``
 (``pip install 'rwa_monitor[foxglove]'``). The node subscribes to the
 DESIGN.md topics and logs JSON messages on these channels, each stamped (log time) with
@@ -45,11 +47,14 @@ try:  # the extra `foxglove`: without it the node says what to install (ConfigEr
     from foxglove.channels import LogChannel
     from foxglove.messages import Log, LogLevel, Timestamp
 
-    from rwa_monitor.nodes.foxglove_front import WebSocketFront
+    from rwa_monitor.nodes.foxglove_front import (loopback_certificate, trusting,
+                                                  WebSocketFront)
 except ImportError as missing:
     _MISSING_EXTRA: ImportError | None = missing
 else:
     _MISSING_EXTRA = None
+
+MAX_CLIENTS = 32
 
 NODE_NAME = 'foxglove_bridge'
 WHEELS = '/rwa_monitor/wheels'
@@ -64,9 +69,12 @@ PARAMETERS = (
     ParamSpec('host', '127.0.0.1', 'Address the server binds to (0.0.0.0 serves every '
               'interface: only on a trusted network).', read_only=True),
     ParamSpec('allowed_origins', [], 'Browser origins (scheme://host[:port]) whose pages may '
-              'connect; * allows any. Empty: any on a loopback host, none beyond it. '
-              'Clients that send no Origin (not browsers) are always served.',
-              kind=list, read_only=True),
+              'connect; * allows any. Empty: pages of this machine (http(s)://localhost or '
+              'a loopback address) on a loopback host, none beyond it. Clients that send no '
+              'Origin (not browsers) are always served.', kind=list, read_only=True),
+    ParamSpec('max_clients', MAX_CLIENTS, 'Most WebSocket clients served at once (each holds '
+              'three file descriptors); more are refused with HTTP 503.', low=1, high=1024,
+              read_only=True),
 )
 
 _NUMBER = {'type': 'number'}
@@ -111,12 +119,18 @@ class FoxgloveBridge(Node):
         self.log_channel = LogChannel(ANOMALY_LOG, context=self.foxglove)
         self._log_levels = {OK: LogLevel.Info, WARN: LogLevel.Warning, ERROR: LogLevel.Error,
                             STALE: LogLevel.Warning}
+        # The SDK's server: loopback, TLS with a certificate only the front trusts, so no
+        # browser page can use it (foxglove_front.py).
+        certificate, key = loopback_certificate()
         self.server = foxglove.start_server(name='rwa_monitor', host='127.0.0.1', port=0,
-                                            context=self.foxglove)
+                                            context=self.foxglove, tls_cert=certificate,
+                                            tls_key=key)
         try:
             self.front = WebSocketFront(self.params['host'], self.params['port'],
                                         self.server.port, self.params['allowed_origins'],
-                                        self.get_logger().warning)
+                                        self.get_logger().warning,
+                                        upstream_tls=trusting(certificate),
+                                        max_clients=self.params['max_clients'])
         except OSError as err:
             self.server.stop()
             raise ConfigError(f'parameters host/port: cannot serve on '
@@ -135,7 +149,8 @@ class FoxgloveBridge(Node):
                                  DIAGNOSTICS_QOS,
                                  event_callbacks=qos_event_callbacks(self, '/diagnostics'))
         origins = (', '.join(self.front.allowed_origins) or
-                   ('any' if self.front.loopback else 'none (set allowed_origins)'))
+                   ('pages of this machine (localhost)' if self.front.loopback
+                    else 'none (set allowed_origins)'))
         self.get_logger().info(f'Foxglove WebSocket server on ws://{self.params["host"]}:'
                                f'{self.port} (open it in the Foxglove app, docs/usage.md); '
                                f'browser origins allowed: {origins}')

@@ -318,6 +318,7 @@ class FssDiagnoserNode(Node):
             return self.alarms.merge(wheel.health.hardware_id, ERROR,
                                      f'diagnosis failed ({failure[1]})', values)
         if wheel.result is None:
+            values[keys.WAITING_SAMPLES] = wheel.window.length - wheel.window.size
             return self.alarms.merge(
                 wheel.health.hardware_id, STALE, f'unknown: not examined yet, waiting for '
                 f'a full window ({wheel.window.size}/{wheel.window.length} samples)', values)

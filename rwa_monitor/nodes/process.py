@@ -154,6 +154,13 @@ def run_nodes(factories: Sequence[Callable[[], Node]], args: Sequence[str] | Non
     (rclpy.experimental.EventsExecutor).
     """
     argv = sys.argv if args is None else list(args)
+    from rwa_monitor.paths import with_installed_params_files
+    argv, notes = with_installed_params_files(argv)
+    for note in notes:
+        print(f'{str(argv[0]).rsplit("/", 1)[-1]}: {note}', file=sys.stderr)
+    from rwa_monitor.core import jit
+    from rwa_monitor.progress import KernelNotice
+    jit.set_reporter(KernelNotice())    # a machine's first run says it compiles, and how far
     if wants_help(argv):
         text = help_text() if callable(help_text) else help_text
         if text is None:   # the docstring and PARAMETERS of the module defining ``factory``

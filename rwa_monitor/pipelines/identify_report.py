@@ -62,7 +62,8 @@ def plot_residuals(selection, path: pathlib.Path, which: str) -> None:
     diag = selection.diagnostics_before if which == 'before' else selection.diagnostics_after
     resid = selection.residual_before() if which == 'before' else selection.residual_after()
     aux_keys = [k for k in diag['binned'] if k.startswith('aux:')]
-    history = [k for k in ('since_zero',) if k in diag['binned']]
+    history = [k for k in ('since_zero', 'acceleration', 'position', 'since_reversal')
+               if k in diag['binned']]
     panels = ['speed', 'approach', 'time', 'direction', 'acf', 'std', 'spectrum'] + \
         history + aux_keys
     cols = 3
@@ -85,9 +86,7 @@ def plot_residuals(selection, path: pathlib.Path, which: str) -> None:
             ax.axhline(0, color='k', lw=0.5)
             span = max(4 * data.noise_floor, 1.5 * np.max(np.abs(b['mean']) + b['band']))
             ax.set_ylim(-span, span)
-            ax.set_xlabel({'speed': 'speed (rad/s)', 'time': 'time (s)',
-                           'since_zero': 'time since the last zero passage (s)'}.get(
-                               name, name[4:]))
+            ax.set_xlabel(AXIS_LABELS.get(name, name[4:]))
             if name == 'speed':
                 ax.legend(fontsize=7, markerscale=6)
             ax.set_ylabel('residual (N m)')
@@ -149,14 +148,23 @@ def plot_residuals(selection, path: pathlib.Path, which: str) -> None:
     plt.close(fig)
 
 
+AXIS_LABELS = {'speed': 'speed (rad/s)', 'time': 'time (s)',
+               'since_zero': 'time since the last zero passage (s)',
+               'acceleration': 'dw/dt (rad/s^2)', 'position': 'position = integral of speed (rad)',
+               'since_reversal': 'distance since the last reversal (rad)'}
+
+
 def _axis_values(data, name: str) -> np.ndarray:
     if name == 'speed':
         return data.speed
     if name == 'time':
         return data.time
-    if name == 'since_zero':
-        finite = np.isfinite(data.past.since_zero_s)
-        return np.where(finite, data.past.since_zero_s, np.nan)
+    past = data.past
+    history = {'since_zero': 'since_zero_s', 'acceleration': 'rate',
+               'position': 'position', 'since_reversal': 'distance_since_reversal'}
+    if name in history:
+        values = getattr(past, history[name])
+        return np.where(np.isfinite(values), values, np.nan)
     return data.aux[name[4:]]
 
 

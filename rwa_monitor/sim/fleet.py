@@ -237,13 +237,13 @@ def _fault(f: Fault, craft: Spacecraft, plan: FleetPlan) -> dict:
 
 
 def write_fleet(out: str | os.PathLike, plan: FleetPlan, suffix: str = '.csv',
-                writer: Callable[[pathlib.Path, Telemetry], None] | None = None
-                ) -> list[pathlib.Path]:
+                writer: Callable[[pathlib.Path, Telemetry], None] | None = None,
+                progress: Callable[[int], None] | None = None) -> list[pathlib.Path]:
     """Write every pass of every spacecraft and truth.json under ``out``; return the paths.
 
     Each pass is ``<pass id><suffix>`` written by ``writer`` (default: write_telemetry,
     the format by the suffix); each file atomically; truth.json last, so a complete archive
-    has it.
+    has it. ``progress(passes written)`` is called after each pass.
     """
     root = pathlib.Path(out)
     written = []
@@ -252,6 +252,8 @@ def write_fleet(out: str | os.PathLike, plan: FleetPlan, suffix: str = '.csv',
             path = root / craft.name / f'{p.pass_id}{suffix}'
             (writer or write_telemetry)(path, pass_telemetry(plan, craft, i))
             written.append(path)
+            if progress is not None:
+                progress(len(written))
     truth = root / 'truth.json'
     write_text_atomic(truth, json.dumps(truth_document(plan), indent=1) + '\n')
     return written + [truth]

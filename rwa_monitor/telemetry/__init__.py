@@ -19,7 +19,7 @@ import os
 import pathlib
 from typing import Mapping
 
-from rwa_monitor.exceptions import TelemetrySchemaError
+from rwa_monitor.exceptions import ConfigError, TelemetrySchemaError
 from rwa_monitor.telemetry.atomic import is_stream
 from rwa_monitor.telemetry.csv_io import read_csv, write_csv
 from rwa_monitor.telemetry.schema import STREAMS, Telemetry, Wheel
@@ -118,7 +118,8 @@ def read_with_notes(path: str | os.PathLike,
 def _read_file(path: str | os.PathLike) -> Telemetry:
     """Read a CSV or Parquet file."""
     if not os.path.exists(path):
-        raise TelemetrySchemaError(os.fspath(path), 'no such file')
+        from rwa_monitor.telemetry.atomic import path_problem
+        raise TelemetrySchemaError(os.fspath(path), path_problem(path))
     if os.path.isdir(path):
         raise TelemetrySchemaError(os.fspath(path), 'a folder without metadata.yaml is not '
                                    'a rosbag2 recording')
@@ -140,7 +141,8 @@ def read_packet_file(path: str | os.PathLike, xtce: str | os.PathLike | None = N
     return tele, [f'{os.fspath(path)}: {line}' for line in report.lines()]
 
 
-def write_telemetry(path: str | os.PathLike, telemetry: Telemetry) -> None:
+def write_telemetry(path: str | os.PathLike, telemetry: Telemetry,
+                    topics: str | None = None) -> None:
     """Write a telemetry file or recording, the format chosen by the path (module doc).
 
     Parameters
@@ -151,6 +153,9 @@ def write_telemetry(path: str | os.PathLike, telemetry: Telemetry) -> None:
         ``FILE_map.yaml`` beside them; anything else: CSV.
     telemetry : Telemetry
         The record to write (atomically: a reader never sees half a file).
+    topics : str, optional
+        A recording's topic per stream, ``wheels=/a,gyro=/b`` (others keep the DESIGN.md
+        names), as another system would name them; ConfigError for a CSV file.
 
     Returns
     -------
@@ -167,12 +172,17 @@ def write_telemetry(path: str | os.PathLike, telemetry: Telemetry) -> None:
     """
     from rwa_monitor.telemetry import rosbag_io
     target = pathlib.Path(path)
+    recording = not is_stream(target) and not is_packets(target) and (
+        rosbag_io.is_recording(target) or not target.suffix)
+    if topics and not recording:
+        raise ConfigError(f'{target}: --topics names the topics of a recording (a folder '
+                          'name without suffix, .mcap or .db3), not of another file')
     if is_stream(target):
         write_csv(target, telemetry)   # a FIFO or device (-o /dev/null): CSV, streamed
     elif is_packets(target):
         from rwa_monitor.telemetry.ccsds_write import write_packets
         write_packets(target, telemetry)
-    elif rosbag_io.is_recording(target) or not target.suffix:
-        rosbag_io.write(target, telemetry)
+    elif recording:
+        rosbag_io.write(target, telemetry, topics)
     else:
         write_csv(target, telemetry)

@@ -10,10 +10,11 @@ healthy again (a cleared record still waits for its acknowledgement).
 every acknowledgement is appended to that file as one JSON object per line, flushed and
 fsynced before :meth:`AlarmStore.declare` returns; :meth:`AlarmStore.load` reads it back
 at start and keeps the unacknowledged records (a line cut short by a crash is skipped and
-counted), then rewrites the journal with only those (through ``atomic_write``), so the
-file does not grow without bound across restarts. A path that is not a journal (a foreign
-file, a folder, a device) is refused with :class:`~rwa_monitor.exceptions.JournalError`
-and left untouched (:func:`check_journal`).
+counted), then rewrites the journal with its header line and only those (through
+``atomic_write``), so the file does not grow without bound across restarts. A path that
+is not a journal (a foreign file, a folder, a device) is refused with
+:class:`~rwa_monitor.exceptions.JournalError` and left untouched (:func:`check_journal`):
+a journal is recognised by a whole first line, its header or a whole record.
 """
 
 from __future__ import annotations
@@ -34,8 +35,12 @@ from rwa_monitor.telemetry.atomic import append_bytes, write_text_atomic
 
 RECOVERY_KINDS = ('healthy',)
 MAX_ALARMS = 10_000
-# Every journal line starts so (json.dumps of a dict whose first key is 'record').
-JOURNAL_START = b'{"record": "'
+# A journal's first line: written when the journal is created or compacted.
+HEADER_RECORD = 'journal'
+JOURNAL_FORMAT = 'rwa_monitor alarm journal'
+JOURNAL_VERSION = 1
+# Longest first line read to recognise a journal (a record is well under 4 KiB).
+MAX_FIRST_LINE = 1 << 16
 _CORE = (keys.DETECTOR, keys.COMPONENT, keys.KIND, keys.CHANGE_TIME, keys.CHANGE_INDEX,
          keys.DECLARATION_TIME, keys.DECLARATION_INDEX, keys.P_VALUE, keys.REVISION)
 
@@ -75,12 +80,51 @@ def event_from_record(fields: dict[str, Any]) -> AnomalyEvent:
         details={k: v for k, v in fields.items() if k not in _CORE})
 
 
-def check_journal(path: str | os.PathLike) -> None:
-    """Raise JournalError unless ``path`` is missing, empty, or a journal this module wrote.
+def journal_header() -> str:
+    """Return the first line of every journal this module creates (with its newline)."""
+    return json.dumps({'record': HEADER_RECORD, 'format': JOURNAL_FORMAT,
+                       'version': JOURNAL_VERSION}) + '\n'
 
-    A journal's first line is a record written by :class:`AlarmStore` (JOURNAL_START, a
-    line cut short by a crash included); a folder, a FIFO, a device or a file starting
-    with anything else is refused and left untouched.
+
+def _head(path: pathlib.Path) -> tuple[bytes | None, bool]:
+    """Return (first line without its newline or None if longer than the limit, blank).
+
+    ``blank``: the whole file is white space (read only when it is that short).
+    """
+    with open(path, 'rb') as handle:
+        head = handle.read(MAX_FIRST_LINE + 1)
+    blank = len(head) <= MAX_FIRST_LINE and not head.strip()
+    if b'\n' in head:
+        return head.split(b'\n', 1)[0], blank
+    return (head if len(head) <= MAX_FIRST_LINE else None), blank
+
+
+def _is_first_record(line: bytes) -> bool:
+    """Return True if ``line`` is a whole journal header or record (not a prefix of one)."""
+    try:
+        record = json.loads(line)
+    except (ValueError, UnicodeDecodeError):
+        return False
+    if not isinstance(record, dict):
+        return False
+    kind = record.get('record')
+    if kind == HEADER_RECORD:
+        version = record.get('version')
+        return (record.get('format') == JOURNAL_FORMAT and isinstance(version, int)
+                and 1 <= version <= JOURNAL_VERSION)
+    if kind == 'event':
+        return isinstance(record.get('key'), str) and isinstance(record.get('event'), dict)
+    return kind == 'acknowledged' and isinstance(record.get('key'), str)
+
+
+def check_journal(path: str | os.PathLike) -> None:
+    """Raise JournalError unless ``path`` is missing, blank, or a journal this module wrote.
+
+    A journal is recognised by its whole first line: the header :func:`journal_header`
+    (written when the journal is created), or a whole event or acknowledgement record
+    (journals written before the header existed). A first line that only begins like one
+    (e.g. the ``{`` of a pretty-printed JSON file), a folder, a FIFO, a device or any
+    other content is refused and the file left untouched.
     """
     path = pathlib.Path(path)
     try:
@@ -95,15 +139,30 @@ def check_journal(path: str | os.PathLike) -> None:
         raise JournalError(f'events_file {path}: is {kind}, not an alarm journal; '
                            'refusing to use it (give a new file name)')
     try:
-        with open(path, 'rb') as handle:
-            head = handle.read(len(JOURNAL_START) + 64).lstrip()
+        first, blank = _head(path)
     except OSError as err:
         raise JournalError(f'events_file {path}: cannot read: {err.strerror or err}') from None
-    first = head.split(b'\n', 1)[0].strip()
-    if first and not (first.startswith(JOURNAL_START) or JOURNAL_START.startswith(first)):
+    if blank:
+        return
+    if first is None or not _is_first_record(first):
+        version = _newer_version(first)
+        if version:
+            raise JournalError(f'events_file {path}: a journal of format version {version}, '
+                               f'newer than this version reads ({JOURNAL_VERSION}); '
+                               'refusing to use or overwrite it')
         raise JournalError(f'events_file {path}: exists and is not an alarm journal (its '
-                           'first line is not a journal record); refusing to use or '
+                           'first line is not a whole journal record); refusing to use or '
                            'overwrite it (give a new file name)')
+
+
+def _newer_version(line: bytes | None) -> int:
+    """Return the version of a header newer than this module's, else 0."""
+    try:
+        record = json.loads(line or b'')
+        version = record['version'] if record.get('record') == HEADER_RECORD else 0
+    except (ValueError, UnicodeDecodeError, AttributeError, KeyError, TypeError):
+        return 0
+    return version if isinstance(version, int) and version > JOURNAL_VERSION else 0
 
 
 @dataclass
@@ -145,24 +204,27 @@ class AlarmStore:
     def load(self) -> list[Alarm]:
         """Read the journal; keep its unacknowledged records; compact it; return them.
 
-        A missing file is an empty journal. Lines that are not a journal record (a write
-        cut short by a crash) are skipped and counted.
+        A missing (or blank) file is an empty journal: it is created with its header.
+        Lines that are not a journal record (a write cut short by a crash) are skipped
+        and counted.
         """
         if self.path is None:
             return []
         check_journal(self.path)
-        if not self.path.exists():
-            return []
-        try:
-            text = self.path.read_text(encoding='utf-8', errors='replace')
-        except OSError as err:
-            self._failed(err)
-            return []
+        text = ''
+        if self.path.exists():
+            try:
+                text = self.path.read_text(encoding='utf-8', errors='replace')
+            except OSError as err:
+                self._failed(err)
+                return []
         for line in text.splitlines():
             if not line.strip():
                 continue
             try:
                 record = json.loads(line)
+                if record.get('record') == HEADER_RECORD:
+                    continue
                 if record.get('record') == 'acknowledged':
                     self._acknowledge_key(str(record['key']), None)
                 else:
@@ -179,7 +241,7 @@ class AlarmStore:
         lines = [json.dumps({'record': 'event', 'key': a.key, 'wall_time_s': a.declared_wall_s,
                              'event': event_record(a.event)}) + '\n' for a in kept]
         try:
-            write_text_atomic(self.path, ''.join(lines))
+            write_text_atomic(self.path, journal_header() + ''.join(lines))
         except OSError as err:
             self._failed(err)
 

@@ -19,16 +19,20 @@ from __future__ import annotations
 
 import contextlib
 import ctypes
+import errno
 import fnmatch
 import os
 import pathlib
 import shutil
+import signal
 import stat
 import tempfile
+import threading
 from typing import IO, Iterable, Iterator
 
 from rwa_monitor.exceptions import OutputError
 from rwa_monitor.telemetry.schema import NAME_RULE, valid_name
+from rwa_monitor.telemetry.temporaries import remove_stale, temporary_prefix
 
 
 def child(folder: str | os.PathLike, name: str, suffix: str = '') -> pathlib.Path:
@@ -51,9 +55,48 @@ def umask() -> int:
 
 
 def _resolve(path: str | os.PathLike) -> pathlib.Path:
-    """Return the final target of ``path`` (links followed, a dangling one included)."""
+    """Return the final target of ``path`` (links followed, a dangling one included).
+
+    OutputError when the links loop (the error used to surface as a RuntimeError of
+    pathlib, or as "cannot examine" naming the resolved path).
+    """
     target = pathlib.Path(path)
-    return pathlib.Path(os.path.realpath(target)) if target.is_symlink() else target
+    if not target.is_symlink():
+        return target
+    try:
+        return pathlib.Path(os.path.realpath(target, strict=True))
+    except FileNotFoundError:
+        return pathlib.Path(os.path.realpath(target))    # dangling: its target is created
+    except OSError as err:
+        raise OutputError(f'{path}: {path_problem(path, err)}') from None
+
+
+def path_problem(path: str | os.PathLike, err: OSError | None = None) -> str:
+    """Return what is wrong with a path that cannot be used, in plain words.
+
+    ``err`` is the error of the failed call if any; without it the path is examined. A
+    loop of symbolic links, a dangling link (naming its target), a missing folder on the
+    way, a component that is a file, or the error's own text.
+    """
+    path = pathlib.Path(path)
+    if err is None:
+        try:
+            os.stat(path)
+            return 'exists'
+        except OSError as error:
+            err = error
+    if err.errno == errno.ELOOP:
+        return 'its symbolic links form a loop (a link leads back to itself)'
+    if err.errno == errno.ENOTDIR:
+        return 'a part of the path that should be a folder is a file'
+    if err.errno == errno.ENOENT:
+        if path.is_symlink():
+            return (f'a symbolic link to {os.readlink(path)}, which does not exist')
+        parent = path.parent
+        if str(parent) not in ('', '.') and not parent.is_dir():
+            return f'no such file (its folder {parent} does not exist)'
+        return 'no such file'
+    return err.strerror or str(err)
 
 
 def _mode_of(path: pathlib.Path, default: int) -> int:
@@ -70,7 +113,7 @@ def _kind(path: pathlib.Path) -> str:
     except FileNotFoundError:
         return 'none'
     except OSError as err:
-        raise OutputError(f'{path}: cannot examine: {err.strerror or err}') from None
+        raise OutputError(f'{path}: cannot examine: {path_problem(path, err)}') from None
     if stat.S_ISREG(mode):
         return 'file'
     if stat.S_ISDIR(mode):
@@ -88,10 +131,20 @@ def is_stream(path: str | os.PathLike) -> bool:
         return False
 
 
-def _make_parent(target: pathlib.Path, make_parents: bool) -> None:
+def _make_parent(path: str | os.PathLike, target: pathlib.Path, make_parents: bool) -> None:
+    """Create the target's folder if allowed; never the folder of a link's target.
+
+    A dangling symbolic link names a place the user made once: a folder missing on its
+    way is not made up (OutputError naming both), the link's own target file is created.
+    """
     parent = target.parent
-    if parent.exists():
+    if parent.is_dir():
         return
+    if pathlib.Path(path).is_symlink():
+        raise OutputError(f'{path}: a symbolic link to {target}, whose folder {parent} does '
+                          'not exist; not creating it (create the folder or fix the link)')
+    if parent.exists():
+        raise OutputError(f'{target}: {parent} is not a folder')
     if not make_parents:
         raise OutputError(f'{target}: folder {parent} does not exist')
     try:
@@ -125,14 +178,16 @@ def atomic_write(path: str | os.PathLike, mode: str = 'w', *, encoding: str | No
         with _streamed(path, target, mode, kwargs) as handle:
             yield handle
         return
-    _make_parent(target, make_parents)
+    _make_parent(path, target, make_parents)
+    remove_stale(target)
     try:
-        fd, tmp_name = tempfile.mkstemp(prefix=f'.{target.name}.', suffix='.tmp',
-                                        dir=target.parent)
+        with _signals_held():
+            fd, tmp_name = tempfile.mkstemp(prefix=temporary_prefix(target), suffix='.tmp',
+                                            dir=target.parent)
+            tmp = pathlib.Path(tmp_name)
     except OSError as err:
         raise OutputError(f'{path}: cannot write in {target.parent}: '
                           f'{err.strerror or err}') from None
-    tmp = pathlib.Path(tmp_name)
     try:
         os.chmod(fd, _mode_of(target, 0o666))
         with os.fdopen(fd, mode, **kwargs) as handle:
@@ -146,6 +201,27 @@ def atomic_write(path: str | os.PathLike, mode: str = 'w', *, encoding: str | No
         if isinstance(err, OSError) and not isinstance(err, OutputError):
             raise OutputError(f'{path}: write failed: {err.strerror or err}') from None
         raise
+
+
+@contextlib.contextmanager
+def _signals_held() -> Iterator[None]:
+    """Hold SIGINT and SIGTERM while a temporary file is made and named.
+
+    A Ctrl-C that arrives after the file exists but before the code that removes it on
+    failure has its name would leave it behind; held, the signal is delivered when the
+    block ends, inside that code. Only the main thread receives these signals; elsewhere,
+    or where the platform has no signal masks, nothing is held.
+    """
+    mask = getattr(signal, 'pthread_sigmask', None)
+    if mask is None or threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    held = {signal.SIGINT, signal.SIGTERM}
+    previous = mask(signal.SIG_BLOCK, held)
+    try:
+        yield
+    finally:
+        mask(signal.SIG_SETMASK, previous)
 
 
 @contextlib.contextmanager
@@ -286,11 +362,16 @@ class FolderOutput:
                               f'are not {self.what} ({shown}); choose a new or empty folder')
 
     def open(self) -> pathlib.Path:
-        """Create the temporary folder beside the target; return the path to fill."""
+        """Create the temporary folder beside the target; return the path to fill.
+
+        Temporaries of this target left by a killed run are removed first
+        (telemetry/temporaries.py).
+        """
         parent = self.target.parent
+        _make_parent(self.path, self.target, True)
+        remove_stale(self.target, (self.target.name,))
         try:
-            parent.mkdir(parents=True, exist_ok=True)
-            self.work = pathlib.Path(tempfile.mkdtemp(prefix=f'.{self.target.name}.',
+            self.work = pathlib.Path(tempfile.mkdtemp(prefix=temporary_prefix(self.target),
                                                       suffix='.tmp', dir=parent))
         except OSError as err:
             raise OutputError(f'{self.path}: cannot write in {parent}: '
@@ -323,10 +404,21 @@ class FolderOutput:
             self.abort()
 
     def abort(self) -> None:
-        """Remove the temporary folder (the target is left as it was)."""
+        """Remove the temporary folder (the target is left as it was).
+
+        Also one whose name was not yet known (an interrupt inside ``mkdtemp``): it carries
+        this process's prefix (telemetry/temporaries.py).
+        """
         if self.work is not None:
             shutil.rmtree(self.work, ignore_errors=True)
             self.work = None
+            return
+        with contextlib.suppress(OSError):
+            prefix = temporary_prefix(self.target)
+            for entry in os.scandir(self.target.parent):
+                if entry.name.startswith(prefix) and entry.name.endswith('.tmp') and \
+                        entry.is_dir(follow_symlinks=False):
+                    shutil.rmtree(entry.path, ignore_errors=True)
 
     def __enter__(self) -> pathlib.Path:
         """Open the temporary folder (created) and return it."""

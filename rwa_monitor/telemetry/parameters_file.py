@@ -30,6 +30,7 @@ def read_parameters_file(path: str | pathlib.Path | None) -> dict[str, Any]:
             path = paths.config_file()
         except FileNotFoundError:
             return {}
+    path = paths.installed_or_given(path)     # config/NAME of the docs, for a pip install
     document = read_yaml(path)
     if document is None:
         return {}

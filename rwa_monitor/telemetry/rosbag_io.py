@@ -248,8 +248,11 @@ def _named(items: list[tuple[int, Any]], field: str) -> dict[str, np.ndarray]:
 
 
 # ------------------------------------------------------------------------------ writing
-def write(path: str | os.PathLike, tele: Telemetry) -> None:
+def write(path: str | os.PathLike, tele: Telemetry,
+          topics: str | Mapping[str, str] | None = None) -> None:
     """Write ``tele`` as a rosbag2 directory, or a bare ``.mcap``/``.db3`` file by suffix.
+
+    ``topics``: the topic of each stream (:func:`parse_topics`; default the DESIGN.md names).
 
     Through telemetry/atomic.py: a folder is built beside ``path`` and swapped in whole
     (an existing folder may hold only a recording: telemetry/recording_folder.py), a bare
@@ -261,7 +264,7 @@ def write(path: str | os.PathLike, tele: Telemetry) -> None:
     if not bare:
         output = recording_output(target)
         try:
-            _write_bag(output.open(), tele, storage)
+            _write_bag(output.open(), tele, storage, topics)
             output.commit()
         except OSError as err:
             if isinstance(err, OutputError):
@@ -274,7 +277,7 @@ def write(path: str | os.PathLike, tele: Telemetry) -> None:
         target.parent.mkdir(parents=True, exist_ok=True)
         with tempfile.TemporaryDirectory(prefix=f'.{target.name}.', dir=target.parent) as work:
             bag = pathlib.Path(work) / target.stem
-            _write_bag(bag, tele, storage)
+            _write_bag(bag, tele, storage, topics)
             install_file(next(bag.glob('*' + target.suffix.lower())), target)
     except OSError as err:
         if isinstance(err, OutputError):
@@ -282,15 +285,17 @@ def write(path: str | os.PathLike, tele: Telemetry) -> None:
         raise OutputError(f'{target}: write failed: {err.strerror or err}') from None
 
 
-def _write_bag(bag: pathlib.Path, tele: Telemetry, storage: str) -> None:
+def _write_bag(bag: pathlib.Path, tele: Telemetry, storage: str,
+               topics: str | Mapping[str, str] | None = None) -> None:
     from rosbags.rosbag2 import StoragePlugin, Writer
     store = typestore()
     plugin = StoragePlugin.SQLITE3 if storage == 'sqlite3' else StoragePlugin.MCAP
     streams = dict(_message_streams(tele))
+    names = parse_topics(topics)
     stamps = (np.round(tele.time * 1e9)).astype(np.int64)
     with Writer(bag, version=9, storage_plugin=plugin) as writer:
         conns = {stream: writer.add_connection(
-            DEFAULT_TOPICS.get(stream, COLUMNS_TOPIC), MSG_TYPES[stream], typestore=store)
+            names.get(stream, COLUMNS_TOPIC), MSG_TYPES[stream], typestore=store)
             for stream in streams}
         order = sorted(((int(stamps[row]), k, row, stream)
                         for k, (stream, rows) in enumerate(

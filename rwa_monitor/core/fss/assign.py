@@ -99,6 +99,10 @@ def assign_changepoints(times: np.ndarray, signs: np.ndarray, reject_cost: np.nd
     m = times.size
     if signs.size != m or reject_cost.size != m:
         raise ValueError('times, signs and reject_cost must have the same length')
+    if not np.all(np.isfinite(reject_cost) & (reject_cost >= 0.0)):
+        # A state's score must stay finite: with an infinite cost every state of a
+        # stage was dropped and the survivors' index was empty (IndexError).
+        raise ValueError('reject_cost must be finite and >= 0')
     n_sys = len(systems)
     times_ext = np.concatenate(([-1], times))
     radix = np.array([s.n_config * (m + 1) for s in systems], dtype=np.int64)

@@ -58,6 +58,8 @@ class FssDiagnoser:
     wglr_window, w_bias, viscous_prior, p_false, dk_error, beam, torque_scale_nm, \
 speed_scale_rad_s
         The stages' parameters (core/schema.py ``FSS``, docs/parameters.md).
+    max_abs_speed, max_abs_friction : float
+        Plausibility limits: samples at or beyond are not tested (rad/s, N m).
 
     Examples
     --------
@@ -79,17 +81,20 @@ speed_scale_rad_s
                  window_period: int = 20_000, wglr_window: int = 20, w_bias: float = 1.0e-4,
                  viscous_prior: float = 1.0, p_false: float = 1.0e-9, dk_error: int = 10,
                  beam: int = 256, torque_scale_nm: float = 2.0e-4,
-                 speed_scale_rad_s: float = 400.0) -> None:
+                 speed_scale_rad_s: float = 400.0, max_abs_speed: float = 1.0e5,
+                 max_abs_friction: float = 1.0e3) -> None:
         self.classifier = classifier
         self.config = FssConfig(wglr_window=wglr_window, w_bias=w_bias,
                                 viscous_prior=viscous_prior, p_false=p_false,
                                 dk_error=dk_error, beam=beam, torque_scale_nm=torque_scale_nm,
-                                speed_scale_rad_s=speed_scale_rad_s)
+                                speed_scale_rad_s=speed_scale_rad_s,
+                                max_abs_speed=max_abs_speed, max_abs_friction=max_abs_friction)
         self.window = SlidingWindow(length=window_length, period=window_period)
         self._params = {'window_length': window_length, 'window_period': window_period,
                         **{k: getattr(self.config, k) for k in (
                             'wglr_window', 'w_bias', 'viscous_prior', 'p_false', 'dk_error',
-                            'beam', 'torque_scale_nm', 'speed_scale_rad_s')}}
+                            'beam', 'torque_scale_nm', 'speed_scale_rad_s', 'max_abs_speed',
+                            'max_abs_friction')}}
         self.reset()
 
     @property

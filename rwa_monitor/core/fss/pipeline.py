@@ -15,6 +15,7 @@ from typing import Sequence
 
 import numpy as np
 
+from rwa_monitor.core import keys
 from rwa_monitor.core.coverage import Coverage, judge, NOT_EXAMINED, UNKNOWN
 from rwa_monitor.core.fss.assign import (assign_changepoints, base_dry_weights,
                                          friction_levels)
@@ -37,6 +38,8 @@ class FssConfig:
     beam: int = 256                   # DP states kept per stage
     torque_scale_nm: float = 2.0e-4   # one normalised torque unit (N m)
     speed_scale_rad_s: float = 400.0  # one normalised speed unit (rad/s)
+    max_abs_speed: float = 1.0e5      # rad/s: samples at or beyond are not tested
+    max_abs_friction: float = 1.0e3   # N m: samples at or beyond are not tested
     systems: tuple[SwitchingSystem, ...] = DEFAULT_SYSTEMS
 
     def __post_init__(self) -> None:
@@ -48,6 +51,8 @@ class FssConfig:
         check_int('beam', self.beam, 1, 1_000_000)
         check_real('torque_scale_nm', self.torque_scale_nm, 0.0, low_open=True)
         check_real('speed_scale_rad_s', self.speed_scale_rad_s, 0.0, low_open=True)
+        check_real('max_abs_speed', self.max_abs_speed, 0.0, low_open=True)
+        check_real('max_abs_friction', self.max_abs_friction, 0.0, low_open=True)
 
 
 @dataclass
@@ -209,6 +214,29 @@ def _changepoints(speed: np.ndarray, friction: np.ndarray, config: FssConfig) ->
     return finite[cps.changepoints]
 
 
+def plausible(speed_rad_s: np.ndarray, friction_nm: np.ndarray, config: FssConfig
+              ) -> tuple[np.ndarray, np.ndarray, dict[str, int]]:
+    """Return (speed, friction) with untestable samples NaN, and the counts by reason.
+
+    A sample is not tested when a value is not finite (``non_finite``) or at or beyond
+    the plausibility limits ``max_abs_speed`` / ``max_abs_friction`` (``out_of_range``):
+    the limits and the reasons of the LLR detector (core/llr_kernel.py ``accept``), so
+    that a value no wheel can produce (1e300 N m) never reaches the least squares, where
+    it overflowed the sums (a viscous flag from a 1e300 column, an infinite noise
+    estimate, an assignment without a finite score).
+    """
+    speed = np.array(speed_rad_s, dtype=float)
+    friction = np.array(friction_nm, dtype=float)
+    finite = np.isfinite(speed) & np.isfinite(friction)
+    with np.errstate(invalid='ignore'):
+        inside = (np.abs(speed) < config.max_abs_speed) & (
+            np.abs(friction) < config.max_abs_friction)
+    speed[~(finite & inside)] = np.nan
+    friction[~(finite & inside)] = np.nan
+    return speed, friction, {keys.NON_FINITE: int(np.count_nonzero(~finite)),
+                             keys.OUT_OF_RANGE: int(np.count_nonzero(finite & ~inside))}
+
+
 def normalise(speed_rad_s: np.ndarray, friction_nm: np.ndarray, config: FssConfig
               ) -> tuple[np.ndarray, np.ndarray]:
     """Return (speed, friction) in normalised units and paper sign from SI telemetry."""
@@ -224,7 +252,8 @@ def diagnose(speed_rad_s: np.ndarray, friction_nm: np.ndarray, time_s: np.ndarra
     ----------
     speed_rad_s, friction_nm, time_s : ndarray, shape (n,)
         The window's speed (rad/s), friction (N m) and stamps (s); non-finite samples
-        are skipped by the stages.
+        and samples beyond the plausibility limits are skipped by the stages
+        (:func:`plausible`).
     classifier : WindowClassifier
         The trained classifier (``rwa_monitor.load_fss_model()``: the shipped one).
     config : FssConfig
@@ -235,7 +264,8 @@ def diagnose(speed_rad_s: np.ndarray, friction_nm: np.ndarray, time_s: np.ndarra
     dict
         ``anomalies``: one boolean per anomaly; ``estimates``: base dry (N m), viscous
         (N m s/rad) and its standard error, noise std (N m), levels per FSS (N m);
-        ``changepoints``: time, index, FSS and dry jump (N m) of each accepted
+        ``rejected``: samples not tested by reason (:func:`plausible`: ``non_finite``,
+        ``out_of_range``); ``changepoints``: time, index, FSS and dry jump (N m) of each accepted
         changepoint; ``onsets``: index, time and dry jump (N m) of each persistent change
         inside the window (:func:`extract`), the rest describing the part diagnosed, from
         sample ``estimates['diagnosed_from_index']``; ``timings_s``: seconds per stage.
@@ -255,14 +285,15 @@ def diagnose(speed_rad_s: np.ndarray, friction_nm: np.ndarray, time_s: np.ndarra
     >>> result['anomalies']
     {'dry': False, 'viscous': False, 'fss1': False, 'fss2': False}
     """
-    speed, friction = normalise(speed_rad_s, friction_nm, config)
+    speed, friction, rejected = plausible(speed_rad_s, friction_nm, config)
+    speed, friction = normalise(speed, friction, config)
     time_s = np.asarray(time_s, dtype=float)
     coverage = window_coverage(speed, friction, config)
     if coverage.verdict == NOT_EXAMINED:
         estimates = dict.fromkeys(('base_dry_nm', 'viscous_nms', 'noise_std_nm'))
         return _unknown({'anomalies': dict.fromkeys(classifier_flags(classifier), False),
                          'estimates': estimates, 'changepoints': [], 'onsets': [],
-                         'timings_s': {}},
+                         'timings_s': {}, 'rejected': rejected},
                         coverage)
     ext = extract(speed, friction, config)
     t0 = _time.perf_counter()
@@ -293,7 +324,7 @@ def diagnose(speed_rad_s: np.ndarray, friction_nm: np.ndarray, time_s: np.ndarra
                   for k, d in zip(ext.onsets, ext.onset_deltas)]
     result = {'anomalies': {k: bool(v) for k, v in flags.items()},
               'estimates': estimates, 'changepoints': changepoints, 'onsets': onset_list,
-              'timings_s': dict(ext.timings)}
+              'timings_s': dict(ext.timings), 'rejected': rejected}
     return result if coverage.examined else _unknown(result, coverage)
 
 

@@ -45,7 +45,7 @@ def reprofile(design: Design, added: list[AddedEffect], data: IdentData,
                 continue
             keep = np.ones(design.X.shape[1], dtype=bool)
             keep[eff.columns] = False
-            others = Design(design.y, design.X[:, keep], design.held_out)
+            others = Design(design.y, design.X[:, keep], design.split)
             scored = score_candidate(others, others.fit(), cand, data)
             if scored is None or scored['columns'].shape[1] != eff.columns.stop - \
                     eff.columns.start or scored['fit'].rss_train >= \
@@ -53,7 +53,7 @@ def reprofile(design: Design, added: list[AddedEffect], data: IdentData,
                 continue
             X = design.X.copy()
             X[:, eff.columns] = scored['columns']
-            design = Design(design.y, X, design.held_out)
+            design = Design(design.y, X, design.split)
             eff.evidence.setdefault('params_at_entry', dict(eff.params))
             eff.params = scored['params']
             moved = True
@@ -70,11 +70,11 @@ def prune(design: Design, added: list[AddedEffect], alpha_held: float
     After re-profiling, an effect that entered early can be redundant (on the windage
     file, before the sign rule of effects.POSITIVE_WEIGHT, a pre-sliding band took the
     Stribeck curve at step 0; once the Stribeck term sat at its own speed the band's
-    held-out gain was 0.4). Each effect is tested as it
+    validation gain was 0.4). Each effect is tested as it
     was at entry, against the model without it (its nonlinear parameters fixed): p below
-    its step's level, held-out LR above the chi^2 critical value at ``alpha_held``, BIC
+    its step's level, validation LR above the chi^2 critical value at ``alpha_held``, BIC
     gain positive, its weight of the physical sign (effects.POSITIVE_WEIGHT). The weakest
-    failing effect (smallest held-out LR) is removed, the list changed in place, and the
+    failing effect (smallest validation LR) is removed, the list changed in place, and the
     test repeated. A removed effect is not tried again.
     """
     removed: list[dict] = []
@@ -87,18 +87,18 @@ def prune(design: Design, added: list[AddedEffect], alpha_held: float
                 failing.append((-np.inf, eff, own))
                 continue
             own['bic_gain'] = own['lr'] - (own['dof'] + eff.evidence['parameters']
-                                           - eff.evidence['dof']) * np.log(full.n_train)
-            entry = {'p_value': own['p_value'], 'lr_held_out': own['lr_held_out'],
+                                           - eff.evidence['dof']) * np.log(full.n_train_eff)
+            entry = {'p_value': own['p_value'], 'lr_validation': own['lr_validation'],
                      'bic_gain': own['bic_gain'], 'dof': own['dof']}
             if not significant(entry, eff.evidence.get('level', 1.0), alpha_held):
-                failing.append((own['lr_held_out'], eff, own))
+                failing.append((own['lr_validation'], eff, own))
         if not failing:
             break
         _, eff, own = min(failing, key=lambda item: item[0])
         keep = np.ones(design.X.shape[1], dtype=bool)
         keep[eff.columns] = False
         width = eff.columns.stop - eff.columns.start
-        design = Design(design.y, design.X[:, keep], design.held_out)
+        design = Design(design.y, design.X[:, keep], design.split)
         for other in added:
             if other.columns.start > eff.columns.start:
                 other.columns = slice(other.columns.start - width, other.columns.stop - width)

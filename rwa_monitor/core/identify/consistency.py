@@ -11,7 +11,7 @@ Identical wheels on one bus should need the same named effects. Two ways to comp
   * **extra** (its evidence for an effect the siblings do without): the wheel's refitted
     residual fails the structure tests and one step of the single-wheel selection
     (select.py) on it, at the family level alpha / K for K wheels, adds an effect: the
-    wheel alone would need it (Bonferroni p, held-out LR and BIC gain all pass).
+    wheel alone would need it (Bonferroni p, validation LR and BIC gain all pass).
   * **missing** (its evidence against an effect the siblings share): with the shared
     nonlinear parameters, the wheel's weights b_k differ from the mean of its siblings'
     b_s by the two-sample Wald statistic W = d' (C_k + C_s)^-1 d, d = b_k - b_s, chi^2

@@ -54,16 +54,20 @@ Effects (names are the DESIGN.md vocabulary):
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
 from typing import Callable
 
 import numpy as np
 
+from rwa_monitor.core.identify import effects_motion as em
+from rwa_monitor.core.identify.candidate import Candidate
+from rwa_monitor.core.identify.candidates_motion import motion_candidates, speed_noise
 from rwa_monitor.core.identify.data import IdentData, speed_history
+from rwa_monitor.core.identify.fitting import held_out_mask
 
 Column = Callable[..., np.ndarray]
-NAMED = ('stribeck', 'stribeck_hysteresis', 'presliding', 'asymmetric_coulomb', 'drag',
-         'aux', 'drift', 'periodic')
+NAMED = ('stribeck', 'stribeck_hysteresis', 'presliding', 'presliding_state',
+         'frictional_lag', 'stick', 'asymmetric_coulomb', 'drag', 'inertia', 'gravity_load',
+         'load_dry', 'gear_ripple', 'aux', 'drift', 'periodic')
 FALLBACK = 'smooth_speed'
 DRAG_EXPONENTS = (2.0, 1.25, 1.5, 1.75, 2.5, 3.0, 4.0)
 STRIBECK_QUANTILES = (0.01, 0.02, 0.05, 0.1, 0.2, 0.35)
@@ -89,7 +93,12 @@ POSITIVE_WEIGHT = ('stribeck', 'stribeck_hysteresis', 'presliding', 'drag')
 
 
 def physical_weights(kind: str, weights: np.ndarray) -> bool:
-    """Return whether an effect's fitted weights have their physical sign (POSITIVE_WEIGHT)."""
+    """Return whether an effect's fitted weights have their physical sign (POSITIVE_WEIGHT).
+
+    Effects with a state or a position: effects_motion.POSITIVE_COLUMNS.
+    """
+    if kind in em.KINDS:
+        return em.positive_columns(kind, weights)
     return kind not in POSITIVE_WEIGHT or bool(np.all(np.asarray(weights) > 0))
 
 
@@ -137,8 +146,11 @@ def regressor_columns(kind: str, params: dict) -> list[tuple[str, Column]]:
 
     ``aux`` is a mapping of auxiliary channel name -> values (arrays or scalars). These
     callables are the single definition of every effect, used by the selection and by
-    the refined model fed back to the detectors.
+    the refined model fed back to the detectors. Effects with a state or a position:
+    effects_motion.py (their columns need the record: time and speed of every sample).
     """
+    if kind in em.KINDS:
+        return em.regressor_columns(kind, params)
     if kind == 'stribeck':
         ws, shape = float(params['velocity_rad_s']), float(params.get('shape', 2.0))
         return [('stribeck', lambda w, t, a: -np.sign(w) * np.exp(-(np.abs(w) / ws) ** shape))]
@@ -199,20 +211,46 @@ def evaluate(kind: str, params: dict, data: IdentData) -> np.ndarray:
                             for _, col in regressor_columns(kind, params)])
 
 
-@dataclass
-class Candidate:
-    """An effect to test: its vocabulary name, kind and grid of nonlinear parameters."""
+def prerequisite(name: str) -> str | None:
+    """Return the effect that must be in the model before ``name`` is offered, or None.
 
-    name: str
-    kind: str
-    grid: list[dict]
-    tests: int = 0
-    skipped: str | None = None
-    extra: dict = field(default_factory=dict)
+    ``gear_ripple:k`` (a transmission's k-th spatial frequency) follows ``gear_ripple:k-1``
+    (``gear_ripple`` for k = 2); every other effect is offered from the start.
+    """
+    base, _, count = name.partition(':')
+    if base != 'gear_ripple' or not count.isdigit():
+        return None
+    return base if int(count) == 2 else f'{base}:{int(count) - 1}'
 
-    def __post_init__(self) -> None:
-        if not self.tests:
-            self.tests = len(self.grid)
+
+def offered(name: str, tried: set[str], present: set[str]) -> bool:
+    """Return whether ``name`` may be scored: untried, its prerequisite in the model."""
+    need = prerequisite(name)
+    return name not in tried and (need is None or need in present)
+
+
+def renumbered(names: list[str]) -> list[str]:
+    """Return effect names with the repeats of an effect numbered 1, 2, ... in order.
+
+    A stage removed by the backfit leaves its followers' numbers with a gap
+    (``gear_ripple:2`` alone): the final model counts its stages from the first again.
+    """
+    out, seen = [], 0
+    for name in names:
+        if name.partition(':')[0] == 'gear_ripple' and prerequisite(name) is not None \
+                or name == 'gear_ripple':
+            seen += 1
+            name = 'gear_ripple' if seen == 1 else f'gear_ripple:{seen}'
+        out.append(name)
+    return out
+
+
+def left_out(name: str) -> frozenset[str]:
+    """Return ``name`` and the repeats that follow it (left out of a selection together)."""
+    if name.partition(':')[0] != 'gear_ripple':
+        return frozenset({name})
+    first = 1 if ':' not in name else int(name.partition(':')[2])
+    return frozenset({name} | {f'gear_ripple:{k}' for k in range(first + 1, em.RIPPLES + 1)})
 
 
 def named_candidates(data: IdentData, residual: np.ndarray) -> list[Candidate]:
@@ -240,12 +278,13 @@ def named_candidates(data: IdentData, residual: np.ndarray) -> list[Candidate]:
     t0, span = float(data.time[0]), float(data.time[-1] - data.time[0])
     out.append(Candidate('drift', 'drift', [{'component': c, 't0_s': t0, 'scale_s': span}
                                             for c in ('dry', 'viscous', 'offset')]))
-    freqs, tested = spectral_peaks(data.time, residual, PERIODIC_PEAKS)
+    seen = np.where(held_out_mask(len(residual)), 0.0, residual)   # test rows unseen
+    freqs, tested = spectral_peaks(data.time, seen, PERIODIC_PEAKS)
     out.append(Candidate('periodic', 'periodic',
                          [{'frequency_hz': f, 't0_s': t0} for f in freqs],
                          tests=max(tested, 1),
                          skipped=None if freqs else 'not testable: too few samples'))
-    return out
+    return out + motion_candidates(data, residual)
 
 
 def stribeck_candidate(abs_speed: np.ndarray) -> Candidate:
@@ -301,10 +340,15 @@ def presliding_candidate(data: IdentData, abs_speed: np.ndarray | None = None
                          ) -> Candidate:
     """Return the pre-sliding band candidate (needs samples near zero speed).
 
-    Band widths span quantiles of ``abs_speed`` (default abs(w) of ``data``).
+    Band widths span quantiles of ``abs_speed`` (default abs(w) of ``data``), and reach
+    at least three times the speed's noise (candidates_motion.speed_noise): within its
+    noise the sampled speed's sign says nothing of the motion's direction, so a band
+    narrower than that cannot be told from a jump of the dry term at every noisy sign
+    change (a joint at rest: a quarter of its samples within the noise).
     """
     aw = np.abs(data.speed) if abs_speed is None else np.abs(abs_speed)
     lo, hi = (float(np.quantile(aw, q)) for q in PRESLIDING_RANGE)
+    hi = max(hi, 3.0 * speed_noise(data))
     if hi <= 0 or np.sum(aw < hi) < 10 or data.past is None or data.past.passages == 0:
         return Candidate('presliding', 'presliding', [], tests=1,
                          skipped='not testable: the speed never comes near zero')

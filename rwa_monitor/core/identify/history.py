@@ -15,7 +15,12 @@ tested against them (residuals.py) and the hysteresis effect can be built (effec
 - ``since_zero_s``: time since the last zero passage (inf before the first);
 - ``left_zero``: a zero passage happened at or after the last sample at which abs(w)
   fell: the wheel has been moving away from zero ever since it passed it (the branch
-  of the loop that carries the breakaway peak).
+  of the loop that carries the breakaway peak);
+- ``position``: the integral of the speed (motion.py), the angle up to an offset;
+- ``since_reversal_s`` / ``distance_since_reversal``: time and distance travelled since
+  the direction of motion last changed (the direction keeps its value while abs(w) is
+  below its 5 % quantile, so noise about zero in a stop is not a reversal), and
+  ``previous_direction``: the direction before that reversal (the sign history).
 """
 
 from __future__ import annotations
@@ -24,7 +29,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from rwa_monitor.core.identify.motion import position, reversals
+
 RATE_NOISE_SIGMAS = 3.0
+REVERSAL_BAND_QUANTILE = 0.05
 
 
 @dataclass
@@ -37,6 +45,10 @@ class History:
     zero_passage: np.ndarray
     since_zero_s: np.ndarray
     left_zero: np.ndarray
+    position: np.ndarray
+    since_reversal_s: np.ndarray
+    distance_since_reversal: np.ndarray
+    previous_direction: np.ndarray
 
     @property
     def passages(self) -> int:
@@ -80,5 +92,10 @@ def history(time: np.ndarray, speed: np.ndarray, rate: np.ndarray,
     last_fall = np.maximum.accumulate(np.where(approaching, idx, -1))
     left_zero = (last_zero >= 0) & (last_zero >= last_fall) & (speed != 0)
     since = np.where(last_zero >= 0, time - time[np.maximum(last_zero, 0)], np.inf)
+    band = float(np.quantile(np.abs(speed), REVERSAL_BAND_QUANTILE)) if n else 0.0
+    turns = reversals(time, speed, band)
     return History(rate=rate, receding=receding, approaching=approaching,
-                   zero_passage=passage, since_zero_s=since, left_zero=left_zero)
+                   zero_passage=passage, since_zero_s=since, left_zero=left_zero,
+                   position=position(time, speed), since_reversal_s=turns.since_s,
+                   distance_since_reversal=turns.distance,
+                   previous_direction=turns.previous)

@@ -14,10 +14,10 @@ together, the way one would argue from several specimens of one part:
    refined between grid neighbours on it.
 2. The effect enters when the pooled evidence passes select.py's three tests: p-value
    below alpha / m (Bonferroni over the step's grid points; a periodic frequency searched
-   on every wheel's residual counts every wheel's search), the summed held-out LR above
+   on every wheel's residual counts every wheel's search), the summed validation LR above
    the chi^2(sum dof) critical value at ``alpha_held``, and the pooled BIC gain
    sum_k (LR_k - dof_k ln n_k) - q ln(sum_k n_k) > 0 (q shared nonlinear parameters,
-   counted once). Among significant effects the largest summed held-out LR wins, with
+   counted once). Among significant effects the largest summed validation LR wins, with
    select.py's precedence between alternative explanations of one structure (cosine
    and Vuong's test on the wheels' pooled, variance-weighted rows). After each addition
    the shared parameters of every common effect are profiled again and effects that no
@@ -82,7 +82,7 @@ class JointSelection:
 
 
 def identify_joint(datas: list[IdentData], alpha: float = 1e-3, alpha_held: float = 1e-2,
-                   max_effects: int = 6, jumps: bool = True, jump_window: int | None = None
+                   max_effects: int = 10, jumps: bool = True, jump_window: int | None = None
                    ) -> JointSelection:
     """Identify sibling wheels declared identical together (module docstring).
 
@@ -132,9 +132,9 @@ class _Run:
     banned: list[str]
     catch_all: dict | None = None
 
-    def held_out(self) -> float:
-        """Return the held-out RSS summed over the wheels, each over its floor squared."""
-        return sum(fit.rss_held_out / data.noise_floor ** 2
+    def validation_rss(self) -> float:
+        """Return the validation RSS summed over the wheels, each over its floor squared."""
+        return sum(fit.rss_validation / data.noise_floor ** 2
                    for fit, data in zip(self.wheels.current, self.wheels.datas))
 
 
@@ -145,11 +145,11 @@ def _named_first(datas: list[IdentData], segments: list[Segments], alpha: float,
     select._named_first on the pooled evidence. A named set reaches the noise floor when
     every wheel's residual passes the structure and whiteness tests, or when the pooled
     catch-all (each wheel its own knots), scored on top of it, fails the entry tests at
-    the last step's level (p below alpha / m, summed held-out LR above the chi^2
+    the last step's level (p below alpha / m, summed validation LR above the chi^2
     critical value at ``alpha_held`` for its summed columns, pooled BIC gain positive).
     When the first named set does not, the selection runs again with each of its
     effects left out in turn; among the named sets that reach the floor the smallest
-    held-out RSS (summed over wheels, each over its floor squared) wins; when none does,
+    validation RSS (summed over wheels, each over its floor squared) wins; when none does,
     the catch-all is added to the set with the smallest and reported as unexplained
     speed dependence. ``JointSelection.alternatives`` records every run.
     """
@@ -157,9 +157,9 @@ def _named_first(datas: list[IdentData], segments: list[Segments], alpha: float,
     runs = [run]
     if run.catch_all is not None:
         runs += [_run(datas, segments, alpha, alpha_held, max_effects,
-                      frozenset({a['candidate'].name})) for a in run.added]
+                      fx.left_out(a['candidate'].name)) for a in run.added]
     floor = [r for r in runs if r.catch_all is None]
-    best = min(floor or runs, key=_Run.held_out)
+    best = min(floor or runs, key=_Run.validation_rss)
     if best.catch_all is not None:
         best.added.append(best.catch_all)
         best.wheels = best.wheels.with_effects(best.added)
@@ -170,7 +170,7 @@ def _named_first(datas: list[IdentData], segments: list[Segments], alpha: float,
     if len(runs) > 1:
         joint.alternatives = [{'left_out': r.banned,
                                'effects': [a['candidate'].name for a in r.added],
-                               'held_out_over_floor2': r.held_out(),
+                               'validation_over_floor2': r.validation_rss(),
                                'reaches_floor': r.catch_all is None} for r in runs]
         for sel in joint.selections.values():   # selection.json of every wheel
             sel.alternatives = joint.alternatives
@@ -196,7 +196,8 @@ def _run(datas: list[IdentData], segments: list[Segments], alpha: float,
         if len(run.added) >= max_effects:
             run.stop = f'max_effects = {max_effects} reached'
             break
-        chosen, record = joint_step(run.wheels, residuals, tried, alpha, alpha_held)
+        chosen, record = joint_step(run.wheels, residuals, tried, alpha, alpha_held,
+                                    frozenset(a['candidate'].name for a in run.added))
         record['banned'] = run.banned
         run.steps.append(record)
         if chosen is None:
@@ -231,7 +232,7 @@ def _refit_wheel(wheels: Wheels, k: int, added: list[dict], before: dict, alpha:
                  steps: list[dict], stop: str) -> Selection:
     """Return wheel k's Selection: the common effects, continuous parameters its own."""
     data, segments = wheels.datas[k], wheels.segments[k]
-    held = wheels.designs[k].held_out
+    held = wheels.designs[k].split
     mine = [(a['candidate'], dict(a['per'][k]['params'])) for a in added
             if a['per'][k] is not None]
     cols = [fx.evaluate(c.kind, p, data) for c, p in mine]
@@ -263,7 +264,8 @@ def _refit_wheel(wheels: Wheels, k: int, added: list[dict], before: dict, alpha:
         evidence = {key: v for key, v in pooled.items() if key != 'wheels'}
         evidence['pooled'] = True
         evidence['rmse_in_sample'] = design.fit().rmse_train
-        evidence['rmse_held_out'] = design.fit().rmse_held_out
+        evidence['rmse_validation'] = design.fit().rmse_validation
+        evidence['rmse_held_out'] = design.fit().rmse_test
         sel.effects.append(AddedEffect(wheel_name(cand.name, data.wheel), cand.kind, params,
                                        slice(start, design.X.shape[1]), evidence))
     sel.final_fit = design.fit()

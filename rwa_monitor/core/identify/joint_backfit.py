@@ -29,7 +29,7 @@ def reprofile_joint(wheels: Wheels, added: list[dict], passes: int = 3) -> Wheel
             scored = score_joint(others, cand)
             if scored is None:
                 continue
-            now = sum(likelihood_ratio(o.n_train, o.rss_train, c.rss_train)
+            now = sum(likelihood_ratio(o.n_train_eff, o.rss_train, c.rss_train)
                       for o, c, s in zip(others.current, wheels.current, a['per'])
                       if s is not None)
             if others.pooled_lr(scored['per']) <= now + 1e-9 * max(abs(now), 1.0):
@@ -48,7 +48,7 @@ def prune_joint(wheels: Wheels, added: list[dict], alpha_held: float
     """Remove common effects that no longer pass the pooled entry tests (select.prune).
 
     Each effect's pooled evidence against the model without it (its parameters fixed):
-    summed LR and held-out LR over the wheels that have it, BIC gain with its shared
+    summed LR and validation LR over the wheels that have it, BIC gain with its shared
     parameters paid once, at its step's level; the wheels' mean weight of the physical
     sign (effects.POSITIVE_WEIGHT). The weakest failing one goes first.
     """
@@ -66,10 +66,10 @@ def prune_joint(wheels: Wheels, added: list[dict], alpha_held: float
                 columns = wheels.columns_of(added, a, k)
                 weights.append(full.coef[columns])
                 own = drop_one(wheels.designs[k], full, columns)
-                lr, held, dof = lr + own['lr'], held + own['lr_held_out'], dof + own['dof']
-                gain += own['lr'] - own['dof'] * float(np.log(full.n_train))
-                n_total += full.n_train
-            entry = {'lr': lr, 'dof': dof, 'lr_held_out': held,
+                lr, held, dof = lr + own['lr'], held + own['lr_validation'], dof + own['dof']
+                gain += own['lr'] - own['dof'] * float(np.log(full.n_train_eff))
+                n_total += full.n_train_eff
+            entry = {'lr': lr, 'dof': dof, 'lr_validation': held,
                      'p_value': float(stats.chi2.sf(lr, dof)) if dof else 1.0,
                      'bic_gain': gain - a['candidate'].free * float(np.log(max(n_total, 1)))}
             kind = a['candidate'].kind

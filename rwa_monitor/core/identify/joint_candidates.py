@@ -66,8 +66,8 @@ def joint_candidates(datas: list[IdentData], residuals: list[np.ndarray]
                                       sum(c.tests for c, good in zip(cands, ok) if good),
                                       1 if len(freqs) > 1 else 0))
         else:
-            grid = [[c.grid[g] if good else None for c, good in zip(cands, ok)]
-                    for g in range(len(first.grid))]
+            grid = [[c.grid[g] if good and g < len(c.grid) else None
+                     for c, good in zip(cands, ok)] for g in range(len(first.grid))]
             out.append(JointCandidate(name, kind, grid, first.tests, free_parameters(first)))
     backs = [fx.fallback_candidate(d) for d in datas]
     fallback = JointCandidate(fx.FALLBACK, 'smooth_speed', [[b.grid[0] for b in backs]],

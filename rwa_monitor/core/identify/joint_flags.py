@@ -55,7 +55,7 @@ def wheel_flags(selections: dict[str, Selection], effects: list[str], wheels: Wh
         tried = {e.name for e in sel.effects}
         resid = sel.design.residual(sel.final_fit)
         chosen, record = selection_step(sel.design, sel.final_fit, data, resid, tried,
-                                        alpha / count, alpha_held)
+                                        alpha / count, alpha_held, present=frozenset(tried))
         if chosen is not None:
             extra[data.wheel] = {'effect': canonical_name(chosen['candidate'].name,
                                                           data.wheel),

@@ -4,7 +4,7 @@ Pooled evidence of a candidate: the sum of the wheels' likelihood ratios,
 LR = sum_k n_k log(RSS_0,k / RSS_1,k), chi^2 with sum_k dof_k degrees of freedom when
 the effect is absent from every wheel (independent noises, each wheel its own noise
 variance); grid points are profiled on this pooled LR and the continuous parameter
-refined between grid neighbours on it. The held-out LR and the BIC gain are summed the
+refined between grid neighbours on it. The validation LR and the BIC gain are summed the
 same way, the shared nonlinear parameters paid once (select.py's three tests).
 """
 
@@ -18,7 +18,7 @@ from scipy import optimize, stats
 from rwa_monitor.core.identify import effects as fx
 from rwa_monitor.core.identify.baseline import Segments
 from rwa_monitor.core.identify.data import IdentData
-from rwa_monitor.core.identify.fitting import Design, held_out_mask
+from rwa_monitor.core.identify.fitting import Design, split_rows
 from rwa_monitor.core.identify.joint_candidates import joint_candidates, JointCandidate
 from rwa_monitor.core.identify.scoring import likelihood_ratio, NO_ADMISSIBLE_FIT
 from rwa_monitor.core.identify.scoring import significant
@@ -31,7 +31,7 @@ class Wheels:
     def __init__(self, datas: list[IdentData], segments: list[Segments]) -> None:
         self.datas = datas
         self.segments = segments
-        self.designs = [Design(d.friction, s.columns(d.speed), held_out_mask(len(d)))
+        self.designs = [Design(d.friction, s.columns(d.speed), split_rows(len(d), d.stride))
                         for d, s in zip(datas, segments)]
         self.base = [dz.fit() for dz in self.designs]
         self.current = list(self.base)
@@ -43,7 +43,7 @@ class Wheels:
         for k, (data, seg) in enumerate(zip(self.datas, self.segments)):
             cols = [seg.columns(data.speed)] + [a['per'][k]['columns'] for a in added
                                                 if a is not skip and a['per'][k] is not None]
-            design = Design(data.friction, np.hstack(cols), held_out_mask(len(data)))
+            design = Design(data.friction, np.hstack(cols), split_rows(len(data), data.stride))
             other.designs.append(design)
             other.current.append(design.fit())
         return other
@@ -80,7 +80,7 @@ class Wheels:
 
     def pooled_lr(self, per: list[dict | None]) -> float:
         """Return the summed training likelihood ratio of a candidate's fits."""
-        return sum(likelihood_ratio(s['fit'].n_train, cur.rss_train, s['fit'].rss_train)
+        return sum(likelihood_ratio(s['fit'].n_train_eff, cur.rss_train, s['fit'].rss_train)
                    for s, cur in zip(per, self.current) if s is not None)
 
 
@@ -102,19 +102,19 @@ def score_joint(wheels: Wheels, cand: JointCandidate) -> dict | None:
             continue
         fit = s['fit']
         k = max(int(fit.rank - cur.rank), 0)
-        lr_k = likelihood_ratio(fit.n_train, cur.rss_train, fit.rss_train)
-        held_k = likelihood_ratio(fit.n_held_out, cur.rss_held_out, fit.rss_held_out)
-        lr, lr_held, dof, n_total = lr + lr_k, lr_held + held_k, dof + k, n_total + fit.n_train
-        gain += lr_k - k * float(np.log(fit.n_train))
-        own[data.wheel] = {'lr': lr_k, 'dof': k, 'lr_held_out': held_k,
-                           'rmse_held_out': fit.rmse_held_out}
+        lr_k = likelihood_ratio(fit.n_train_eff, cur.rss_train, fit.rss_train)
+        held_k = likelihood_ratio(fit.n_validation_eff, cur.rss_validation, fit.rss_validation)
+        lr, lr_held, dof, n_total = lr + lr_k, lr_held + held_k, dof + k, n_total + fit.n_train_eff
+        gain += lr_k - k * float(np.log(fit.n_train_eff))
+        own[data.wheel] = {'lr': lr_k, 'dof': k, 'lr_validation': held_k,
+                           'rmse_validation': fit.rmse_validation}
     if dof <= 0:
         return None
     evidence = {'lr': lr, 'dof': dof, 'p_value': float(stats.chi2.sf(lr, dof)),
-                'lr_held_out': lr_held, 'parameters': dof + cand.free,
+                'lr_validation': lr_held, 'parameters': dof + cand.free,
                 'bic_gain': gain - cand.free * float(np.log(n_total)),
-                'rmse_held_out': float(np.sqrt(np.mean(
-                    [v['rmse_held_out'] ** 2 for v in own.values()]))),
+                'rmse_validation': float(np.sqrt(np.mean(
+                    [v['rmse_validation'] ** 2 for v in own.values()]))),
                 'wheels': own}
     return {'candidate': cand, 'per': best, 'evidence': evidence}
 
@@ -169,7 +169,7 @@ def _same(wheels: Wheels, a: dict, b: dict) -> bool:
 
 def preferred_joint(wheels: Wheels, winners: list[dict], level: float, record: dict) -> dict:
     """Return the significant effect to add (select._preferred on the pooled rows)."""
-    best = max(winners, key=lambda s: s['evidence']['lr_held_out'])
+    best = max(winners, key=lambda s: s['evidence']['lr_validation'])
     critical = float(stats.norm.isf(level / 2))
     ties = [best]
     ca = _weighted_rows(wheels, best, 'contribution')
@@ -193,14 +193,15 @@ def preferred_joint(wheels: Wheels, winners: list[dict], level: float, record: d
 
 
 def joint_step(wheels: Wheels, residuals: list[np.ndarray], tried: set[str], alpha: float,
-               alpha_held: float) -> tuple[dict | None, dict]:
+               alpha_held: float, present: frozenset[str] = frozenset()
+               ) -> tuple[dict | None, dict]:
     """Score every untried joint candidate; return the named effect to add (or None).
 
     select.selection_step on the pooled evidence. The catch-all is scored and recorded;
     when it alone is significant it is left in ``record['catch_all']`` (joint.py decides).
     """
     cands, fallback = joint_candidates(wheels.datas, residuals)
-    cands = [c for c in cands if c.name not in tried]
+    cands = [c for c in cands if fx.offered(c.name, tried, present)]
     m = sum(c.tests for c in cands if c.skipped is None) + fallback.tests
     level = alpha / m
     record: dict = {'level': level, 'tests': m, 'candidates': [], 'pooled': True}

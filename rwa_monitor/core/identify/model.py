@@ -25,8 +25,9 @@ import numpy as np
 from rwa_monitor.core.identify.effects import regressor_columns
 from rwa_monitor.exceptions import ConfigError
 
-KINDS = ('stribeck', 'stribeck_hysteresis', 'presliding', 'asymmetric_coulomb', 'drag',
-         'aux', 'drift', 'periodic', 'smooth_speed')
+KINDS = ('stribeck', 'stribeck_hysteresis', 'presliding', 'presliding_state',
+         'frictional_lag', 'stick', 'asymmetric_coulomb', 'drag', 'inertia', 'gravity_load',
+         'load_dry', 'gear_ripple', 'aux', 'drift', 'periodic', 'smooth_speed')
 
 
 def plain(value: Any) -> Any:

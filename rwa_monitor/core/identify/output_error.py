@@ -18,8 +18,10 @@ the same rule.
 Integration: classical Runge-Kutta (order 4) on the sample times, u held over each
 interval (the zero-order hold of a torque command), aux channels and history channels
 (hysteresis) taken at the interval's start; time-dependent effects (drift, periodic) are
-evaluated at the stage times. Each segment's coefficients are those of the baseline
-segment (friction jumps) the sample belongs to.
+evaluated at the stage times. Effects with a state or a position (effects_motion.py:
+lag, stop, pre-sliding state, position) are simulated along the measured speed and
+held over each interval, as the history channel is. Each segment's coefficients are
+those of the baseline segment (friction jumps) the sample belongs to.
 """
 
 from __future__ import annotations
@@ -27,6 +29,7 @@ from __future__ import annotations
 import numpy as np
 
 from rwa_monitor.core.identify import effects as fx
+from rwa_monitor.core.identify import effects_motion as em
 
 
 def _friction(selection, coef: np.ndarray, effects: list, w: np.ndarray, t: np.ndarray,
@@ -40,9 +43,21 @@ def _friction(selection, coef: np.ndarray, effects: list, w: np.ndarray, t: np.n
     if data.past is not None:
         aux[fx.LEFT_ZERO] = data.past.left_zero[rows].astype(float)
     for eff in effects:
+        if eff.kind in em.KINDS:
+            f = f + _along_record(selection, eff)[rows] @ coef[eff.columns]
+            continue
         cols = [col(w, t, aux) for _, col in fx.regressor_columns(eff.kind, eff.params)]
         f = f + np.column_stack(cols) @ coef[eff.columns]
     return f
+
+
+def _along_record(selection, eff) -> np.ndarray:
+    """Return an effect's columns simulated along the measured record (cached)."""
+    cache = selection.__dict__.setdefault('_state_columns', {})
+    key = (eff.name, repr(sorted(eff.params.items())))
+    if key not in cache:
+        cache[key] = fx.evaluate(eff.kind, eff.params, selection.data)
+    return cache[key]
 
 
 def integrate_speed(selection, inertia: float, model: str, torque: np.ndarray | None = None,

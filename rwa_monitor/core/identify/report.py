@@ -53,11 +53,41 @@ def effect_parameters(eff, coef: np.ndarray) -> dict:
     elif eff.kind == 'periodic':
         params['amplitude_nm'] = float(np.hypot(weights[0], weights[1]))
         params['phase_rad'] = float(np.arctan2(-weights[1], weights[0]))
+    elif eff.kind in MOTION_WEIGHTS:
+        params.update(_motion_parameters(eff.kind, eff.params, weights))
     else:
         params['values_nm'] = [float(w) for w in weights]
     params['weights'] = dict(zip(column_names(eff.name, eff.kind, eff.params),
                                  [float(w) for w in weights]))
     return params
+
+
+MOTION_WEIGHTS = ('frictional_lag', 'stick', 'presliding_state', 'gravity_load', 'load_dry',
+                  'gear_ripple', 'inertia')
+
+
+def _motion_parameters(kind: str, params: dict, weights: np.ndarray) -> dict:
+    """Return the named weights of an effect with a state or a position (effects_motion)."""
+    w = [float(v) for v in weights]
+    if kind == 'frictional_lag':
+        return {'coulomb_lagged_nm': w[0]}
+    if kind == 'presliding_state':
+        return {'coulomb_elastic_nm': w[0]}
+    if kind == 'inertia':
+        return {'inertia_kg_m2': w[0]}
+    if kind == 'stick':
+        return {'dry_released_nm': w[0], 'held_level_nm': w[1], 'breakaway_nm': w[2]}
+    if kind in ('gravity_load', 'load_dry'):
+        # a sin q + b cos q = A sin(q + phi)
+        key = 'amplitude_nm' if kind == 'gravity_load' else 'dry_amplitude_nm'
+        return {key: float(np.hypot(w[0], w[1])), 'phase_rad': float(np.arctan2(w[1], w[0]))}
+    out = {'period_rad': 1.0 / float(params['cycles_per_rad'])}
+    pairs = {'torque': w[:2], 'dry': w[-2:]}
+    for part in ('torque', 'dry'):
+        if params['component'] in (part, 'both'):
+            key = 'amplitude_nm' if part == 'torque' else 'dry_amplitude_nm'
+            out[key] = float(np.hypot(*pairs[part]))
+    return out
 
 
 def report(selection) -> dict:
@@ -80,8 +110,8 @@ def report(selection) -> dict:
         effects.append({'name': eff.name, 'parameters': params, 'evidence': evidence})
     out = {'baseline': {'model': 'coulomb+viscous', 'parameters': parameters},
            'noise_floor': float(selection.data.noise_floor),
-           'rmse_before': {'in_sample': base.rmse_train, 'held_out': base.rmse_held_out},
-           'rmse_after': {'in_sample': final.rmse_train, 'held_out': final.rmse_held_out},
+           'rmse_before': {'in_sample': base.rmse_train, 'held_out': base.rmse_test},
+           'rmse_after': {'in_sample': final.rmse_train, 'held_out': final.rmse_test},
            'effects': effects}
     counts = selection.data.counts
     dropped = {key: int(counts.get(f'{key}_rows', 0)) for key in DROPPED}
@@ -162,8 +192,8 @@ def markdown(selection, rep: dict, title: str) -> str:
             shown = {k: v for k, v in e['parameters'].items()
                      if k != 'weights' and not isinstance(v, list)}
             lines.append(f'- `{e["name"]}`: {shown}; LR {ev["lr"]:.1f} on {ev["dof"]} dof '
-                         f'(p = {ev["p_value"]:.2g}, level {ev["level"]:.2g}); held-out '
-                         f'RMSE {ev["rmse_held_out"]:.4g}')
+                         f'(p = {ev["p_value"]:.2g}, level {ev["level"]:.2g}); validation '
+                         f'RMSE {ev["rmse_validation"]:.4g}')
     else:
         lines += ['', 'No effect added: the baseline model explains the data.']
     ident = identifiability(selection)

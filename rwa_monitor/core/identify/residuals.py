@@ -14,6 +14,17 @@ zero-mean noise, independent of everything":
   on the direction of approach (hysteresis, lag) shows here and nowhere else.
 - ``since_zero``: the residual binned by the time since the last zero passage (a memory
   of the last reversal: breakaway, warm-up of the lubricant film).
+- ``acceleration``: binned by dw/dt (an inertia between the torque measurement and the
+  contact, a load that depends on the acceleration); not when friction was derived from
+  dw/dt (the residual then carries dw/dt's own noise).
+- ``position``: binned by the integral of the speed (gravity load, gear ripple), when
+  the joint moves back and forth within a turn (candidates_motion.reciprocating).
+- ``since_reversal``: binned by the distance travelled since the direction last changed
+  (pre-sliding builds up over a displacement, not a time).
+- ``sign_history``: the mean residual of each (direction before the last reversal,
+  direction now) group over its standard error, squares summed, chi^2 with one degree
+  of freedom per group (a friction that remembers the path: stops that continue differ
+  from stops that reverse).
 - ``signal:<column>``: the residual binned by every other signal of the file (other
   wheels' channels); reported, not used to stop (through the attitude loop they
   correlate with this wheel's own history).
@@ -23,6 +34,9 @@ zero-mean noise, independent of everything":
 - ``variance_vs_speed``: Levene's test (median-centred) across speed bins; reported, not
   used to stop the selection (a change of variance does not change the mean model).
 
+The tests are decisions of the selection (when to stop, whether a named set reaches the
+floor), so they use the rows a decision may look at: never the held-out test rows
+(fitting.held_out_mask), whose residual is only reported.
 When friction was differentiated from speed the noise is correlated over ``stride``
 samples, so every test uses every stride-th residual (binned means of correlated
 residuals would have a standard error unlike sd / sqrt(count)).
@@ -37,8 +51,15 @@ from scipy import stats
 
 from rwa_monitor.core.identify.data import IdentData
 from rwa_monitor.core.identify.effects import uniform_resample
+from rwa_monitor.core.identify.fitting import held_out_mask
 
 STOP_TESTS_EXCLUDED = ('variance_vs_speed',)
+# Fewest independent residuals (every stride-th, test rows left out) for "the residual
+# passes" to stop the selection: with fewer, two bins of a dozen samples each cannot see
+# the curvature an unmodelled drag leaves (a coast of 566 revolutions differentiated over
+# 41 samples keeps 9 independent residuals), and the selection goes on with its entry
+# tests alone.
+MIN_TESTED = 60
 REPORT_ONLY_PREFIX = 'signal:'
 MIN_PASSAGES = 2
 
@@ -93,6 +114,32 @@ def approach_test(speed: np.ndarray, receding: np.ndarray, approaching: np.ndarr
             'p_value': float(stats.chi2.sf(chi2, dof)) if dof else 1.0}
 
 
+def _motion_tests(data: IdentData, residual: np.ndarray, by, out: dict, k: int,
+                  bins: int) -> None:
+    """Add the acceleration, position, since-reversal and sign-history diagnostics."""
+    past = data.past
+    if not data.derived and np.ptp(past.rate) > 0:
+        out['binned']['acceleration'] = by(past.rate)
+    span = float(np.ptp(past.position))
+    travel = float(np.sum(np.abs(np.diff(past.position))))
+    if 0 < span < 2 * np.pi and travel >= 4.0 * span:
+        out['binned']['position'] = by(past.position)
+    finite = np.isfinite(past.distance_since_reversal)
+    if np.sum(finite[::k]) >= 2 * bins:
+        out['binned']['since_reversal'] = by(past.distance_since_reversal, finite)
+    groups = []
+    sign = np.sign(data.speed)
+    for before in (-1.0, 1.0):
+        for now in (-1.0, 1.0):
+            r = residual[::k][((past.previous_direction == before) & (sign == now))[::k]]
+            if len(r) >= 10:
+                groups.append(float(np.mean(r) / (np.std(r, ddof=1) / np.sqrt(len(r)))))
+    if len(groups) >= 2:
+        chi2 = float(np.sum(np.square(groups)))
+        out['tests']['sign_history'] = {'statistic': chi2, 'dof': len(groups),
+                                        'p_value': float(stats.chi2.sf(chi2, len(groups)))}
+
+
 def autocorrelation(residual: np.ndarray, max_lag: int) -> np.ndarray:
     """Return the sample autocorrelation at lags 1..max_lag."""
     r = residual - np.mean(residual)
@@ -127,7 +174,34 @@ def fisher_g(time: np.ndarray, residual: np.ndarray) -> dict:
 
 def diagnose(data: IdentData, residual: np.ndarray, alpha: float = 1e-3,
              bins: int = 20) -> dict:
-    """Return every residual diagnostic, the tests, and whether the residual passes."""
+    """Return every residual diagnostic, the tests, and whether the residual passes.
+
+    Computed on the rows a decision may use (all but the held-out test rows).
+    """
+    rows = ~held_out_mask(len(data))
+    residual = np.asarray(residual, dtype=float)
+    # The spectrum test keeps the time axis: the test rows are set to zero, not cut out
+    # (cutting every third block out makes the sampling periodic, a peak at the block
+    # rate; white noise times a fixed gate keeps a flat expected periodogram).
+    gated = (data.time[::data.stride], np.where(rows, residual, 0.0)[::data.stride])
+    return _diagnose(_restricted(data, rows), residual[rows], alpha, bins, gated)
+
+
+def _restricted(data: IdentData, rows: np.ndarray) -> IdentData:
+    """Return the samples of ``data`` on ``rows`` (history features carried over)."""
+    past = data.past
+    if past is not None:
+        past = type(past)(**{f: getattr(past, f)[rows] for f in past.__dataclass_fields__})
+    return IdentData(wheel=data.wheel, time=data.time[rows], speed=data.speed[rows],
+                     friction=data.friction[rows], noise_std=data.noise_std[rows],
+                     aux={c: v[rows] for c, v in data.aux.items()}, derived=data.derived,
+                     stride=data.stride,
+                     signals={c: v[rows] for c, v in data.signals.items()}, past=past,
+                     half_width=data.half_width)
+
+
+def _diagnose(data: IdentData, residual: np.ndarray, alpha: float, bins: int,
+              gated: tuple[np.ndarray, np.ndarray]) -> dict:
     k = max(1, data.stride)
     n = len(residual[::k])
     bins = int(max(2, min(bins, n // 30)))
@@ -152,6 +226,7 @@ def diagnose(data: IdentData, residual: np.ndarray, alpha: float = 1e-3,
         finite = np.isfinite(past.since_zero_s)
         if past.passages >= MIN_PASSAGES and np.sum(finite[::k]) >= 2 * bins:
             out['binned']['since_zero'] = by(past.since_zero_s, finite)
+        _motion_tests(data, residual, by, out, k, bins)
     for column, values in data.signals.items():
         if np.std(values) > 1e-9 * (1.0 + abs(np.mean(values))):
             out['binned'][REPORT_ONLY_PREFIX + column] = by(values)
@@ -170,7 +245,7 @@ def diagnose(data: IdentData, residual: np.ndarray, alpha: float = 1e-3,
     out['acf'] = lb.pop('acf')
     out['acf_stride'] = data.stride
     out['tests']['whiteness'] = lb
-    spec = fisher_g(data.time[::data.stride], thinned)
+    spec = fisher_g(*gated)
     out['spectrum'] = {'frequency_hz': spec.pop('frequency_hz'), 'power': spec.pop('power')}
     out['tests']['spectrum'] = spec
     labels = _bins(data.speed, bins)
@@ -190,6 +265,7 @@ def diagnose(data: IdentData, residual: np.ndarray, alpha: float = 1e-3,
     level = alpha / max(len(stop), 1)
     out['level'] = level
     out['failing'] = [k for k in stop if out['tests'][k]['p_value'] <= level]
-    out['passes'] = not out['failing']
+    out['tested_samples'] = n
+    out['passes'] = not out['failing'] and n >= MIN_TESTED
     out['rmse'] = float(np.sqrt(np.mean(residual ** 2)))
     return out

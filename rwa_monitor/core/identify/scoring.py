@@ -4,7 +4,7 @@ A candidate is fitted on the training rows beside the current model; its nonline
 parameters are profiled over their grid (best training fit) and the continuous one
 refined between grid neighbours. Its evidence is the likelihood ratio with unknown noise
 variance, LR = n_train log(RSS_0 / RSS_1), chi^2 with k degrees of freedom (k = rank
-added) under "the effect is absent" (Wilks); the held-out LR and the BIC gain are the
+added) under "the effect is absent" (Wilks); the validation LR and the BIC gain are the
 other two entry tests (:func:`significant`, select.py).
 """
 
@@ -95,35 +95,35 @@ def score_candidate(design: Design, current: Fit, cand: fx.Candidate, data: Iden
     dof = fit.rank - current.rank
     if dof <= 0:
         return None
-    lr = likelihood_ratio(fit.n_train, current.rss_train, fit.rss_train)
-    lr_held = likelihood_ratio(fit.n_held_out, current.rss_held_out, fit.rss_held_out)
+    lr = likelihood_ratio(fit.n_train_eff, current.rss_train, fit.rss_train)
+    lr_held = likelihood_ratio(fit.n_validation_eff, current.rss_validation, fit.rss_validation)
     free = int(dof) + free_parameters(cand)
     return {'candidate': cand, 'params': params, 'fit': fit, 'columns': cols,
             'evidence': {'lr': lr, 'dof': int(dof), 'p_value': float(stats.chi2.sf(lr, dof)),
-                         'lr_held_out': lr_held,
+                         'lr_validation': lr_held,
                          'parameters': free,
-                         'bic_gain': lr - free * float(np.log(fit.n_train)),
+                         'bic_gain': lr - free * float(np.log(fit.n_train_eff)),
                          'rmse_in_sample': fit.rmse_train,
-                         'rmse_held_out': fit.rmse_held_out}}
+                         'rmse_validation': fit.rmse_validation}}
 
 
 def drop_one(design: Design, full: Fit, columns: slice) -> dict:
     """Return the evidence for columns in a fit: the LR of leaving them out."""
     keep = np.ones(design.X.shape[1], dtype=bool)
     keep[columns] = False
-    without = Design(design.y, design.X[:, keep], design.held_out).fit()
+    without = Design(design.y, design.X[:, keep], design.split).fit()
     dof = max(int(full.rank - without.rank), 0)
-    lr = likelihood_ratio(full.n_train, without.rss_train, full.rss_train)
+    lr = likelihood_ratio(full.n_train_eff, without.rss_train, full.rss_train)
     return {'lr': lr, 'dof': dof,
             'p_value': float(stats.chi2.sf(lr, dof)) if dof else 1.0,
-            'lr_held_out': likelihood_ratio(full.n_held_out, without.rss_held_out,
-                                            full.rss_held_out)}
+            'lr_validation': likelihood_ratio(full.n_validation_eff,
+                                              without.rss_validation, full.rss_validation)}
 
 
 def significant(evidence: dict, level: float, alpha_held: float) -> bool:
-    """Return whether evidence passes the three tests (p, held-out LR, BIC gain)."""
+    """Return whether evidence passes the three tests (p, validation LR, BIC gain)."""
     evidence['level'] = level
-    evidence['held_out_threshold'] = float(stats.chi2.isf(alpha_held, evidence['dof']))
+    evidence['validation_threshold'] = float(stats.chi2.isf(alpha_held, evidence['dof']))
     return bool(evidence['p_value'] < level
-                and evidence['lr_held_out'] > evidence['held_out_threshold']
+                and evidence['lr_validation'] > evidence['validation_threshold']
                 and evidence['bic_gain'] > 0)

@@ -1,4 +1,4 @@
-"""Forward selection of friction effects, validated on held-out data.
+"""Forward selection of friction effects, validated on rows it was not fitted on.
 
 At each step every untried candidate (effects.py) is fitted on the training rows beside
 the current model; its nonlinear parameters are profiled over their grid (best training
@@ -9,14 +9,14 @@ LR = n_train log(RSS_0 / RSS_1), chi^2 with k degrees of freedom (k = rank added
 1. its p-value is below alpha / m, where m counts every grid point and searched frequency
    of every candidate of the step (Bonferroni: the chance of adding any effect to data
    that have none is at most alpha per step), and
-2. it also improves the held-out rows: n_held log(RSS_0,held / RSS_1,held) above the
+2. it also improves the validation rows: n_val log(RSS_0,val / RSS_1,val) above the
    chi^2(k) critical value at level ``alpha_held`` (an effect that only fits the noise of
-   the training rows makes the held-out fit worse, not better), and
+   the training rows makes the validation fit worse, not better), and
 3. it pays for its parameters: the BIC gain LR - (k + q) ln(n_train) is positive, q the
    number of nonlinear parameters searched on its grid (Schwarz's criterion; the many
    weights of the fallback need a large gain).
 
-Among the significant named candidates the one with the smallest held-out RSS is added
+Among the significant named candidates the one with the smallest validation RSS is added
 (ties between alternative explanations: ties.py). After each addition every effect's
 nonlinear parameters are profiled again beside all the others and effects that no
 longer pass the three tests are removed (backfit.py). Physics first: the loop runs on
@@ -38,7 +38,7 @@ from rwa_monitor.core.identify import effects as fx
 from rwa_monitor.core.identify.backfit import prune, reprofile
 from rwa_monitor.core.identify.baseline import check_identifiable, find_jumps, Segments
 from rwa_monitor.core.identify.data import IdentData
-from rwa_monitor.core.identify.fitting import Design, Fit, held_out_mask
+from rwa_monitor.core.identify.fitting import Design, Fit, split_rows
 from rwa_monitor.core.identify.residuals import diagnose
 from rwa_monitor.core.identify.scoring import AddedEffect, NO_ADMISSIBLE_FIT
 from rwa_monitor.core.identify.scoring import score_candidate, significant
@@ -79,7 +79,7 @@ class Selection:
 
 
 def identify(data: IdentData, alpha: float = 1e-3, alpha_held: float = 1e-2,
-             max_effects: int = 6, jumps: bool = True, jump_window: int | None = None
+             max_effects: int = 10, jumps: bool = True, jump_window: int | None = None
              ) -> Selection:
     """Run the loop: baseline fit with jumps, diagnostics, forward selection.
 
@@ -95,7 +95,7 @@ def identify(data: IdentData, alpha: float = 1e-3, alpha_held: float = 1e-2,
     alpha : float
         Family-wise level of the effect and jump tests, in (0, 0.5].
     alpha_held : float
-        Level of the held-out confirmation of an added effect, in (0, 0.5].
+        Level of the validation confirmation of an added effect, in (0, 0.5].
     max_effects : int
         Most effects added to model (1).
     jumps : bool
@@ -148,26 +148,27 @@ def _named_first(data: IdentData, segments: Segments, alpha: float, alpha_held: 
     The forward selection runs on the named effects only (:func:`_select`). A named set
     *reaches the noise floor* when its residual passes the structure and whiteness tests
     (residuals.py), or when the catch-all, scored on top of it, fails the entry tests of
-    :func:`significant` at the last step's level (p below alpha / m, held-out LR above
+    :func:`significant` at the last step's level (p below alpha / m, validation LR above
     the chi^2 critical value at ``alpha_held`` for its columns, BIC gain positive): then
     it cannot show structure beyond noise that the named effects leave. Forward selection
     is greedy (an early step can give a structure to the wrong named effect: a pre-sliding
     band took the Stribeck curve while drag and temperature still dominated the
     residual), so when the first named set does not reach the floor the selection runs
     again with each of its effects left out in turn. Among the named sets that reach the
-    floor the smallest held-out RSS wins; when none does, the catch-all is added to the
-    set with the smallest held-out RSS and reported as unexplained speed dependence.
+    floor the smallest validation RSS wins; when none does, the catch-all is added to the
+    set with the smallest validation RSS and reported as unexplained speed dependence.
     ``Selection.alternatives`` records every run.
     """
     sel = _select(data, segments, alpha, alpha_held, max_effects, frozenset())
     if sel.catch_all is None:
         return sel
     runs = [sel] + [_select(data, segments, alpha, alpha_held, max_effects,
-                            frozenset({eff.name})) for eff in sel.effects]
+                            fx.left_out(eff.name)) for eff in sel.effects]
     floor = [r for r in runs if r.catch_all is None]
-    best = min(floor or runs, key=lambda r: r.final_fit.rss_held_out)
+    best = min(floor or runs, key=lambda r: r.final_fit.rss_validation)
     best.alternatives = [{'left_out': r.banned, 'effects': [e.name for e in r.effects],
-                          'rmse_held_out': r.final_fit.rmse_held_out,
+                          'rmse_validation': r.final_fit.rmse_validation,
+                          'rmse_held_out': r.final_fit.rmse_test,
                           'reaches_floor': r.catch_all is None} for r in runs]
     if best.catch_all is not None:
         _admit_catch_all(best, alpha)
@@ -200,8 +201,8 @@ def _select(data: IdentData, segments: Segments, alpha: float, alpha_held: float
     the loop stops because no named effect is significant while the catch-all is,
     ``Selection.catch_all`` holds the catch-all's scored fit (not added).
     """
-    held = held_out_mask(len(data))
-    design = Design(data.friction, segments.columns(data.speed), held)
+    design = Design(data.friction, segments.columns(data.speed),
+                    split_rows(len(data), data.stride))
     base_fit = design.fit()
     sel = Selection(data=data, segments=segments, design=design, baseline_fit=base_fit,
                     final_fit=base_fit, baseline_names=segments.names())
@@ -219,7 +220,8 @@ def _select(data: IdentData, segments: Segments, alpha: float, alpha_held: float
             sel.stop_reason = f'max_effects = {max_effects} reached'
             break
         chosen, record = selection_step(design, current, data, residual, tried, alpha,
-                                        alpha_held, catch_all=False)
+                                        alpha_held, catch_all=False,
+                                        present=frozenset(e.name for e in sel.effects))
         sel.steps.append(record)
         if chosen is None:
             sel.stop_reason = 'no candidate effect is significant'
@@ -242,25 +244,30 @@ def _select(data: IdentData, segments: Segments, alpha: float, alpha_held: float
         evidence['residual_failing_after'] = list(diag['failing'])
     sel.final_fit = current
     sel.diagnostics_after = diag
+    for eff, name in zip(sel.effects, fx.renumbered([e.name for e in sel.effects])):
+        eff.name = name
     return sel
 
 
 def selection_step(design: Design, current: Fit, data: IdentData, residual: np.ndarray,
                    tried: set[str], alpha: float, alpha_held: float,
-                   catch_all: bool = True) -> tuple[dict | None, dict]:
+                   catch_all: bool = True, present: frozenset[str] = frozenset()
+                   ) -> tuple[dict | None, dict]:
     """Score every untried candidate on one wheel; return the one to add (or None).
 
     The catch-all is scored and recorded at every step and chosen only when no named
     effect is significant; with ``catch_all`` False it is not chosen: when it alone is
     significant it is left in ``record['catch_all']`` (the caller decides, _named_first).
     """
-    cands = [c for c in fx.named_candidates(data, residual) if c.name not in tried]
+    cands = [c for c in fx.named_candidates(data, residual)
+             if fx.offered(c.name, tried, present)]
     fallback = fx.fallback_candidate(data)
     m = sum(c.tests for c in cands if c.skipped is None) + fallback.tests
     level = alpha / m
     record: dict = {'level': level, 'tests': m, 'candidates': [],
                     'rmse_in_sample_before': current.rmse_train,
-                    'rmse_held_out_before': current.rmse_held_out}
+                    'rmse_validation_before': current.rmse_validation,
+                    'rmse_held_out_before': current.rmse_test}
     scored = []
     for cand in cands:
         if cand.skipped is not None:

@@ -22,8 +22,12 @@ SAME_STRUCTURE = 0.9
 # (Vuong's test), the one with the least structure is taken: the pre-sliding band only
 # reshapes the Coulomb term at zero speed, Stribeck adds the lubricant film's speed
 # scale, hysteresis a memory on top of it.
-PRECEDENCE = ('presliding', 'stribeck', 'stribeck_hysteresis', 'asymmetric_coulomb', 'drag',
-              'aux', 'drift', 'periodic')
+PRECEDENCE = ('presliding', 'stribeck', 'presliding_state', 'frictional_lag',
+              'stribeck_hysteresis', 'stick', 'asymmetric_coulomb', 'drag', 'inertia',
+              'gravity_load', 'load_dry', 'aux', 'gear_ripple', 'drift', 'periodic')
+# Effects with a state or a position (effects_motion.py) sit after the static speed
+# effects they refine, and the position effects before the time effects: on a record
+# that repeats one path, a structure tied to the path is periodic in time too.
 
 
 def _training_residual(design: Design, scored: dict) -> np.ndarray:
@@ -62,14 +66,14 @@ def preferred(design: Design, data: IdentData, winners: list[dict], level: float
               record: dict) -> dict:
     """Return the significant named effect to add.
 
-    The smallest held-out RSS wins unless another candidate explains the same structure
+    The smallest validation RSS wins unless another candidate explains the same structure
     (:func:`same_structure` above SAME_STRUCTURE), is indistinguishable from it and
     comes earlier in PRECEDENCE: then that one (identical wheels must not tell different
     stories because of noise). Indistinguishable: Vuong's two-sided test at the step's
     Bonferroni level ``level`` (a preference is claimed only with the evidence a finding
     needs).
     """
-    best = min(winners, key=lambda s: s['fit'].rss_held_out)
+    best = min(winners, key=lambda s: s['fit'].rss_validation)
     critical = float(stats.norm.isf(level / 2))
     ties = []
     for s in winners:
