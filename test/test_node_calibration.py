@@ -28,7 +28,10 @@ CONFIG = {'window': 200, 'false_alarm_rate': 1.0e-5}
 
 def _files(tmp_path):
     """Return (calibration file, faulted telemetry file, its telemetry)."""
-    nominal, _ = simulate_friction_with_truth(wheels=['rw1', 'rw2'], n_samples=3000,
+    # 10 minutes of commissioning: with 5 (3000 samples) the nominal is not determined to
+    # a test window's precision at the faulted record's speeds of rw2 (docs/calibration.md,
+    # "Where the nominal is tested"), which would then be left untested.
+    nominal, _ = simulate_friction_with_truth(wheels=['rw1', 'rw2'], n_samples=6000,
                                               rate_hz=10.0, seed=5)
     document, _, arrays = calibrated.commission([nominal])
     cal = calibrated.write(document, arrays, tmp_path / 'cal')[0]

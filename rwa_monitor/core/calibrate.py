@@ -45,8 +45,9 @@ from rwa_monitor.core.nominal import nominal_prediction, NominalWheel, TABLE_STE
 __all__ = ['BAND_EDGES', 'BAND_LEVEL', 'calibrate_gyro', 'calibrate_wheel',
            'check_calibration', 'check_wheels', 'diagnose_fss', 'fss_extra', 'fss_inputs',
            'fss_reference', 'MAX_BAND_RAD_S', 'MIN_EXCESS', 'noise_profile',
-           'nominal_prediction', 'NominalWheel', 'REFERENCE_FRACTION', 'refit_outside_band',
-           'REFIT_RCOND', 'SPEED_KINDS', 'TABLE_STEP_RAD_S', 'VERSION']
+           'nominal_prediction', 'NOMINAL_SE_FRACTION', 'NominalWheel', 'REFERENCE_FRACTION',
+           'refit_outside_band', 'REFIT_RCOND', 'SPEED_KINDS', 'TABLE_STEP_RAD_S',
+           'tested_speeds', 'VERSION']
 
 # |speed| bin edges (rad/s) of the noise profile; the last bin is open.
 BAND_EDGES = (0.0, 0.25, 0.5, 1.0, 1.5, 2.0, 3.0, 4.0, 5.0, 6.0, 8.0, 10.0, 15.0)
@@ -62,6 +63,16 @@ SPEED_KINDS = ('stribeck', 'asymmetric_coulomb', 'drag', 'smooth_speed')
 REFIT_RCOND = 1.0e-9
 # Speeds above this fraction of the largest |speed| seen form the reference region.
 REFERENCE_FRACTION = 0.3
+# The nominal is tested where the commissioning determined it (tested_speeds): the
+# standard error of its prediction at most this multiple of the standard error of the
+# mean of one LLR test window, noise std / sqrt(window): the nominal rests on at least
+# a window's worth of samples (docs/calibration.md, "Where the nominal is tested").
+NOMINAL_SE_FRACTION = 1.0
+# Speed step (rad/s) at which that standard error is evaluated.
+COVERAGE_STEP_RAD_S = 0.05
+# A speed whose regressor row leaves the fit's row space by more than this (relative) is
+# an extrapolation of the fit: not determined by the data at all.
+ESTIMABLE_TOLERANCE = 1.0e-6
 
 
 def noise_profile(speed: np.ndarray, residual: np.ndarray,
@@ -124,8 +135,10 @@ def calibrate_wheel(wheel: str, time: np.ndarray, speed: np.ndarray, friction: n
     calibrated LLR detector (docs/llr.md, "Calibrated") runs on the calibration data
     against the model just fitted, at ``false_alarm_rate``. The low-speed band starts
     where the noise profile puts it (``noise_band_rad_s``) and is widened, edge by edge
-    up to MAX_BAND_RAD_S, until that self-check is silent; at each width the weights are
-    refitted on the samples outside the band (:func:`refit_outside_band`): the residual of a static
+    up to MAX_BAND_RAD_S, until that self-check is silent (if no width silences it, the
+    noise profile's band stands: what is declared is not structure near zero speed); at
+    each width the weights are refitted on the samples outside the band
+    (:func:`refit_outside_band`): the residual of a static
     nominal model stays structured a little beyond where its excess noise is visible (on
     the bus: the Stribeck hysteresis, a few 1e-6 N m at 3-6 rad/s), and the band must
     hold what the detector would take for changes. Each change still declared at the
@@ -165,20 +178,34 @@ def calibrate_wheel(wheel: str, time: np.ndarray, speed: np.ndarray, friction: n
     band = noise_model['low_speed_band']
     widths = [band['speed_abs_below_rad_s']] + [
         e for e in BAND_EDGES if band['speed_abs_below_rad_s'] < e <= MAX_BAND_RAD_S]
-    for width in widths:
+
+    def self_check(width: float) -> list:
         band['speed_abs_below_rad_s'] = float(width)
         refit_outside_band(model, w, f, width)
         residual, _ = NominalWheel(block).residual(t, w, f)
-        events = [e for e in detect_batch(t, w, residual, component=wheel,
-                                          false_alarm_rate=false_alarm_rate)
-                  if e.revision == 0]
+        return [e for e in detect_batch(t, w, residual, component=wheel,
+                                        false_alarm_rate=false_alarm_rate)
+                if e.revision == 0]
+
+    for width in widths:
+        events = self_check(width)
         if not events:
             break
+    if events and len(widths) > 1:
+        # No band removes them: not the low-speed structure the widening is for (a change
+        # in the data, or a chance declaration), so the noise profile's band stands.
+        events = self_check(widths[0])
     inside = np.abs(w) < band['speed_abs_below_rad_s']
     band['std_nm'] = float(np.sqrt(np.mean(fitted_everywhere[inside] ** 2))
                            if inside.any() else noise_model['std_nm'])
     band['samples'] = int(np.sum(inside))
     band['noise_band_rad_s'] = float(widths[0])
+    # After the self-check, which looks for changes in the data on every sample outside
+    # the band (in sample, the nominal's error where data are few is fitted away).
+    block['tested_speeds_rad_s'] = tested_speeds(model, w, band['speed_abs_below_rad_s'],
+                                                 noise_model['std_nm'])
+    block['tested_samples'] = int(sum(np.count_nonzero((w >= a) & (w <= b))
+                                      for a, b in block['tested_speeds_rad_s']))
     block['fss'] = fss_reference(w, f, model, noise_model)
     block['changes_found_s'] = [float(e.time) for e in events]
     warnings = [f'{wheel}: a friction change ({e.kind}) at t = {e.time:.1f} s in the '
@@ -214,6 +241,63 @@ def refit_outside_band(model: dict[str, Any], speed: np.ndarray, friction: np.nd
     model['weights'] = {n: float(c) for n, c in zip(regs.names, coef)}
 
 
+def tested_speeds(model: dict[str, Any], speed: np.ndarray, band_rad_s: float,
+                  noise_std: float, window: int | None = None) -> list[list[float]]:
+    """Return the signed speed intervals ``[[lo, hi], ...]`` where the nominal is tested.
+
+    The nominal (the model refitted on ``|w| >= band_rad_s``, :func:`refit_outside_band`)
+    is tested at a speed when the commissioning determined it there:
+
+    - the speed lies on a side of zero the data saw, between the smallest and the
+      largest ``|w|`` seen on that side outside the band (no extrapolation in speed);
+    - its regressor row lies in the row space of the fit (else the prediction is not
+      determined by the data at all: a piecewise-linear knot beyond the data);
+    - the standard error of its prediction, ``noise_std sqrt(x^T (X^T X)^+ x)`` with the
+      same column scaling and singular-value cut as the fit, is at most
+      NOMINAL_SE_FRACTION ``noise_std / sqrt(window)``: the nominal is known at least as
+      precisely as one test window's mean (``window``: the LLR's default).
+
+    Evaluated every COVERAGE_STEP_RAD_S; a run of such speeds is one interval. Where
+    commissioning passed only quickly (a zero crossing in a fast slew leaves a few
+    samples per rad/s), the smooth-speed knots are pinned by a handful of samples and
+    the nominal is off by a sizeable fraction of the noise: such speeds are not tested
+    (docs/calibration.md, "Where the nominal is tested").
+    """
+    from rwa_monitor.core.identify.model import regressors_from_config
+    from rwa_monitor.core.schema import LLR
+    window = int(LLR['window'].default if window is None else window)
+    limit = NOMINAL_SE_FRACTION * float(noise_std) / np.sqrt(window)
+    speed = np.asarray(speed, dtype=float)
+    speed = speed[np.isfinite(speed) & (np.abs(speed) >= band_rad_s) & (speed != 0.0)]
+    regs = regressors_from_config(model)
+    if speed.size < 2 * len(regs.names):
+        return []
+    x = regs.matrix(speed)
+    scale = np.sqrt(np.mean(x ** 2, axis=0))
+    keep = scale > 0
+    _, sv, vt = np.linalg.svd(x[:, keep] / scale[keep], full_matrices=False)
+    cut = sv > REFIT_RCOND * sv[0]
+    basis, sv = vt[cut].T, sv[cut]
+    out: list[list[float]] = []
+    for side in (-1.0, 1.0):
+        mags = np.abs(speed[np.sign(speed) == side])
+        if mags.size == 0:
+            continue
+        lo, hi = float(np.min(mags)), float(np.max(mags))
+        grid = np.unique(np.append(np.arange(lo, hi, COVERAGE_STEP_RAD_S), hi))
+        rows = regs.matrix(side * grid)[:, keep] / scale[keep]
+        coords = rows @ basis
+        se = noise_std * np.sqrt(np.sum((coords / sv) ** 2, axis=1))
+        off = np.linalg.norm(rows - coords @ basis.T, axis=1)
+        ok = (se <= limit) & (off <= ESTIMABLE_TOLERANCE * np.linalg.norm(rows, axis=1))
+        edges = np.flatnonzero(np.diff(np.concatenate([[0], ok.astype(np.int8), [0]])))
+        for a, b in zip(edges[::2], edges[1::2] - 1):
+            if b > a:
+                ends = sorted((side * float(grid[a]), side * float(grid[b])))
+                out.append(ends)
+    return sorted(out)
+
+
 def _keep_speed_effects(model: dict[str, Any], data: Any) -> list[str]:
     """Keep the effects that depend on speed only; refit the weights; return the dropped.
 
@@ -230,7 +314,7 @@ def _keep_speed_effects(model: dict[str, Any], data: Any) -> list[str]:
     effects = model.get('effects') or []
     kept = [e for e in effects if e.get('kind') in SPEED_KINDS]
     dropped = [str(e.get('name', e.get('kind'))) for e in effects if e not in kept]
-    if not any(e['kind'] == 'smooth_speed' for e in kept):
+    if dropped and not any(e['kind'] == 'smooth_speed' for e in kept):
         fallback = fx.fallback_candidate(data)
         kept.append({'name': fallback.name, 'kind': fallback.kind,
                      'params': dict(fallback.grid[0])})

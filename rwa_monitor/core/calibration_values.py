@@ -20,7 +20,8 @@ MALFORMED = (ConfigError, TypeError, ValueError, KeyError, AttributeError, Index
 _POSITIVE = {'std_nm', 'noise_std_nm', 'block_std_rad_s', 'block_s', 'block_samples',
              'level_threshold_rad_s', 'slope_threshold_rad_s2'}
 _NON_NEGATIVE = {'speed_abs_below_rad_s', 'noise_std_rad_s', 'quiet_level_rad_s',
-                 'correlation_time_s', 'samples', 'rms_nm', 'noise_band_rad_s'}
+                 'correlation_time_s', 'samples', 'rms_nm', 'noise_band_rad_s',
+                 'tested_samples'}
 # Reported by the fit and read by nothing, or NaN by definition when not estimable.
 _MAY_BE_NAN = {'viscous_se_nms', 'block_lag1_correlation', 'base_dry_window_std_nm'}
 
@@ -90,6 +91,11 @@ def _check_wheel_shape(wheel: Mapping[str, Any], key: str,
     band = noise.get('low_speed_band', {})
     if not isinstance(band, Mapping):
         fail(f'{key}.noise.low_speed_band', 'expected a mapping')
+    tested = wheel.get('tested_speeds_rad_s', [])
+    if not isinstance(tested, (list, tuple)) or not all(
+            isinstance(v, (list, tuple)) and len(v) == 2 and all(map(_number, v))
+            and v[0] <= v[1] for v in tested):
+        fail(f'{key}.tested_speeds_rad_s', 'expected a list of [lo, hi] with lo <= hi')
 
 
 def check_model_values(model: Mapping[str, Any], source: str = 'friction_model') -> None:

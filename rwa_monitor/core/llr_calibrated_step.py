@@ -56,7 +56,8 @@ def nominal_residual(table, t, w, f):
     """Return ``f - nominal(w)`` from the table; NaN if not tested (reason counted).
 
     Not tested: non-finite input, ``|w|`` inside the low-speed band (reason 1), ``w``
-    outside the calibrated range (reason 2), ``|w|`` off the side's grid. The interval of
+    outside the calibrated range, off the side's grid or between its tested intervals
+    (NaN points of the table; reason 2). The interval of
     ``|w|`` is found by ``numpy.searchsorted`` between its bucket's bounds, then
     ``nominal_j + (|w| - grid_j) slope_j`` (the floats of ``NominalWheel.residual``).
     """
@@ -72,18 +73,27 @@ def nominal_residual(table, t, w, f):
     if table[T_REASON] != 0.0:
         table[T_COUNTS + int(table[T_REASON]) - 1] += 1.0
         return math.nan
+    nominal = math.nan
     if w == 0.0:
-        return f - table[T_AT_ZERO]
-    head = T_ABOVE if w > 0.0 else T_BELOW
-    o = int(table[head])
-    n = int(table[head + 1])
-    grid = table[o:o + n]
-    if mag < grid[0] or mag > grid[n - 1]:
+        nominal = table[T_AT_ZERO]
+    else:
+        head = T_ABOVE if w > 0.0 else T_BELOW
+        o = int(table[head])
+        n = int(table[head + 1])
+        grid = table[o:o + n]
+        if grid[0] <= mag <= grid[n - 1]:
+            bucket = int(table[head + 2]) + int((mag - grid[0]) * table[T_SCALE])
+            lo = int(table[bucket])
+            j = lo + np.searchsorted(grid[lo:int(table[bucket + 3])], mag, side='right') - 1
+            nominal = table[o + n + j]
+            if mag != grid[j]:
+                nominal += (mag - grid[j]) * table[o + 2 * n + j]
+    if nominal != nominal:
+        # Off the side's grid or between its tested intervals (NaN points).
+        table[T_REASON] = OUTSIDE_RANGE
+        table[T_COUNTS + OUTSIDE_RANGE - 1] += 1.0
         return math.nan
-    bucket = int(table[head + 2]) + int((mag - grid[0]) * table[T_SCALE])
-    lo = int(table[bucket])
-    j = lo + np.searchsorted(grid[lo:int(table[bucket + 3])], mag, side='right') - 1
-    return f - (table[o + n + j] + (mag - grid[j]) * table[o + 2 * n + j])
+    return f - nominal
 
 
 @njit('int64(float64[::1], int64[::1], float64[::1], float64, float64, float64)', cache=True)

@@ -175,17 +175,19 @@ def _restart(live: Live, config: LLRConfig, c: int, n: int) -> None:
 def _continues(live: Live, config: LLRConfig, tau: int, n: int) -> bool:
     """Return True if the change declared at ``n`` is the previous one still growing.
 
-    Possible while the previous change's kind is still re-checked (its ramp sums are
-    kept up to date): :func:`llr_growth.continues` on its segments up to ``n`` and on
-    the samples ``[tau, n]``. If so, its ramp sums take in the samples up to ``n``.
+    Its ramp sums are kept up to date whether its re-checks are over (closed) or not:
+    :func:`llr_growth.continues` on its segments up to ``n`` and on the samples ``[tau,
+    n]``. If so, its ramp sums take in the samples up to ``n``. A closed change is tested
+    too: a slow wear grows for days, past the last re-check (docs/llr.md "One declaration
+    per ramp").
     """
     prev = live.change
-    if prev is None or prev.closed or prev.finished:
+    if prev is None or prev.finished:
         return False
     blocks = prev.ramp
     if prev.ramp_end < n:
-        blocks = np.concatenate([blocks, _ramp_block(live, config, prev.ramp_end + 1, n,
-                                                     prev.time)[None, :]])
+        blocks = _with_block(blocks, _ramp_block(live, config, prev.ramp_end + 1, n,
+                                                 prev.time), prev.tail)
     after_sums = prev.gap + live.prefix_now()
     times = live.ring.time[np.arange(tau, n + 1) % len(live.ring.row)]
     if not llr_growth.continues(prev.before, prev.n_before, after_sums, blocks,
@@ -240,14 +242,22 @@ def _take_ramp(live: Live, config: LLRConfig, j: int) -> None:
     cat = live.change
     if j <= cat.ramp_end:
         return
-    block = _ramp_block(live, config, cat.ramp_end + 1, j, cat.time)
-    if cat.tail:
-        # Merge into the block after the last re-check: sums add, the knot moves.
-        merged = np.concatenate([block[:1], cat.ramp[-1, 1:] + block[1:]])
-        ramp = np.concatenate([cat.ramp[:-1], merged[None, :]])
-    else:
-        ramp = np.concatenate([cat.ramp, block[None, :]])
+    ramp = _with_block(cat.ramp, _ramp_block(live, config, cat.ramp_end + 1, j, cat.time),
+                       cat.tail)
     live.change = replace(cat, ramp=ramp, tail=cat.closed, ramp_end=j)
+
+
+def _with_block(ramp: np.ndarray, block: np.ndarray, tail: bool) -> np.ndarray:
+    """Return the ramp-sum blocks with ``block`` appended, or merged into the last one.
+
+    Merged after the last re-check (``tail``): the sums add and the knot moves to the
+    new block's end, so the time shapes of a closed change stay those of its re-checks
+    plus the straight ramp to the end, their number bounded however long it grows.
+    """
+    if tail:
+        merged = np.concatenate([block[:1], ramp[-1, 1:] + block[1:]])
+        return np.concatenate([ramp[:-1], merged[None, :]])
+    return np.concatenate([ramp, block[None, :]])
 
 
 def finish(live: Live, config: LLRConfig) -> list[AnomalyEvent]:

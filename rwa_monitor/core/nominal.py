@@ -69,30 +69,69 @@ class NominalWheel:
         self.band_rad_s = float(band.get('speed_abs_below_rad_s', 0.0))
         lo, hi = block['speed_range_rad_s']
         self.speed_range = (float(lo), float(hi))
+        self.tested = self._tested(block.get('tested_speeds_rad_s'))
         knots = [float(k) for e in self.friction_model.get('effects') or []
                  for k in (e.get('params') or {}).get('knots_rad_s', [])]
         self._tables = {side: self._table(side, knots) for side in (1.0, -1.0)}
-        self.at_zero = float(nominal_prediction(self.friction_model, np.zeros(1))[0])
+        self.at_zero = (float(nominal_prediction(self.friction_model, np.zeros(1))[0])
+                        if any(a <= 0.0 <= b for a, b in self.tested) else np.nan)
         # Both sides packed for the compiled lookup (also LLRDetector.update_nominal's).
         self.table = llr_calibrated_step.pack_table(
             self.band_rad_s, self.speed_range, self.at_zero, 1.0 / TABLE_STEP_RAD_S,
             _lookup(*self._tables[1.0]), _lookup(*self._tables[-1.0]))
 
+    def _tested(self, intervals: Any) -> tuple[tuple[float, float], ...]:
+        """Return the signed speed intervals where the nominal is tested.
+
+        A calibration's ``tested_speeds_rad_s`` (core/calibrate.py ``tested_speeds``);
+        one written before it: the calibrated range outside the low-speed band on each
+        side (zero speed included when there is no band).
+        """
+        lo, hi = self.speed_range
+        if intervals is not None:
+            return tuple((max(float(a), lo), min(float(b), hi)) for a, b in intervals
+                         if max(float(a), lo) <= min(float(b), hi))
+        if self.band_rad_s == 0.0:
+            return ((lo, hi),)
+        return tuple((a, b) for a, b in ((lo, min(hi, -self.band_rad_s)),
+                                         (max(lo, self.band_rad_s), hi)) if a <= b)
+
     def _table(self, side: float, knots: list[float]
                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Return (|w| grid, nominal, slope to the next point) of one side of zero."""
-        end = self.speed_range[1] if side > 0 else -self.speed_range[0]
-        start = max(self.band_rad_s, TABLE_STEP_RAD_S * 1e-3)
+        """Return (|w| grid, nominal, slope to the next point) of one side of zero.
+
+        The grid spans the side's tested speeds (:attr:`tested`); between two tested
+        intervals its points are NaN, so that the interpolation there is NaN (not
+        tested).
+        """
+        floor = max(self.band_rad_s, TABLE_STEP_RAD_S * 1e-3)
+        parts = []
+        for a, b in self.tested:
+            near, far = (max(a, 0.0), b) if side > 0 else (max(-b, 0.0), -a)
+            if far >= max(near, floor):
+                parts.append((max(near, floor), far))
+        parts.sort()
+        if not parts:
+            grid = np.array([floor, floor])
+            return grid, np.full(2, np.nan), np.array([np.nan, 0.0])
+        start, end = parts[0][0], parts[-1][1]
+        gaps = [0.5 * (b0 + a1) for (_, b0), (a1, _) in zip(parts[:-1], parts[1:])]
         if end <= start:
             grid = np.array([start, start])
         else:
             grid = np.unique(np.concatenate([
                 np.arange(start, end, TABLE_STEP_RAD_S), [end],
-                [abs(k) for k in knots if start < abs(k) < end and k * side > 0]]))
+                [abs(k) for k in knots if start < abs(k) < end and k * side > 0],
+                [v for part in parts for v in part], gaps]))
         values = nominal_prediction(self.friction_model, side * grid)
+        inside = np.zeros(grid.size, dtype=bool)
+        for a, b in parts:
+            inside |= (grid >= a) & (grid <= b)
+        values[~inside] = np.nan
         step = np.diff(grid)
-        slope = np.append(np.divide(np.diff(values), step, out=np.zeros_like(step),
-                                    where=step > 0), 0.0)
+        with np.errstate(invalid='ignore'):
+            slope = np.append(np.divide(np.diff(values), step, out=np.zeros_like(step),
+                                        where=step > 0), 0.0)
         return grid, values, slope
 
     @property
@@ -117,7 +156,9 @@ class NominalWheel:
                 on = (mag >= grid[0]) & (mag <= grid[-1])
             j = np.searchsorted(grid, mag[on], side='right') - 1
             j = np.minimum(j, len(grid) - 1)
-            out[on] = values[j] + (mag[on] - grid[j]) * slope[j]
+            with np.errstate(invalid='ignore'):
+                out[on] = np.where(mag[on] == grid[j], values[j],
+                                   values[j] + (mag[on] - grid[j]) * slope[j])
         return out
 
     def residual(self, time: np.ndarray, speed: np.ndarray, friction: np.ndarray
@@ -137,17 +178,18 @@ class NominalWheel:
         mag = np.abs(speed)
         with np.errstate(invalid='ignore'):
             low = valid & (mag < self.band_rad_s)
-            outside = valid & ((speed < self.speed_range[0]) | (speed > self.speed_range[1]))
         (grid, values, _), (grid_below, values_below, _) = (self._tables[1.0],
                                                             self._tables[-1.0])
         out = np.interp(mag, grid, values, np.nan, np.nan)
         np.copyto(out, np.interp(mag, grid_below, values_below, np.nan, np.nan),
                   where=~(speed > 0.0))
         out[speed == 0.0] = self.at_zero
+        # Off the tables, or between tested intervals (NaN points): not tested.
+        outside = valid & ~low & np.isnan(out)
         np.subtract(friction, out, out=out)
-        out[low | outside | ~finite] = np.nan
+        out[low | ~finite] = np.nan
         return out, {'low_speed_band': int(np.count_nonzero(low)),
-                     'outside_calibrated_range': int(np.count_nonzero(outside & ~low))}
+                     'outside_calibrated_range': int(np.count_nonzero(outside))}
 
     def residual_one(self, time: float, speed: float, friction: float
                      ) -> tuple[float, str | None]:
@@ -170,6 +212,13 @@ class NominalWheel:
         """Samples not tested since construction, by reason, through :attr:`table`."""
         return {name: int(self.table[llr_calibrated_step.T_COUNTS + code - 1])
                 for code, name in enumerate(_REASONS) if code}
+
+
+def tested_text(intervals: Any) -> str:
+    """Return tested speed intervals as text: ``tested at -250.0..-3.0, 3.0..240.0 rad/s``."""
+    if not intervals:
+        return 'no speed tested'
+    return 'tested at ' + ', '.join(f'{a:.1f}..{b:.1f}' for a, b in intervals) + ' rad/s'
 
 
 def _lookup(grid: np.ndarray, values: np.ndarray, slope: np.ndarray) -> tuple:

@@ -8,7 +8,8 @@ friction (calibrated, docs/llr.md "Calibrated"); or a refined friction model wri
 The rules that every entry point used to repeat live here once:
 
 - feeding: a calibrated wheel's samples inside the low-speed band or outside the
-  calibrated speed range are given as NaN and counted as not tested, by reason
+  calibrated speeds (docs/calibration.md "Where the nominal is tested") are given as
+  NaN and counted as not tested, by reason
   (core/nominal.py); whole arrays (:meth:`WheelRunner.feed`, files and passes) and single
   samples (:meth:`WheelRunner.update`, a node) give the same events;
 - facts: the detector's rejected samples (those fed as NaN because untested are not
@@ -32,7 +33,7 @@ from rwa_monitor.core.events import AnomalyEvent
 from rwa_monitor.core.friction import RegressorSet
 from rwa_monitor.core.llr import LLRDetector
 from rwa_monitor.core.llr_state import LLRState
-from rwa_monitor.core.nominal import NominalWheel
+from rwa_monitor.core.nominal import NominalWheel, tested_text
 from rwa_monitor.core.records import RecordError
 from rwa_monitor.core.runner_facts import ComponentFacts
 from rwa_monitor.core.schema import llr_kwargs
@@ -180,9 +181,9 @@ class WheelRunner:
         details: dict[str, Any] = {}
         outside = untested.get('outside_calibrated_range', 0)
         if outside and self._nominal is not None:
-            lo, hi = self._nominal.speed_range
-            details['warning'] = (f'{outside} samples outside the calibrated speed range '
-                                  f'[{lo:.1f}, {hi:.1f}] rad/s: not tested')
+            details['warning'] = (f'{outside} samples at speeds where the calibration did '
+                                  f'not determine its nominal '
+                                  f'({tested_text(self._nominal.tested)}): not tested')
         return ComponentFacts(self.component, FAMILY, samples, rejected, untested,
                               judge(samples, usable, self._needed, 'the LLR test'), details)
 

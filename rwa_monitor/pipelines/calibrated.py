@@ -19,6 +19,7 @@ from rwa_monitor.core.calibration_values import check_values
 from rwa_monitor.core.coverage import (Coverage, judge, llr_samples_needed,
                                        MOSTLY_UNTESTED_SHARE, NOT_EXAMINED)
 from rwa_monitor.core.identify.model import plain
+from rwa_monitor.core.nominal import tested_text
 from rwa_monitor.exceptions import ConfigError, NotExaminedError
 from rwa_monitor.telemetry import Telemetry
 from rwa_monitor.telemetry.atomic import atomic_write, child, FolderOutput, write_text_atomic
@@ -129,16 +130,26 @@ def gyro_coverage(tele: Telemetry) -> Coverage | None:
 
 def untested_shares(document: Mapping[str, Any],
                     share: float = MOSTLY_UNTESTED_SHARE) -> list[str]:
-    """Return one message per wheel whose low-speed band holds more than ``share`` of its data.
+    """Return one message per wheel that would leave more than ``share`` of its data untested.
 
     The detectors never test a sample inside the band: a band that swallows most of the
     commissioning data makes every later verdict ``unknown``, and is the mark of speeds
-    in other units (normalised, or per cent of the top speed), hence the hint.
+    in other units (normalised, or per cent of the top speed), hence the hint. Nor do they
+    test a speed where the commissioning did not determine the nominal
+    (``tested_speeds_rad_s``): too few samples per speed for the model's parameters.
     """
     messages = []
     for name, block in document['calibration']['wheels'].items():
         band = block['noise']['low_speed_band']
         inside, total = int(band.get('samples', 0)), int(block.get('samples', 0))
+        tested = int(block.get('tested_samples', total - inside))
+        if total and inside <= share * total and total - tested > share * total:
+            messages.append(
+                f'{name}: the nominal model is determined well enough to be tested at '
+                f'speeds holding only {tested} of {total} samples ({tested / total:.0%}; '
+                f'{tested_text([tuple(v) for v in block["tested_speeds_rad_s"]])}): the '
+                f'detectors would leave the others untested; commission with more data '
+                f'at each speed (docs/calibration.md, "Where the nominal is tested")')
         if total and inside > share * total:
             top = max(abs(v) for v in block['speed_range_rad_s'])
             hint = (f'speeds reach only {top:.3g} rad/s: is the file in rad/s?'
