@@ -191,15 +191,15 @@ def _brief(event: Any, time: np.ndarray, events: Iterable[Any] = ()) -> dict[str
             'revisions': len(same) - 1}
 
 
-def run_seed(seed: int, spacecraft: int, days: float, folder: pathlib.Path
-             ) -> dict[str, Any]:
+def run_seed(seed: int, spacecraft: int, days: float, folder: pathlib.Path,
+             llr: dict[str, Any] | None = None) -> dict[str, Any]:
     """Simulate, calibrate, detect and score one constellation."""
     from rwa_monitor.sim.fleet import plan_fleet
     plan = plan_fleet(spacecraft=spacecraft, days=days, seed=seed)
     crafts = []
     for craft in plan.spacecraft:
         start = time.perf_counter()
-        found = detect_spacecraft(plan, craft, folder)
+        found = detect_spacecraft(plan, craft, folder, llr)
         crafts.append(score_spacecraft(plan, craft, found))
         crafts[-1]['wall_s'] = time.perf_counter() - start
         print(f'  seed {seed} {craft.name}: {_line(crafts[-1])}', flush=True)
@@ -248,13 +248,17 @@ def _trend_flag(wheel: dict[str, Any]) -> bool:
     return bool(p < TREND_LEVEL)
 
 
-def evaluate(seeds: Iterable[int], spacecraft: int, days: float) -> dict[str, Any]:
-    """Run every seed; return per-seed results and the totals."""
+def evaluate(seeds: Iterable[int], spacecraft: int, days: float,
+             llr: dict[str, Any] | None = None) -> dict[str, Any]:
+    """Run every seed; return per-seed results and the totals.
+
+    ``llr``: llr_detector parameters set beside the installed ones (an operating point).
+    """
     with tempfile.TemporaryDirectory(prefix='fleet_fa_') as tmp:
-        runs = [run_seed(s, spacecraft, days, pathlib.Path(tmp)) for s in seeds]
+        runs = [run_seed(s, spacecraft, days, pathlib.Path(tmp), llr) for s in seeds]
     crafts = [c for r in runs for c in r['spacecraft']]
     return {'settings': {'spacecraft': spacecraft, 'days': days,
-                         'seeds': [r['seed'] for r in runs]},
+                         'seeds': [r['seed'] for r in runs], 'llr': dict(llr or {})},
             'runs': runs, 'totals': totals(crafts), 'goal_false_per_100_h': GOAL_PER_100_H}
 
 
@@ -264,12 +268,17 @@ def markdown(result: dict[str, Any], label: str) -> str:
     rows = [[r['seed'], *_cells(r)] for r in result['runs']]
     rows.append(['all', *_cells(result['totals'])])
     return (f'{label}: {s["spacecraft"]} spacecraft x {s["days"]:g} days per seed, '
-            f'seeds {_span(s["seeds"])}; goal at most {GOAL_PER_100_H:g} false first '
+            f'seeds {_span(s["seeds"])}{_setting(s)}; goal at most {GOAL_PER_100_H:g} false first '
             'declaration per 100 healthy wheel-hours.\n\n'
             + report.table(['seed', 'false', 'healthy wheel-hours', 'per 100 h',
                             'faults found', 'right final kind',
                             'wearing wheels: declarations', 'trend flag: wearing / others'],
                            rows))
+
+
+def _setting(settings: dict[str, Any]) -> str:
+    rate = settings.get('llr', {}).get('false_alarm_rate')
+    return '' if rate is None else f', r = {rate:g} (not the installed default)'
 
 
 def _cells(t: dict[str, Any]) -> list[Any]:
@@ -288,10 +297,11 @@ def _span(seeds: list[int]) -> str:
 
 
 def run(out: pathlib.Path, quick: bool, seeds: Iterable[int] = DEFAULT_SEEDS,
-        label: str = 'development', name: str = 'fleet_false_alarms') -> dict[str, Any]:
+        label: str = 'development', name: str = 'fleet_false_alarms',
+        llr: dict[str, Any] | None = None) -> dict[str, Any]:
     """Evaluate, write the JSON and the results.md section; return the result."""
     settings = QUICK if quick else SETTINGS
-    result = evaluate(seeds, settings['spacecraft'], settings['days'])
+    result = evaluate(seeds, settings['spacecraft'], settings['days'], llr)
     result['label'] = label
     result['machine'] = report.machine()
     report.write_json(out, name, result)
@@ -321,9 +331,13 @@ def main(argv: list[str] | None = None) -> int:
                         help='JSON / results.md section name')
     parser.add_argument('--out', type=pathlib.Path, default=report.RESULTS_DIR)
     parser.add_argument('--quick', action='store_true')
+    parser.add_argument('--false-alarm-rate', type=float, default=None,
+                        help="the LLR's r (default: config/rwa_monitor.yaml)")
     args = parser.parse_args(argv)
     os.environ.setdefault('PYTHONHASHSEED', '0')
-    run(args.out, args.quick, _seeds(args.seeds), args.label, args.name)
+    llr = ({} if args.false_alarm_rate is None
+           else {'false_alarm_rate': args.false_alarm_rate})
+    run(args.out, args.quick, _seeds(args.seeds), args.label, args.name, llr)
     return 0
 
 
