@@ -1,4 +1,4 @@
-"""The fleet's report.html (rwa_monitor/fleet/report.py): self-contained, every wheel shown."""
+"""The fleet's report.html (fleet/report.py): self-contained, every wheel in the table."""
 
 import base64
 import datetime as dt
@@ -77,14 +77,19 @@ def test_trend_table_finds_the_wearing_wheel_and_projects_the_limit():
     assert (mixed['wheel'], mixed['passes'], mixed['relative_to']) == ('rw1', 20, 'zero')
 
 
-def test_report_is_self_contained_and_shows_every_wheel(tmp_path):
+def test_report_is_self_contained_shows_every_wheel_and_plots_those_to_look_at(tmp_path):
     events, summary, rows = fleet_inputs()
     path = tmp_path / 'out' / 'report.html'
     write_report(path, events, summary, rows)
     text = path.read_text()
     assert not re.search(r'https?:', text) and '<script' not in text and '<link' not in text
     images = re.findall(r'src="([^"]*)"', text)
-    assert len(images) == 4 and all(i.startswith('data:image/png;base64,') for i in images)
+    assert len(images) == 3 and all(i.startswith('data:image/png;base64,') for i in images)
+    # Drawn: the wearing wheel (trend), the one with a change, the one not examined; the
+    # healthy wheel with no trend and only a superseded event is a table row only.
+    drawn = re.findall(r'<h3 id="([^"]*)"', text)
+    assert drawn == ['w-sc1_rw2', 'w-sc_2__rw1', 'w-sc_2__rw2'], drawn
+    assert 'href="#w-sc1_rw1"' not in text and 'the other 1 are healthy' in text
     assert all(base64.b64decode(i.split(',', 1)[1])[:8] == b'\x89PNG\r\n\x1a\n'
                for i in images)
     for craft, wheel in [('sc1', 'rw1'), ('sc1', 'rw2'), ('sc&lt;2&gt;', 'rw1')]:
