@@ -15,12 +15,14 @@ parallel.
 
 from __future__ import annotations
 
+import contextlib
 from dataclasses import dataclass, field
 import functools
+import gc
 import json
 import resource
 import time as _time
-from typing import Mapping, Sequence, TYPE_CHECKING
+from typing import Iterator, Mapping, Sequence, TYPE_CHECKING
 
 import numpy as np
 
@@ -135,6 +137,25 @@ def make_runners(spec: SpacecraftSpec) -> Runners:
     return Runners({wheel: setup.runner(wheel) for wheel in spec.wheels}, gyro)
 
 
+@contextlib.contextmanager
+def _no_cycle_collection() -> Iterator[None]:
+    """Hold Python's cycle collector for the length of a task, then give it back.
+
+    A Dask worker process holds many long-lived objects; the collector's full passes
+    walk all of them, and they took about a fifth of a task's CPU (5 spacecraft-weeks on
+    one worker: 0.59-0.61 s with it, 0.48-0.51 s without; 0.43-0.47 s in a plain
+    process). A task makes few reference cycles and is bounded (``TASK_BYTES`` of
+    passes); reference counting frees everything else as it goes.
+    """
+    enabled = gc.isenabled()
+    gc.disable()
+    try:
+        yield
+    finally:
+        if enabled:
+            gc.enable()
+
+
 def step(spec: SpacecraftSpec, chain: Chain, passes: Sequence[PassFile],
          last: bool = False) -> Chain:
     """Return the chain after ``passes`` (in time order).
@@ -146,6 +167,12 @@ def step(spec: SpacecraftSpec, chain: Chain, passes: Sequence[PassFile],
     new passes continues as a full run would, and its own end-of-record events supersede
     these (fleet/history.py).
     """
+    with _no_cycle_collection():
+        return _step(spec, chain, passes, last)
+
+
+def _step(spec: SpacecraftSpec, chain: Chain, passes: Sequence[PassFile],
+          last: bool) -> Chain:
     start = _time.process_time()
     runners = make_runners(spec)
     runners.restore(chain.states)
