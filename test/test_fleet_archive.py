@@ -52,6 +52,27 @@ def test_scan_orders_by_first_stamp_and_names_components(record, tmp_path):
         'unreadable: FileNotFoundError')
 
 
+def test_scan_of_parquet_reads_the_first_row_group_that_has_rows(tmp_path):
+    path = tmp_path / 'groups.parquet'
+    with pq.ParquetWriter(path, pa.schema([('time', pa.float64()),
+                                           ('rw1_speed', pa.float64())])) as writer:
+        writer.write_table(pa.table({'time': pa.array([], pa.float64()),
+                                     'rw1_speed': pa.array([], pa.float64())}))
+        writer.write_table(pa.table({'time': [7.5, 8.0], 'rw1_speed': [1.0, 2.0]}))
+    assert pq.ParquetFile(path).metadata.num_row_groups == 2
+    scan = archive.scan_pass(str(path))
+    assert scan.first == 7.5 and scan.columns == ('time', 'rw1_speed')
+    empty = tmp_path / 'empty.parquet'
+    pq.write_table(pa.table({'time': pa.array([], pa.float64())}), empty)
+    no_time = tmp_path / 'no_time.parquet'
+    pq.write_table(pa.table({'t': [0.0]}), no_time)
+    text = tmp_path / 'text.parquet'
+    text.write_bytes(b'PAR1 not really')
+    assert archive.scan_pass(str(empty)).endswith('no rows')
+    assert "column 'time'" in archive.scan_pass(str(no_time))
+    assert archive.scan_pass(str(text)).startswith('unreadable:')
+
+
 def test_rows_at_or_before_the_last_time_are_dropped(record):
     kept, dropped = archive.after(record, 2.0)
     assert dropped == 21 and kept.time[0] == pytest.approx(2.1)
