@@ -166,3 +166,30 @@ def test_too_few_passes_and_bad_rows():
     assert tr.passes == 2 and math.isnan(tr.p_value) and tr.crossing is None
     tr = wheel_trend([0, 1, 2, 3.0], [1, 2, 3, 4.0], [1, 0, 1, 1.0], limit=10.0)
     assert tr.passes == 3
+
+
+def test_compiled_sums_equal_the_matrix_products():
+    from rwa_monitor.core.friction import coulomb_viscous
+    from rwa_monitor.core.llr_noise import lag_gram
+    from rwa_monitor.core.trend_sums import level_sums, residual_lag_gram
+    rng = np.random.default_rng(77)
+    for top in (0, 1, 3):
+        n = 700
+        t = 0.1 * np.arange(n)
+        w = rng.uniform(-80.0, 80.0, n)
+        y = rng.normal(0.0, 1e-4, n)
+        y[5], w[9], t[11] = np.nan, np.inf, np.nan
+        finite = np.isfinite(t) & np.isfinite(w) & np.isfinite(y)
+        kept = finite & (np.abs(w) >= 2.0)
+        sums = level_sums(t, w, y, 2.0)
+        h = coulomb_viscous().matrix(w[kept])
+        assert sums[:3] == (kept.sum(), 3, np.count_nonzero(finite & (np.abs(w) < 2.0)))
+        assert sums[3:5] == (t[kept].min(), t[kept].max())
+        gram, right = h.T @ h, h.T @ y[kept]
+        assert np.allclose(sums[5:8], [gram[0, 0], gram[0, 1], gram[1, 1]], rtol=1e-12)
+        assert np.allclose(sums[8:], right, rtol=1e-10)
+        x = np.array([2e-4, 3e-7])
+        e = y[kept] - h @ x
+        lags = residual_lag_gram(t, w, y, 2.0, x[0], x[1], int(kept.sum()), top)
+        assert np.allclose(lags[:top + 1], lag_gram(e, top), rtol=1e-12)
+        assert lags[top + 1, 0] == pytest.approx(e @ e, rel=1e-12)

@@ -83,20 +83,41 @@ def residual_noise_model(e: np.ndarray, fitted: int, max_order: int,
                          speed_std: tuple[float, float, float] | None = None) -> NoiseModel:
     """Return the AR model of a least-squares residual ``e`` (``fitted`` parameters).
 
-    The order selection of :func:`fit_noise_model`: conditional least squares of
-    ``e[Q:]`` on its ``q`` lags for each ``q <= max_order`` (common targets), solved by
-    the normal equations of one lag Gram matrix (the lags of a residual are far from
-    collinear, so this equals the orthogonal solution to rounding, at a fraction of its
-    cost); ``BIC_q`` as there; an order is kept only if its characteristic roots lie inside
-    the unit circle (checked only for an order whose BIC would win).
+    The order selection of :func:`fit_noise_model` (:func:`noise_model_from_gram` on the
+    residual's :func:`lag_gram`).
     """
     e = np.asarray(e, dtype=float)
+    top = lag_top(e.size, max_order)
+    return noise_model_from_gram(lag_gram(e, top), e.size, float(e @ e), fitted, speed_std)
+
+
+def lag_top(n: int, max_order: int) -> int:
+    """Return the highest AR order tried on ``n`` residuals (at least 10 per order)."""
+    return int(min(max_order, max((n - 10) // 10, 0)))
+
+
+def lag_gram(e: np.ndarray, top: int) -> np.ndarray:
+    """Return ``gram[i, j]``: over the common targets ``e[top:]``, e lagged i times e lagged j."""
     n = e.size
-    top = int(min(max_order, max((n - 10) // 10, 0)))
-    m = n - top
-    # gram[i, j] = sum over the common targets of e lagged i times e lagged j (i, j <= top).
     lagged = np.column_stack([e[top - i:n - i] for i in range(top + 1)])
-    gram = lagged.T @ lagged
+    return lagged.T @ lagged
+
+
+def noise_model_from_gram(gram: np.ndarray, n: int, sum_squares: float, fitted: int,
+                          speed_std: tuple[float, float, float] | None = None
+                          ) -> NoiseModel:
+    """Return the AR model of a residual of ``n`` samples from its lag Gram matrix.
+
+    Conditional least squares of ``e[Q:]`` on its ``q`` lags for each ``q <= Q`` (``Q`` =
+    ``gram``'s size - 1; common targets), solved by the normal equations of the lag Gram
+    matrix (the lags of a residual are far from collinear, so this equals the orthogonal
+    solution to rounding, at a fraction of its cost); ``BIC_q`` as in
+    :func:`fit_noise_model`; an order is kept only if its characteristic roots lie inside
+    the unit circle (checked only for an order whose BIC would win). ``sum_squares`` is
+    ``e @ e``, ``fitted`` the parameters the residual was fitted with.
+    """
+    top = gram.shape[0] - 1
+    m = n - top
     best: tuple[float, tuple[float, ...], float] = (math.inf, (), 0.0)
     for q in range(top + 1):
         if q == 0:
@@ -114,7 +135,7 @@ def residual_noise_model(e: np.ndarray, fitted: int, max_order: int,
                 np.concatenate([[1.0], -coef]))) < 0.999)):
             best = (bic, tuple(float(a) for a in coef), s2)
     _, ar, s2u = best
-    s2e = max(float(e @ e) / max(n - fitted, 1), 1e-300)
+    s2e = max(sum_squares / max(n - fitted, 1), 1e-300)
     ratio = s2u / (1.0 - sum(ar)) ** 2 / s2e
     return NoiseModel(ar, math.sqrt(s2u), math.sqrt(s2e), ratio, speed_std)
 

@@ -17,9 +17,9 @@ import numpy as np
 import scipy.linalg
 import scipy.stats
 
-from rwa_monitor.core.friction import coulomb_viscous
-from rwa_monitor.core.llr_noise import DEFAULT_AR_ORDER, residual_noise_model
+from rwa_monitor.core.llr_noise import DEFAULT_AR_ORDER, lag_top, noise_model_from_gram
 from rwa_monitor.core.params import check_int, check_real
+from rwa_monitor.core.trend_sums import level_sums, residual_lag_gram
 
 SECONDS_PER_DAY = 86400.0
 # Samples slower than this are dropped from a pass fit: at rest sign(w) carries no dry
@@ -103,8 +103,9 @@ def pass_levels(time: np.ndarray, speed: np.ndarray, friction: np.ndarray,
     Rows ``h = -[sign(w), w]`` (eq. (1), core/friction.py), target ``friction -
     nominal_friction`` (or ``friction``). Samples with any non-finite value, or ``|w| <
     min_speed``, are dropped and counted. Standard errors: the residual of the fit gets
-    the project's AR noise model (llr_noise.residual_noise_model, fit_noise_model's order
-    selection by BIC up to ``max_ar_order``); the covariance is ``sigma_LR^2 (H^T H)^-1``
+    the project's AR noise model (llr_noise.noise_model_from_gram, fit_noise_model's order
+    selection by BIC up to ``max_ar_order``); the sums walk the pass compiled
+    (core/trend_sums.py); the covariance is ``sigma_LR^2 (H^T H)^-1``
     with ``sigma_LR^2`` the long-run variance of the residual (its variance times
     ``long_run_ratio``), which is the sandwich covariance of least squares under serially
     correlated noise when the regressors vary slowly against the noise's correlation time
@@ -120,21 +121,18 @@ def pass_levels(time: np.ndarray, speed: np.ndarray, friction: np.ndarray,
                          f'got {t.size}, {w.size}, {f.size}')
     min_speed = check_real('min_speed', min_speed, 0.0)
     max_ar_order = check_int('max_ar_order', max_ar_order, 0, 10)
-    finite = np.isfinite(t) & np.isfinite(w) & np.isfinite(f)
-    used = finite & (np.abs(w) >= min_speed)
-    n = int(np.count_nonzero(used))
-    t_used = t[used]
-    span = (float(t_used.min()), float(t_used.max())) if n else (
+    t, w, f = (np.ascontiguousarray(a) for a in (t, w, f))
+    kept, nonfinite, slow, t_min, t_max, g00, g01, g11, b0, b1 = level_sums(
+        t, w, f, min_speed)
+    n = int(kept)
+    span = (t_min, t_max) if n else (
         (float(np.nanmin(t)), float(np.nanmax(t))) if np.isfinite(t).any() else
         (math.nan, math.nan))
-    counts = {'nonfinite': int(np.count_nonzero(~finite)),
-              'slow': int(np.count_nonzero(finite & ~used))}
+    counts = {'nonfinite': int(nonfinite), 'slow': int(slow)}
     nan = math.nan
     if n < MIN_PASS_SAMPLES:
         return PassLevels(*span, n, nan, nan, nan, nan, **counts, reason='too_few_samples')
-    h = coulomb_viscous().matrix(w[used])
-    y = f[used]
-    gram = h.T @ h
+    gram = np.array([[g00, g01], [g01, g11]])
     d = np.sqrt(np.diag(gram))
     if not (d > 0).all():
         return PassLevels(*span, n, nan, nan, nan, nan, **counts, reason='not_excited')
@@ -142,8 +140,10 @@ def pass_levels(time: np.ndarray, speed: np.ndarray, friction: np.ndarray,
     if np.linalg.det(correlation) < MIN_EXCITATION:
         return PassLevels(*span, n, nan, nan, nan, nan, **counts, reason='not_excited')
     # Normal equations on the unit-diagonal Gram (condition below 4 / MIN_EXCITATION).
-    x = np.linalg.solve(correlation, (h.T @ y) / d) / d
-    noise = residual_noise_model(y - h @ x, 2, max_ar_order)
+    x = np.linalg.solve(correlation, np.array([b0, b1]) / d) / d
+    top = lag_top(n, max_ar_order)
+    lags = residual_lag_gram(t, w, f, min_speed, float(x[0]), float(x[1]), n, top)
+    noise = noise_model_from_gram(lags[:top + 1], n, float(lags[top + 1, 0]), 2)
     variance = noise.residual_std ** 2 * noise.long_run_ratio
     cov = variance * np.linalg.inv(gram)
     return PassLevels(*span, n, float(x[0]), math.sqrt(cov[0, 0]), float(x[1]),
