@@ -168,11 +168,12 @@ def start_times(repeats: int = 5) -> dict[str, float]:
 
 
 def plain_detect(files: list[pathlib.Path]) -> dict[str, Any]:
-    """Time ``detect`` (installed parameters) as the CLI runs it, file by file."""
+    """Time ``detect`` (the fleet's parameters) as the CLI runs it, file by file."""
     from rwa_monitor.cli.cmd_detect import load_config
+    from rwa_monitor.fleet.engine import fleet_parameters_file
     from rwa_monitor.pipelines import detect
     from rwa_monitor.telemetry import read_telemetry
-    config = load_config(None)
+    config = load_config(fleet_parameters_file())
     detect(read_telemetry(files[0]), config)          # warm-up: compiled kernels
     start_wall, start_cpu = time.perf_counter(), time.process_time()
     events = 0

@@ -3,7 +3,8 @@
 Issue 31 item 1. For each seed: a constellation from ``rwa-monitor simulate fleet``'s code
 (``sim/fleet.py``: plan, passes), each spacecraft commissioned on its commissioning passes
 as ``--calibrate`` does (``pipelines/calibrated.commission``), then ``detect``'s code
-(``rwa_monitor.pipelines.detect`` with the calibration, installed parameters) on the
+(``rwa_monitor.pipelines.detect`` with the calibration and the fleet's parameters,
+config/fleet.yaml, as ``rwa-monitor fleet`` reads them) on the
 spacecraft's passes joined in time order (not the fleet engine). Events are scored against
 the plan's truth (what truth.json holds):
 
@@ -18,6 +19,21 @@ the plan's truth (what truth.json holds):
   estimated before the gap: counted as found and as *misdated*, not as false); its final
   kind is the kind of the last event of that change (the end-of-record revision
   included).
+
+What the data allow (the maths of the detector, not its output):
+
+- a fault is *testable by the archive's end* when at least ``w + k_verif`` tested samples
+  (finite residual against the nominal) follow it: Algorithm 1 declares a change at
+  sample ``k_min`` on the arrival of sample ``k_min + k_verif + w`` (docs/llr.md), so a
+  fault followed by fewer cannot be declared by any run of the archive (a later run
+  would);
+- its kind is *told by the data* when the kind test has at least 95 % power on the tested
+  samples after it: the true component's column made orthogonal to the other kind's
+  column (``sign(w)`` and ``w``) carries ``z = |size| ||P w|| / sigma`` (sigma the
+  simulator's noise std) of at least ``z(1 - category_level / 2) + z(0.95)``; below it
+  the data after the fault cannot tell dry from viscous (a wheel at a nearly constant
+  speed), and ``undecided`` is as right as the true kind (a named wrong kind or ``both``
+  is wrong either way).
 
 ``--seeds`` picks seeds (development and acceptance seeds are kept apart by the user:
 docs/results.md says which were which). Results: bench/results/fleet_false_alarms.json and
@@ -70,42 +86,92 @@ def detect_spacecraft(plan: Any, craft: Any, folder: pathlib.Path,
                       llr: dict[str, Any] | None = None) -> dict[str, Any]:
     """Commission, then run detect's code on the joined passes; return events and facts.
 
-    ``llr``: llr_detector parameters to set beside the installed ones (tests).
+    ``llr``: llr_detector parameters to set over the fleet's (config/fleet.yaml).
     """
     import yaml
     from rwa_monitor.cli.cmd_detect import load_config
     from rwa_monitor.core.identify.model import plain
+    from rwa_monitor.fleet.engine import fleet_parameters_file
     from rwa_monitor.pipelines import calibrated, detect
     commissioning, joined = spacecraft_telemetry(plan, craft)
     document, warnings, _ = calibrated.commission(commissioning)
     path = folder / f'{craft.name}.yaml'
     path.write_text(yaml.safe_dump(plain(document), sort_keys=False))
-    config = load_config(None)
+    config = load_config(fleet_parameters_file())
     block = config.setdefault('llr_detector', {}).setdefault('ros__parameters', {})
     block['calibration_file'] = str(path)
     block.update(llr or {})
     passes = joined.aux.pop('pass')
     events, summary = detect(joined.only('wheels'), config)
     wheels = summary['pipelines']['llr']['components'] if 'pipelines' in summary else {}
+    residuals = nominal_residuals(document['calibration']['wheels'], joined)
     return {'events': [e for e in events if e.detector == 'llr'], 'summary': wheels,
             'warnings': warnings, 'time': joined.time,
-            'trend': trends(document['calibration']['wheels'], joined, passes)}
+            'trend': trends(residuals, joined, passes),
+            'tested': {w: (joined.wheels[w].speed, np.isfinite(r))
+                       for w, r in residuals.items()},
+            'limits': data_limits(config)}
 
 
-def trends(blocks: dict[str, Any], joined: Any, passes: np.ndarray) -> dict[str, Any]:
+def nominal_residuals(blocks: dict[str, Any], joined: Any) -> dict[str, np.ndarray]:
+    """Return per wheel the calibrated detector's input (NaN where not tested)."""
+    from rwa_monitor.core.nominal import NominalWheel
+    out = {}
+    for wheel, block in blocks.items():
+        ch = joined.wheels[wheel]
+        out[wheel], _ = NominalWheel(block).residual(joined.time, ch.speed, ch.friction)
+    return out
+
+
+def data_limits(config: dict[str, Any]) -> dict[str, float]:
+    """Return what the detector needs after a change: samples, and the kind test's z.
+
+    ``samples``: ``w + k_verif`` (Algorithm 1 line 18, docs/llr.md); ``kind_z``: the z at
+    which the kind test (two-sided, ``category_level``) has 95 % power.
+    """
+    from scipy.stats import norm
+
+    from rwa_monitor.cli.cmd_detect import node_parameters
+    from rwa_monitor.core.llr_config import LLRConfig, PARAMETERS
+    cfg = LLRConfig.from_parameters(**{
+        k: v for k, v in node_parameters(config, 'llr_detector').items() if k in PARAMETERS})
+    return {'samples': float(cfg.window + cfg.k_verif),
+            'kind_z': float(norm.isf(cfg.category_level / 2.0) + norm.isf(0.05))}
+
+
+def kind_z(kind: str, delta_dry: float, delta_viscous: float, speed: np.ndarray,
+           sigma: float) -> float:
+    """Return the z of a change's own kind beyond the other kind's column.
+
+    The size of the true component along its column made orthogonal to the other kind's
+    column (``sign(w)`` for dry, ``w`` for viscous) over ``speed``, in noise std: the
+    kind test's expected statistic. ``both``: the smaller of the two.
+    """
+    columns = {'dry': (np.sign(speed), speed, abs(delta_dry)),
+               'viscous': (speed, np.sign(speed), abs(delta_viscous))}
+    kinds = ('dry', 'viscous') if kind == 'both' else (kind,)
+    out = math.inf
+    for name in kinds:
+        own, other, size = columns[name]
+        scale = float(other @ other)
+        rest = own - (own @ other / scale) * other if scale > 0.0 else own
+        out = min(out, size * float(np.sqrt(rest @ rest)) / sigma)
+    return out
+
+
+def trends(residuals: dict[str, np.ndarray], joined: Any,
+           passes: np.ndarray) -> dict[str, Any]:
     """Return per wheel the dry trend of the pass levels against nominal (the fleet's).
 
     As the fleet engine does (docs/fleet.md): ``pass_levels`` of each pass on the
     calibrated detector's input (``NominalWheel.residual``: NaN where not tested), then
     ``wheel_trend`` of the dry levels at the passes' mid times.
     """
-    from rwa_monitor.core.nominal import NominalWheel
     from rwa_monitor.core.trend import pass_levels, wheel_trend
     bounds = np.flatnonzero(np.diff(passes)) + 1
     out = {}
-    for wheel, block in blocks.items():
+    for wheel, residual in residuals.items():
         ch = joined.wheels[wheel]
-        residual, _ = NominalWheel(block).residual(joined.time, ch.speed, ch.friction)
         mids, levels, errors = [], [], []
         for seg in np.split(np.arange(len(joined)), bounds):
             lv = pass_levels(joined.time[seg], ch.speed[seg], residual[seg])
@@ -156,12 +222,22 @@ def score_spacecraft(plan: Any, craft: Any, found: dict[str, Any]) -> dict[str, 
             since = float(np.max(starts[starts <= lo], initial=-math.inf))
             hits = [e for e in first if e.time >= since - 1e-9
                     and e.declared_time >= first_sample]
+            speed, tested = found['tested'][wheel]
+            after_tested = tested & (time >= fault.time_s)
+            z = kind_z(fault.kind, fault.delta_dry, fault.delta_viscous,
+                       speed[after_tested], craft.noise_std)
             result = {'truth_kind': fault.kind, 'time_s': fault.time_s,
-                      'first_sample_s': first_sample, 'found': bool(hits)}
+                      'first_sample_s': first_sample, 'found': bool(hits),
+                      'tested_after': int(after_tested.sum()),
+                      'testable': bool(after_tested.sum() >= found['limits']['samples']),
+                      'kind_z': z, 'kind_told': bool(z >= found['limits']['kind_z'])}
             if hits:
                 result.update(_brief(hits[0], time, events))
                 result['misdated_s'] = max(0.0, lo - hits[0].time)
                 result['event_index'] = hits[0].index
+            result['right_kind'] = bool(hits) and (
+                result['final_kind'] == fault.kind
+                or (not result['kind_told'] and result['final_kind'] == 'undecided'))
             faults.append(result)
         found_at = {f.get('event_index') for f in faults}
         false = [e for e in first if e.time < limit and e.index not in found_at]
@@ -232,6 +308,10 @@ def totals(crafts: list[dict[str, Any]]) -> dict[str, Any]:
             'faults_right_kind': sum(f['found'] and f['final_kind'] == f['truth_kind']
                                      for f in faults),
             'faults_misdated': sum(f.get('misdated_s', 0.0) > 0 for f in faults),
+            'faults_testable': sum(f['testable'] for f in faults),
+            'faults_testable_found': sum(f['testable'] and f['found'] for f in faults),
+            'faults_kind_told': sum(f['found'] and f['kind_told'] for f in faults),
+            'faults_right_kind_as_told': sum(f['right_kind'] for f in faults),
             'wear_declarations': sum(len(w['wear_declarations']) for w in wheels),
             'wear_declarations_ramp': sum(d['kind_shape'] == 'ramp' for w in wheels
                                           for d in w['wear_declarations']),
@@ -252,7 +332,7 @@ def evaluate(seeds: Iterable[int], spacecraft: int, days: float,
              llr: dict[str, Any] | None = None) -> dict[str, Any]:
     """Run every seed; return per-seed results and the totals.
 
-    ``llr``: llr_detector parameters set beside the installed ones (an operating point).
+    ``llr``: llr_detector parameters set over the fleet's (another operating point).
     """
     with tempfile.TemporaryDirectory(prefix='fleet_fa_') as tmp:
         runs = [run_seed(s, spacecraft, days, pathlib.Path(tmp), llr) for s in seeds]
@@ -271,20 +351,25 @@ def markdown(result: dict[str, Any], label: str) -> str:
             f'seeds {_span(s["seeds"])}{_setting(s)}; goal at most {GOAL_PER_100_H:g} false first '
             'declaration per 100 healthy wheel-hours.\n\n'
             + report.table(['seed', 'false', 'healthy wheel-hours', 'per 100 h',
-                            'faults found', 'right final kind',
+                            'faults found (of those testable)',
+                            'right final kind (as the data tell it)',
                             'wearing wheels: declarations', 'trend flag: wearing / others'],
                            rows))
 
 
 def _setting(settings: dict[str, Any]) -> str:
     rate = settings.get('llr', {}).get('false_alarm_rate')
-    return '' if rate is None else f', r = {rate:g} (not the installed default)'
+    if rate is None:
+        return ", the fleet's parameters (config/fleet.yaml)"
+    return f", r = {rate:g} set over the fleet's parameters"
 
 
 def _cells(t: dict[str, Any]) -> list[Any]:
     return [t['false'], f'{t["healthy_hours"]:.1f}', f'{t["false_per_100_h"]:.2f}',
-            f'{t["faults_found"]}/{t["faults"]} ({t.get("faults_misdated", 0)} misdated)',
-            f'{t["faults_right_kind"]}/{t["faults"]}',
+            f'{t["faults_found"]}/{t["faults"]} ({t["faults_testable_found"]}/'
+            f'{t["faults_testable"]}; {t.get("faults_misdated", 0)} misdated)',
+            f'{t["faults_right_kind"]}/{t["faults"]} ({t["faults_right_kind_as_told"]}/'
+            f'{t["faults_found"]}; kind told by the data {t["faults_kind_told"]})',
             f'{t["wear_declarations"]} ({t["wear_declarations_ramp"]} ramp)',
             f'{t.get("wearing_trend_flagged", "-")}/{t.get("wearing_wheels", "-")} / '
             f'{t.get("other_trend_flagged", "-")}']
@@ -308,7 +393,9 @@ def run(out: pathlib.Path, quick: bool, seeds: Iterable[int] = DEFAULT_SEEDS,
     t = result['totals']
     print(f'{label}: {t["false"]} false first declarations in {t["healthy_hours"]:.1f} '
           f'healthy wheel-hours ({t["false_per_100_h"]:.2f} per 100 h); faults found '
-          f'{t["faults_found"]}/{t["faults"]}, right kind {t["faults_right_kind"]}')
+          f'{t["faults_found"]}/{t["faults"]} (testable {t["faults_testable_found"]}/'
+          f'{t["faults_testable"]}), right kind {t["faults_right_kind"]} (as the data tell '
+          f'it {t["faults_right_kind_as_told"]}/{t["faults_found"]})')
     if not quick:
         report.update_section(name, markdown(result, label))
     return result
@@ -332,7 +419,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--out', type=pathlib.Path, default=report.RESULTS_DIR)
     parser.add_argument('--quick', action='store_true')
     parser.add_argument('--false-alarm-rate', type=float, default=None,
-                        help="the LLR's r (default: config/rwa_monitor.yaml)")
+                        help="the LLR's r (default: the fleet's, config/fleet.yaml)")
     args = parser.parse_args(argv)
     os.environ.setdefault('PYTHONHASHSEED', '0')
     llr = ({} if args.false_alarm_rate is None

@@ -95,16 +95,20 @@ def make_archive(root: pathlib.Path, work: pathlib.Path) -> dict[str, pathlib.Pa
 
 def detect_events(path: pathlib.Path, calibration: pathlib.Path | None = None,
                   config: pathlib.Path | None = None) -> list[dict]:
-    """Return the events of ``rwa-monitor detect`` on one file."""
+    """Return the events of ``rwa-monitor detect`` on one file.
+
+    ``config`` None: the fleet's own parameters (config/fleet.yaml), which ``fleet`` reads
+    without ``--config``: the engine equals ``detect`` given the same parameters.
+    """
     import json
 
     from rwa_monitor.cli.main import main
+    from rwa_monitor.fleet.engine import fleet_parameters_file
     out = path.with_suffix('.events.json')
-    args = ['detect', str(path), '-o', str(out)]
+    args = ['detect', str(path), '-o', str(out),
+            '--config', str(config or fleet_parameters_file())]
     if calibration is not None:
         args += ['--calibration', str(calibration)]
-    if config is not None:
-        args += ['--config', str(config)]
     assert main(args) in (0, 1, 3)
     return json.loads(out.read_text())['events']
 

@@ -164,3 +164,44 @@ def test_a_slow_wear_is_one_growing_change_not_a_chain_of_steps():
         kinds.append([e for e in events if e.index == first[-1].index][-1].kind)
     assert firsts <= 20
     assert kinds.count('dry') >= 8 and not {'viscous', 'both'} & set(kinds)
+
+
+def test_what_the_data_after_a_fault_can_tell():
+    """The scoring's limits: samples Algorithm 1 needs, and the kind test's z (the maths)."""
+    from rwa_monitor.cli.cmd_detect import load_config
+    limits = bench.data_limits(load_config(None))
+    assert limits['samples'] == 500 + 250                     # w + k_verif (w // 2)
+    assert limits['kind_z'] == pytest.approx(3.2905 + 1.6449, abs=1e-3)
+    # A constant speed: dry and viscous are one column, nothing tells them apart.
+    flat = np.full(600, 85.0)
+    assert bench.kind_z('viscous', 0.0, 4e-7, flat, 6e-5) == pytest.approx(0.0, abs=1e-9)
+    assert bench.kind_z('dry', 3e-5, 0.0, flat, 6e-5) == pytest.approx(0.0, abs=1e-9)
+    # Two speeds of one sign, n samples each: w less its mean has norm sqrt(2n) dw / 2.
+    n, low, high = 400, 80.0, 120.0
+    two = np.repeat([low, high], n)
+    expected = 4e-7 * np.sqrt(2 * n) * (high - low) / 2 / 6e-5
+    assert bench.kind_z('viscous', 0.0, 4e-7, two, 6e-5) == pytest.approx(expected)
+    # Both signs at equal |w|: sign(w) and w are one column again.
+    assert bench.kind_z('both', 1e-4, 4e-7, np.tile([-90.0, 90.0], 300), 6e-5) == \
+        pytest.approx(0.0, abs=1e-9)
+
+
+def test_the_seeded_fault_is_testable_and_its_kind_told(seed_one):
+    fault = seed_one['sc4']['wheels']['rw4']['faults'][0]
+    assert fault['testable'] and fault['tested_after'] >= 750
+    assert fault['kind_told'] and fault['right_kind']
+
+
+def test_the_fleet_reads_its_own_operating_point():
+    """config/fleet.yaml sets r for a constellation; every other value is the schema's."""
+    from rwa_monitor.core.schema import FLEET, LLR, VSADC
+    from rwa_monitor.fleet.engine import fleet_parameters_file, node_blocks
+    from rwa_monitor.telemetry.parameters_file import read_parameters_file
+    document = read_parameters_file(fleet_parameters_file())
+    assert document == {'llr_detector': {'ros__parameters': {'false_alarm_rate': 3.0e-6}}}
+    blocks = node_blocks(None)
+    assert blocks['llr']['false_alarm_rate'] == 3.0e-6
+    for name, schema in (('llr', LLR), ('vsadc', VSADC), ('fleet', FLEET)):
+        defaults = {p.name: p.default for p in schema.params}
+        differ = {k for k, v in blocks[name].items() if defaults.get(k, v) != v}
+        assert differ == ({'false_alarm_rate'} if name == 'llr' else set()), name

@@ -48,7 +48,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                        help='an existing Dask scheduler (dask scheduler / dask worker)')
     parser.add_argument('--config', type=pathlib.Path, metavar='YAML',
                         help='parameters file in the node format (default: the installed '
-                             'config/rwa_monitor.yaml)')
+                             "config/fleet.yaml, the fleet's operating point; a value absent "
+                             "from the file is the schema's default)")
     parser.add_argument('--state', type=pathlib.Path, metavar='DIR',
                         help='state folder: continue from the last run and move it on (a '
                              'state of another version or configuration is refused)')

@@ -23,6 +23,7 @@ import sys
 import time as _time
 from typing import Iterator, Mapping, TextIO, TYPE_CHECKING
 
+from rwa_monitor import paths
 from rwa_monitor.core.schema import FLEET, LLR, VSADC
 from rwa_monitor.exceptions import ConfigError
 from rwa_monitor.fleet import archive as arc, state
@@ -38,6 +39,7 @@ if TYPE_CHECKING:
 # Passes of a spacecraft fed by one task: consecutive ones up to about this many bytes of
 # files (a task costs a few milliseconds of the engine's own).
 TASK_BYTES = 64 << 20
+FLEET_PARAMETERS = 'fleet.yaml'
 
 
 @contextlib.contextmanager
@@ -73,10 +75,18 @@ def dask_client(workers: int = 2, scheduler: str | None = None) -> Iterator[Clie
         yield client
 
 
+def fleet_parameters_file() -> pathlib.Path:
+    """Return the installed config/fleet.yaml: the fleet's parameters without --config."""
+    return paths.config_file(FLEET_PARAMETERS)
+
+
 def node_blocks(config_path: pathlib.Path | None) -> dict[str, dict[str, object]]:
-    """Return the checked llr, vsadc and fleet parameter blocks of a parameters file."""
-    config = read_parameters_file(config_path)
-    where = config_path or 'installed parameters'
+    """Return the checked llr, vsadc and fleet parameter blocks of a parameters file.
+
+    ``None``: the installed fleet parameters (config/fleet.yaml).
+    """
+    where = config_path or fleet_parameters_file()
+    config = read_parameters_file(where)
     blocks = {'llr': dict(block_values(config, LLR, where)),
               'vsadc': dict(block_values(config, VSADC, where)),
               'fleet': dict(block_values(config, FLEET, where))}
@@ -165,7 +175,7 @@ def run_archive(archive: str | pathlib.Path, *, client: Client | None = None,
         crafts, blocks, engine, run=run, epoch=epoch, state_dir=state_dir, loaded=loaded,
         saved=saved, prior_history=prior_history, prior_trend=prior_trend,
         timings=_timings(chains, wall, _time.process_time() - start_cpu),
-        config=str(config or 'installed parameters'))
+        config=str(config or fleet_parameters_file()))
 
 
 def _submit(client: Client, plans: list[SpacecraftPlan], task_bytes: int
