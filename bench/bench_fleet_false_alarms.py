@@ -366,10 +366,10 @@ def _setting(settings: dict[str, Any]) -> str:
 
 def _cells(t: dict[str, Any]) -> list[Any]:
     return [t['false'], f'{t["healthy_hours"]:.1f}', f'{t["false_per_100_h"]:.2f}',
-            f'{t["faults_found"]}/{t["faults"]} ({t["faults_testable_found"]}/'
-            f'{t["faults_testable"]}; {t.get("faults_misdated", 0)} misdated)',
-            f'{t["faults_right_kind"]}/{t["faults"]} ({t["faults_right_kind_as_told"]}/'
-            f'{t["faults_found"]}; kind told by the data {t["faults_kind_told"]})',
+            f'{t["faults_found"]}/{t["faults"]} ({t.get("faults_testable_found", "-")}/'
+            f'{t.get("faults_testable", "-")}; {t.get("faults_misdated", 0)} misdated)',
+            f'{t["faults_right_kind"]}/{t["faults"]} ({t.get("faults_right_kind_as_told", "-")}'
+            f'/{t["faults_found"]}; kind told by the data {t.get("faults_kind_told", "-")})',
             f'{t["wear_declarations"]} ({t["wear_declarations_ramp"]} ramp)',
             f'{t.get("wearing_trend_flagged", "-")}/{t.get("wearing_wheels", "-")} / '
             f'{t.get("other_trend_flagged", "-")}']
