@@ -134,8 +134,11 @@ def test_nodes_and_replay_stop_cleanly_on_signals(tmp_path, sig):
             try:
                 code = proc.wait(timeout=60)
             except subprocess.TimeoutExpired:
+                proc.send_signal(signal.SIGUSR1)      # every thread's stack into its log
+                time.sleep(2.0)
                 proc.kill()
-                pytest.fail(f'{name} did not stop on {sig.name}')
+                tail = log.read_text(errors='replace')[-6000:]
+                pytest.fail(f'{name} did not stop on {sig.name}; its log ends:\n{tail}')
             text = log.read_text(errors='replace')
             assert 'Traceback' not in text and 'RCLError' not in text, text
             assert 'context is invalid' not in text, text    # no logging after shutdown
@@ -199,3 +202,30 @@ def test_output_piped_into_head_ends_quietly(command):
     result = subprocess.run(f'{_script("rwa-monitor")} {command} | head -c 10', shell=True,
                             capture_output=True, text=True, timeout=120)
     assert result.stderr == '' and len(result.stdout) == 10
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+def test_a_node_writes_its_threads_stacks_on_sigusr1_and_goes_on(tmp_path):
+    """A node asked with kill -USR1 writes where it is (docs/nodes.md) and goes on."""
+    tele, _ = simulate_friction_with_truth(wheels=['rw1'], n_samples=2000, rate_hz=10.0,
+                                           seed=5)
+    path = tmp_path / 'short.csv'
+    write_telemetry(path, tele)
+    log = tmp_path / 'replay.log'
+    with RosWorld() as world:
+        proc = subprocess.Popen([_script('rwa-monitor-replay'), '--ros-args', '-p',
+                                 f'file:={path}', '-p', 'rate:=1.0'], env=world.env(),
+                                stdout=log.open('w'), stderr=subprocess.STDOUT)
+        try:
+            assert _wait_for_text(log, 'replaying', 180.0)
+            proc.send_signal(signal.SIGUSR1)
+            assert _wait_for_text(log, 'most recent call first', 30.0)
+            assert proc.poll() is None                 # the dump does not stop the node
+            proc.send_signal(signal.SIGINT)
+            assert proc.wait(timeout=60) == 0
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+    text = log.read_text(errors='replace')
+    assert 'in spin' in text and 'Traceback' not in text, text

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import faulthandler
 import signal
 import sys
 import textwrap
@@ -172,6 +173,9 @@ def run_nodes(factories: Sequence[Callable[[], Node]], args: Sequence[str] | Non
     interrupted = threading.Event()
     if threading.current_thread() is threading.main_thread():
         signal.signal(signal.SIGINT, _interrupt_handler(interrupted))
+        # A node that does not stop can be asked where it is: kill -USR1 PID writes every
+        # thread's Python stack to stderr (docs/nodes.md).
+        faulthandler.register(signal.SIGUSR1, all_threads=True)
     try:
         with _rcl_quiet():   # our one line below says what rcl's own [ERROR] line would
             rclpy.init(args=with_sim_time(argv))
