@@ -106,7 +106,13 @@ def test_cli_outputs_and_unreadable_pass(tmp_path):
     out = tmp_path / 'out'
     code = main(['fleet', str(tmp_path / 'archive'), '-o', str(out), '--workers', '1'])
     assert code == 3
-    fleet = json.loads((out / 'summary.json').read_text())['spacecraft']
+    whole = json.loads((out / 'summary.json').read_text())
+    # Without --config: the fleet's own file, and the operating point it sets, said twice.
+    assert whole['config'].endswith('fleet.yaml')
+    assert whole['operating_point'] == {'false_alarm_rate': 3e-6, 'window': 500,
+                                        'category_level': 1e-3}
+    assert 'false-alarm rate r = 3e-06 per test' in (out / 'report.html').read_text()
+    fleet = whole['spacecraft']
     assert 'no readable pass' in fleet['sat-empty']['not_examined']['spacecraft']
     assert 'calibration.yaml' in fleet['sat-d']['not_examined']['spacecraft']
     summary = fleet['sat-c']

@@ -132,6 +132,12 @@ def _overview(changes: list, summary: Mapping[str, Any], trends: Sequence[Mappin
              f'{"" if epoch else "; the archive has no epoch: times are seconds of the archive"}'
              f'.</p>', f'<p>{", ".join(facts)}. Trend: weighted least-squares slope of the '
              f'pass levels in time, two-sided t test; flagged below p = {TREND_LEVEL:g}.</p>']
+    point = summary.get('operating_point') or {}
+    if 'false_alarm_rate' in point:
+        lines.append(f'<p>Changes: LLR detector at false-alarm rate r = '
+                     f'{number(point["false_alarm_rate"]):g} per test, window '
+                     f'{_e(point.get("window"))} samples; parameters from '
+                     f'{_e(summary.get("config"))}.</p>')
     missing = []
     for craft, block in sorted((summary.get('spacecraft') or {}).items()):
         for what, why in sorted((block.get('not_examined') or {}).items()):

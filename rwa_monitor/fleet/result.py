@@ -21,6 +21,10 @@ from rwa_monitor.fleet import history, state
 from rwa_monitor.fleet.plan import Blocks, SpacecraftPlan
 from rwa_monitor.fleet.records import Chain, GYRO, SpacecraftRecord, TrendRow
 
+# LLR parameters an operator needs beside the events (summary.json, report.html): how
+# often a healthy wheel is declared by chance depends on them (docs/fleet.md).
+OPERATING_POINT = ('false_alarm_rate', 'window', 'category_level')
+
 
 @dataclass(frozen=True)
 class SpacecraftResult:
@@ -204,6 +208,7 @@ class FleetResult:
                    'already_processed': self.already_processed,
                    'epoch_utc': history.utc(self.epoch, 0.0) if self.epoch else None,
                    'engine': {**engine, **self.timings}, 'config': config,
+                   'operating_point': {name: blocks['llr'][name] for name in OPERATING_POINT},
                    'state': None if self.state_dir is None else str(self.state_dir)}
         limits = trend_limits(blocks['fleet'])
         self.trends = wheel_trends([r.fields() for r in self.trend], limits)
