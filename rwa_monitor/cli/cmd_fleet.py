@@ -84,6 +84,9 @@ def report(out: pathlib.Path, result) -> int:
               f'{result.new_passes} new passes of {len(crafts)} spacecraft in '
               f'{result.timings["wall_s"]:.1f} s ({result.summary["events"]} events in the '
               'history)')
+    point = result.summary['operating_point']
+    print(f'changes tested at false-alarm rate r = {point["false_alarm_rate"]:g} per test '
+          f'(parameters: {result.summary["config"]})')
     for craft, entry in crafts.items():
         for what, why in entry['not_examined'].items():
             print(f'not examined: {craft} {what}: {why}')
