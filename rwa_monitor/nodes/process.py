@@ -174,8 +174,10 @@ def run_nodes(factories: Sequence[Callable[[], Node]], args: Sequence[str] | Non
     if threading.current_thread() is threading.main_thread():
         signal.signal(signal.SIGINT, _interrupt_handler(interrupted))
         # A node that does not stop can be asked where it is: kill -USR1 PID writes every
-        # thread's Python stack to stderr (docs/nodes.md).
-        faulthandler.register(signal.SIGUSR1, all_threads=True)
+        # thread's Python stack to the process's stderr (docs/nodes.md); none where that
+        # stream has no file descriptor (an embedding host that replaced it).
+        with contextlib.suppress(AttributeError, ValueError, OSError):
+            faulthandler.register(signal.SIGUSR1, file=sys.__stderr__, all_threads=True)
     try:
         with _rcl_quiet():   # our one line below says what rcl's own [ERROR] line would
             rclpy.init(args=with_sim_time(argv))
