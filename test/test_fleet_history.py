@@ -131,3 +131,18 @@ def test_late_pass_and_no_new_pass(archive, tmp_path, capsys):
     assert main(['fleet', str(grown), '-o', str(out), '--state', str(kept),
                  '--workers', '1']) in (0, 1)
     assert 'no new passes; 4 already processed' in capsys.readouterr().out
+
+
+def test_a_state_of_other_parameters_is_refused_naming_the_file(archive, tmp_path, capsys):
+    """A state made at detect's parameters, then a run at the fleet's own: refused (exit 2)."""
+    from rwa_monitor import paths
+    folder, _ = archive
+    kept = tmp_path / 'state'
+    assert main(['fleet', str(folder), '-o', str(tmp_path / 'one'), '--state', str(kept),
+                 '--workers', '1', '--config', str(paths.config_file())]) in (0, 1, 3)
+    capsys.readouterr()
+    code = main(['fleet', str(folder), '-o', str(tmp_path / 'two'), '--state', str(kept),
+                 '--workers', '1'])
+    err = capsys.readouterr().err
+    assert code == 2 and 'saved with other parameters' in err, err
+    assert err.rstrip().endswith('fleet.yaml'), err

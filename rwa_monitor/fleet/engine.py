@@ -161,7 +161,11 @@ def run_archive(archive: str | pathlib.Path, *, client: Client | None = None,
     with contextlib.ExitStack() as stack:
         if client is None:
             client = stack.enter_context(dask_client(workers, scheduler))
-        plans = plan(client, fleet, blocks, saved)
+        try:
+            plans = plan(client, fleet, blocks, saved)
+        except state.StateError as err:     # name the file this run's parameters came from
+            raise state.StateError(f'{err}; this run read {config or fleet_parameters_file()}'
+                                   ) from None
         finals = _submit(client, plans, task_bytes)
         chains = _gather(client, finals, plans, log)
         engine = {'name': 'dask.distributed', 'scheduler': client.scheduler.address,
