@@ -25,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from bench import report
+from bench import fleet_parts, report
 
 GOALS = {'overhead': 0.15, 'scaling_2_workers': 1.7, 'peak_rss_mb': 500.0,
          'simulate_fleet_week_s': 300.0, 'fleet_year_hours': 4.0, 'start_s': 0.5}
@@ -39,10 +39,10 @@ FEW_SPACECRAFT = 5
 def _settings(quick: bool) -> dict[str, Any]:
     if quick:
         return {'spacecraft': 3, 'days': 1.0, 'long_days': 2.0, 'repeats': 1,
-                'daily_spacecraft': 4,
+                'daily_spacecraft': 4, 'parts_repeats': 1,
                 'memory_days': (0.5, 1.0), 'memory_spacecraft': 1}
     return {'spacecraft': 20, 'days': 7.0, 'long_days': 21.0, 'repeats': 2,
-            'daily_spacecraft': FLEET_YEAR['spacecraft'],
+            'daily_spacecraft': FLEET_YEAR['spacecraft'], 'parts_repeats': 5,
             'memory_days': (2.0, 8.0), 'memory_spacecraft': 2}
 
 
@@ -239,6 +239,8 @@ def run(out_dir: pathlib.Path, quick: bool) -> dict[str, Any]:
         joined = join_passes(archive, scratch / 'joined')
         results['detect'] = plain_detect(joined)
         print(f'  detect: {results["detect"]}', flush=True)
+        results['parts'] = fleet_parts.split(archive, joined, settings['parts_repeats'])
+        print(f'  in one process: {results["parts"]}', flush=True)
         results['command'] = [whole_command(archive, scratch / f'out{i}')
                               for i in range(settings['repeats'])]
         print(f'  whole command: {results["command"]}', flush=True)
@@ -437,6 +439,7 @@ def markdown(results: dict[str, Any]) -> str:
               "the fleet: its tasks' process time on the workers plus the client's; "
               'what a worker process spends between tasks (heartbeats, scheduling '
               'messages) is not in it, and shows in the wall time.',
+              *_parts_lines(results, best['1']),
               f'- Scaling 1 -> 2 workers: x{s["scaling"]:.2f} (goal >= '
               f'{GOALS["scaling_2_workers"]}): **{word[met["scaling"]]}**.',
               '- Peak RSS of one worker: ' + ', '.join(
@@ -516,6 +519,25 @@ def markdown(results: dict[str, Any]) -> str:
                            [[k, f'{p["samples"]:.3g} / ({k} x {p["rate_per_worker"]:.3g}) '
                              f'/ 3600', f'{h:.3g}'] for k, h in p['hours'].items()])]
     return '\n'.join(lines)
+
+
+def _parts_lines(results: dict[str, Any], one: dict[str, Any]) -> list[str]:
+    """Return the bullet of the in-process split (bench/fleet_parts.py), if it was run."""
+    p = results.get('parts')
+    if not p:
+        return []
+    engine = one['cpu_s'] + one['client_cpu_s']
+    return [f'- In one process without Dask (bench/fleet_parts.py; CPU s, median of '
+            f'{results["settings"].get("parts_repeats", "?")} warm runs): `detect` '
+            f'{p["detect"]:.2f} (reading the joined files {p["detect_read"]:.2f}, detecting '
+            f'{p["detect_detect"]:.2f}); the steps of every spacecraft {p["step"]:.2f} '
+            f'({100 * (p["step"] / p["detect"] - 1):+.0f} %: reading the '
+            f'{results["simulate"]["passes"]} passes {p["step_read"]:.2f}, feeding the '
+            f'runners {p["step_feed"]:.2f}, trend levels {p["step_trend"]:.2f}, the rest '
+            f'{p["step_rest"]:.2f}); the scan of the plan {p["scan"]:.2f} (on the workers, '
+            f'not in the CPU above). The cluster adds {engine - p["step"]:.2f} s to the '
+            'steps (the CPU of the 1-worker run less the steps in one process). Where it '
+            'goes and what bounds it: docs/fleet.md "CPU against detect".']
 
 
 def _plot(out_dir: pathlib.Path, results: dict[str, Any]) -> None:
