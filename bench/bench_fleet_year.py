@@ -16,6 +16,7 @@ the tables add to a fleet-year of daily runs (bench fleet's 2.06 h leaves it out
 from __future__ import annotations
 
 import dataclasses
+import os
 import pathlib
 import shutil
 import statistics
@@ -63,6 +64,7 @@ def age_state(fresh: pathlib.Path, aged: pathlib.Path, days: int) -> dict[str, i
 def run(out_dir: pathlib.Path, quick: bool) -> dict[str, Any]:
     """Run the measurement; write fleet_year.json and docs/results.md's section."""
     settings = _settings(quick)
+    load_before = os.getloadavg()[0]
     with tempfile.TemporaryDirectory(prefix='bench-fleet-year-') as tmp:
         scratch = pathlib.Path(tmp)
         archive = scratch / 'archive'
@@ -85,7 +87,7 @@ def run(out_dir: pathlib.Path, quick: bool) -> dict[str, Any]:
                          'median_wall_s': statistics.median(walls)})
             print(f'fleet_year: age {age} d: {statistics.median(walls):.1f} s', flush=True)
     results = {'settings': settings, 'archive': facts, 'day1': day1, 'ages': ages,
-               **_year(ages)}
+               'load_before': load_before, 'load_after': os.getloadavg()[0], **_year(ages)}
     write_json(out_dir, 'fleet_year', results)
     if not quick:
         update_section('fleet_year', markdown(results))
@@ -115,7 +117,8 @@ def markdown(results: dict[str, Any]) -> str:
         f'{results["archive"]["passes"]} passes) run with `--state` after day 1, the '
         'state aged by repeating its trend rows and events once per earlier day '
         '(bench/bench_fleet_year.py); whole command, 2 workers, median of '
-        f'{s["repeats"]}.', '',
+        f'{s["repeats"]}; load average of the 2-core machine (1 min) '
+        f'{results["load_before"]:.1f} before, {results["load_after"]:.1f} after.', '',
         table(['state age (days)', 'trend rows', 'history events', 'median wall (s)',
                'runs (s)'], rows), '',
         f'- Extra time of a run at the last age: '
