@@ -128,9 +128,24 @@ def daily_runs(scratch: pathlib.Path, spacecraft: int) -> dict[str, Any]:
     A 2-day archive is split by each pass's first stamp into day 1 and days 1-2 (hard
     links); the second run finds day 1 processed and runs day 2 only, as a daily job does.
     """
-    import pyarrow.parquet as pq
     archive = scratch / 'daily'
     facts = simulate(archive, spacecraft, 2.0, seed=31)
+    days = split_days(archive, scratch)
+    state = scratch / 'daily-state'
+    first = whole_command(days[1], scratch / 'daily-out1', state=state)
+    second = whole_command(days[2], scratch / 'daily-out2', state=state)
+    shutil.rmtree(archive, ignore_errors=True)
+    return {'spacecraft': spacecraft, 'passes': facts['passes'], 'day1': first,
+            'day2': second}
+
+
+def split_days(archive: pathlib.Path, scratch: pathlib.Path) -> dict[int, pathlib.Path]:
+    """Return archives of day 1 and of days 1-2 of a 2-day ``archive`` (hard links).
+
+    A pass belongs to the days its first stamp falls in; files without one (truth.json,
+    the epoch) go to both.
+    """
+    import pyarrow.parquet as pq
     days = {1: scratch / 'day1', 2: scratch / 'days12'}
     for path in sorted(archive.rglob('*')):
         if path.is_dir():
@@ -142,12 +157,7 @@ def daily_runs(scratch: pathlib.Path, spacecraft: int) -> dict[str, Any]:
             if first < day * 86400.0:
                 (root / relative).parent.mkdir(parents=True, exist_ok=True)
                 os.link(path, root / relative)
-    state = scratch / 'daily-state'
-    first = whole_command(days[1], scratch / 'daily-out1', state=state)
-    second = whole_command(days[2], scratch / 'daily-out2', state=state)
-    shutil.rmtree(archive, ignore_errors=True)
-    return {'spacecraft': spacecraft, 'passes': facts['passes'], 'day1': first,
-            'day2': second}
+    return days
 
 
 def start_times(repeats: int = 5) -> dict[str, float]:

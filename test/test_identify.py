@@ -195,6 +195,10 @@ def test_basilisk_friction_hysteresis_is_found_without_being_declared(tmp_path):
                     '-o', str(path)], check=True, capture_output=True, timeout=600)
     from rwa_monitor.telemetry import read_telemetry
     sel = identify(prepare(read_telemetry(path), 'rw1'))
-    assert [e.name for e in sel.effects][:1] == ['stribeck_hysteresis']
+    # Both of the simulator's features near zero are named: the hysteresis and the
+    # smoothed Coulomb ramp (`presliding`); which enters first is not the claim (since the
+    # cross-validated selection of issue 35 the ramp comes first on this record).
+    assert 'stribeck_hysteresis' in [e.name for e in sel.effects]
+    assert 'presliding' in [e.name for e in sel.effects]
     assert 'smooth_speed' not in [e.name for e in sel.effects]
     assert sel.final_fit.rmse_test < sel.baseline_fit.rmse_test

@@ -163,3 +163,22 @@ def test_identify_schema_bounds_are_the_core_bounds(tmp_path):
             prepare_samples(data.time, data.speed, data.speed, half_width=h)
     with pytest.raises(SystemExit):
         main(['identify', 'x.csv', '--alpha', '0.6', '-o', str(tmp_path)])
+
+
+def test_reversals_held_out_only_are_noted():
+    from types import SimpleNamespace
+
+    from rwa_monitor.core.identify.fitting import held_out_mask
+    from rwa_monitor.core.identify.report import reversals
+    n = 6000
+    test = held_out_mask(n)
+    speed = np.full(n, 5.0)
+    held = np.flatnonzero(test)
+    speed[held[150]:held[150] + 10] = -5.0         # two sign changes, both held out
+    found = reversals(SimpleNamespace(data=SimpleNamespace(speed=speed)))
+    assert found['total'] == 2 and found['held_out'] == 2 and found['training'] == 0
+    assert 'held-out rows' in found['note']
+    train = np.flatnonzero(~test)
+    speed[train[150]:train[150] + 10] = -5.0       # two more, in training rows
+    found = reversals(SimpleNamespace(data=SimpleNamespace(speed=speed)))
+    assert found == {'total': 4, 'held_out': 2, 'training': 2, 'note': None}

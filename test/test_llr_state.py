@@ -317,6 +317,12 @@ EDITS = [
     ('change.tau', lambda s: _with(s, change=dataclasses.replace(s.change, tau=-1))),
     ('change.checks', lambda s: _with(s, change=dataclasses.replace(
         s.change, checks=s.change.checks[::-1]))),
+    # The ramp offsets t - change.time: an edited time overflowed them (found by the
+    # property test below with 1e300), or shifts every re-check's ramp shapes.
+    ('change.time', lambda s: _with(s, change=dataclasses.replace(s.change, time=1e300))),
+    ('change.time', lambda s: _with(s, change=dataclasses.replace(s.change, time=-1e300))),
+    ('change.time', lambda s: _with(s, change=dataclasses.replace(
+        s.change, time=s.change.time + 0.5))),
     ('I_CHECKPOINT', lambda s: _with(s, change=None)),
     ('last_event', lambda s: _with(s, last_event=dataclasses.replace(
         s.last_event, component='rw9'))),

@@ -167,6 +167,10 @@ def _write(args, found, many, title, work, results, agreement, not_examined) -> 
               f'{", ".join(e["name"] for e in result["effects"]) or "none"}'
               + (f'; speed RMSE {speed["before"]:.4g} -> {speed["after"]:.4g} rad/s'
                  if speed else '') + f'; report in {shown}')
+        from rwa_monitor.core.identify.report import reversals
+        note = reversals(selection)['note']
+        if note:
+            print(f'{selection.data.wheel}: note: {note}')
     if many:
         summary = side_by_side(results, agreement)
         if not_examined:

@@ -32,7 +32,8 @@ from rwa_monitor.core import llr_kinds, llr_layout as layout, llr_stats, records
 from rwa_monitor.core.gchi2 import skip_threshold
 from rwa_monitor.core.llr_config import LLRConfig
 from rwa_monitor.core.llr_noise import SPEED_FIT_CAP, speed_fit_ready
-from rwa_monitor.core.llr_state import COUNTER_NAMES, fresh, Live, LLRState, working
+from rwa_monitor.core.llr_state import (
+    COUNTER_NAMES, DeclaredChange, fresh, Live, LLRState, working)
 from rwa_monitor.core.records import RecordError
 
 # Slots of the kernel arrays set from the parameters (equal to a fresh detector's).
@@ -258,3 +259,28 @@ def _change(live: Live, config: LLRConfig) -> None:
         values = getattr(change, name)
         if any(b <= a for a, b in zip(values, values[1:])):
             _fail(f'change.{name}', 'positions not increasing')
+    _change_time(live, change)
+
+
+def _change_time(live: Live, change: DeclaredChange) -> None:
+    """Check the change time against the samples the ring still holds.
+
+    The categorisation's ramp offsets are ``t - change.time`` (core/llr_growth.py): a
+    time edited far from the samples overflows their squares and poisons every later
+    re-check. The time is the sample time at ``tau`` (llr_changes ``_declare``): equal to
+    it while the ring holds ``tau``, else before the oldest sample it holds; and the last
+    ramp block's offset is ``t(ramp_end) - change.time`` while the ring holds
+    ``ramp_end``.
+    """
+    pos, length = live.position, int(live.ints[layout.I_L])
+    times = live.ring.time
+    oldest = max(0, pos - length)
+    if change.tau >= oldest:
+        ok = change.time == times[change.tau % length]
+    else:
+        ok = change.time < times[oldest % length]
+    if ok and change.ramp_end >= oldest:
+        ok = times[change.ramp_end % length] - change.time == change.ramp[-1, 0]
+    if not ok:
+        _fail('change.time', f'{change.time!r} is not the time of the change at position '
+              f'{change.tau} as the samples held and the ramp sums give it')

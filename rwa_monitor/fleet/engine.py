@@ -31,6 +31,7 @@ from rwa_monitor.fleet.chain import step
 from rwa_monitor.fleet.plan import plan, SpacecraftPlan
 from rwa_monitor.fleet.records import Chain, PassRecord, SpacecraftRecord, WorkFacts
 from rwa_monitor.fleet.result import FleetResult, SpacecraftResult
+from rwa_monitor.fleet.trend_table import TrendTable
 from rwa_monitor.telemetry.parameters_file import block_values, read_parameters_file
 
 if TYPE_CHECKING:
@@ -174,7 +175,7 @@ def run_archive(archive: str | pathlib.Path, *, client: Client | None = None,
     run = (loaded.generation + 1) if loaded else (1 if state_dir is not None else 0)
     crafts = [_result(p, chains.get(p.id), run) for p in plans]
     prior_history = loaded.history if loaded else []
-    prior_trend = loaded.trend if loaded else []
+    prior_trend = loaded.trend if loaded else TrendTable.empty()
     return FleetResult.assemble(
         crafts, blocks, engine, run=run, epoch=epoch, state_dir=state_dir, loaded=loaded,
         saved=saved, prior_history=prior_history, prior_trend=prior_trend,

@@ -26,10 +26,6 @@ if TYPE_CHECKING:
 
 FORMAT = 'rwa_monitor.fleet.outputs'
 FILES = ('events.json', 'events.parquet', 'summary.json', 'trend.parquet', 'report.html')
-TREND_COLUMNS = {'spacecraft': 'string', 'wheel': 'string', 'pass': 'string',
-                 't_start': 'float64', 't_end': 'float64', 'samples': 'int64',
-                 'dry': 'float64', 'dry_se': 'float64', 'viscous': 'float64',
-                 'viscous_se': 'float64', 'relative_to': 'string'}
 EVENT_COLUMNS = {'spacecraft': 'string', 'detector': 'string', 'component': 'string',
                  'kind': 'string', 'time': 'float64', 'index': 'int64',
                  'declared_time': 'float64', 'declared_index': 'int64',
@@ -59,15 +55,13 @@ def write_outputs(out: pathlib.Path, result: FleetResult) -> list[pathlib.Path]:
     check_output(out)
     rows = result.rows()
     summary = {'format': FORMAT, **result.summary}
-    report = render(rows, summary, [r.fields() for r in result.trend], result.trends,
-                    result.epoch)
+    report = render(rows, summary, result.trend, result.trends, result.epoch)
     with FolderOutput(out, FILES, 'rwa-monitor fleet outputs') as work:
         work.mkdir(exist_ok=True)
         write_text_atomic(work / FILES[0], _json({'events': rows}))
         write_bytes_atomic(work / FILES[1], parquet(rows, EVENT_COLUMNS))
         write_text_atomic(work / FILES[2], _json(summary))
-        write_bytes_atomic(work / FILES[3], parquet([r.fields() for r in result.trend],
-                                                    TREND_COLUMNS))
+        write_bytes_atomic(work / FILES[3], result.trend.to_parquet())
         write_text_atomic(work / FILES[4], report)
     if not (out / FILES[2]).exists():
         raise OutputError(f'{out}: the outputs were not written')

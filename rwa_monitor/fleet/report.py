@@ -26,7 +26,8 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 from rwa_monitor.core.trend import SECONDS_PER_DAY
-from rwa_monitor.fleet.trends import by_wheel, LEVELS, number
+from rwa_monitor.fleet.trend_table import TrendTable
+from rwa_monitor.fleet.trends import LEVELS, number
 
 UNITS = {'dry': 'N m', 'viscous': 'N m s/rad'}
 # A trend is flagged in the health column when its p-value is below this (two-sided; with
@@ -41,12 +42,14 @@ td.num{text-align:right;font-family:monospace}.events{background:#f6d5d5}
 
 
 def render(rows: Sequence[Mapping[str, Any]], summary: Mapping[str, Any],
-           trend_rows: Sequence[Mapping[str, Any]], trends: Sequence[Mapping[str, Any]],
+           trend_rows: TrendTable | Sequence[Mapping[str, Any]],
+           trends: Sequence[Mapping[str, Any]],
            epoch: dt.datetime | None = None, made: dt.datetime | None = None) -> str:
     """Return the report's HTML.
 
     ``rows``: the events table (fleet/history.py ``rows``: superseded ones are left
-    out here); ``summary``: summary.json's content; ``trend_rows``: trend.parquet's rows;
+    out here); ``summary``: summary.json's content; ``trend_rows``: the trend table (or
+    trend.parquet's rows);
     ``trends``: fleet/trends.py ``wheel_trends`` of them; ``epoch``: time 0 of the
     archive; ``made``: when the run was made (default now).
     """
@@ -55,13 +58,14 @@ def render(rows: Sequence[Mapping[str, Any]], summary: Mapping[str, Any],
     per_wheel: dict[tuple[str, str], list] = defaultdict(list)
     for row in changes:
         per_wheel[(str(row.get('spacecraft')), str(row.get('component')))].append(row)
-    groups = by_wheel(trend_rows)
+    table = TrendTable.of(trend_rows)
+    groups = table.by_wheel()
     plotted = [e for e in trends if needs_plot(e, per_wheel, summary)]
     made = made or dt.datetime.now(dt.timezone.utc)
     parts = ['<!DOCTYPE html>', '<html lang="en"><head><meta charset="utf-8">',
              '<title>Fleet friction report</title>', f'<style>{STYLE}</style></head><body>',
              '<h1>Fleet friction report</h1>',
-             _overview(changes, summary, trends, trend_rows, epoch, made),
+             _overview(changes, summary, trends, table.span(), epoch, made),
              _table(trends, per_wheel, summary, plotted), _events(changes, epoch),
              '<h2>Wheels</h2>',
              f'<p>Pass levels of the {len(plotted)} wheels with a change, a trend flag, a '
@@ -110,13 +114,9 @@ def _when(seconds: Any, epoch: dt.datetime | None) -> str:
 
 
 def _overview(changes: list, summary: Mapping[str, Any], trends: Sequence[Mapping],
-              trend_rows: Sequence[Mapping], epoch: dt.datetime | None,
+              data_span: tuple[float, float] | None, epoch: dt.datetime | None,
               made: dt.datetime) -> str:
     engine = summary.get('engine') or {}
-    starts = [number(r.get('t_start')) for r in trend_rows]
-    ends = [number(r.get('t_end')) for r in trend_rows]
-    starts = [t for t in starts if math.isfinite(t)]
-    ends = [t for t in ends if math.isfinite(t)]
     new = sum(bool(r.get('new')) for r in changes)
     facts = [f'{len(summary.get("spacecraft") or {})} spacecraft',
              f'{len(trends)} wheels with pass levels',
@@ -126,8 +126,8 @@ def _overview(changes: list, summary: Mapping[str, Any], trends: Sequence[Mappin
                      f'{summary.get("already_processed", 0)} processed before')
     if 'wall_s' in engine:
         facts.append(f'wall time {number(engine["wall_s"]):.1f} s')
-    span = (f'Data from {_when(min(starts), epoch)} to {_when(max(ends), epoch)}.'
-            if starts and ends else 'No pass levels.')
+    span = (f'Data from {_when(data_span[0], epoch)} to {_when(data_span[1], epoch)}.'
+            if data_span else 'No pass levels.')
     lines = [f'<p>{span} Report made {made.strftime("%Y-%m-%d %H:%M:%S")} UTC'
              f'{"" if epoch else "; the archive has no epoch: times are seconds of the archive"}'
              f'.</p>', f'<p>{", ".join(facts)}. Trend: weighted least-squares slope of the '
@@ -278,16 +278,16 @@ class _Canvas:
         self._plt.close(self.fig)
         self._style.__exit__(*exc)
 
-    def plot(self, key: tuple[str, str], rows: list, entry: Mapping[str, Any],
-             changes: list, epoch: dt.datetime | None) -> str:
-        """Return the base64 PNG of one wheel: levels with errors, trend, limit, changes."""
-        mid = np.array([0.5 * (number(r.get('t_start')) + number(r.get('t_end')))
-                        for r in rows])
-        days = mid / SECONDS_PER_DAY
+    def plot(self, key: tuple[str, str], columns: Mapping[str, np.ndarray],
+             entry: Mapping[str, Any], changes: list, epoch: dt.datetime | None) -> str:
+        """Return the base64 PNG of one wheel: levels with errors, trend, limit, changes.
+
+        ``columns``: the wheel's group of TrendTable.by_wheel.
+        """
+        days = 0.5 * (columns['t_start'] + columns['t_end']) / SECONDS_PER_DAY
         for ax, level in zip(self.axes, LEVELS):
             ax.cla()
-            y = np.array([number(r.get(level)) for r in rows])
-            se = np.array([number(r.get(f'{level}_se')) for r in rows])
+            y, se = columns[level], columns[f'{level}_se']
             ax.errorbar(days, y, yerr=se, fmt='o', ms=3, color='C0', ecolor='0.6',
                         label='pass level ± 1 s.e.')
             slope = number(entry[f'{level}_slope_per_day'])

@@ -20,6 +20,7 @@ from rwa_monitor.core.runner_facts import ComponentFacts
 from rwa_monitor.fleet import history, state
 from rwa_monitor.fleet.plan import Blocks, SpacecraftPlan
 from rwa_monitor.fleet.records import Chain, GYRO, SpacecraftRecord, TrendRow
+from rwa_monitor.fleet.trend_table import TrendTable
 
 # LLR parameters an operator needs beside the events (summary.json, report.html): how
 # often a healthy wheel is declared by chance depends on them (docs/fleet.md).
@@ -129,7 +130,7 @@ class FleetResult:
 
     crafts: list[SpacecraftResult]
     history: list[history.Entry]
-    trend: list[TrendRow]
+    trend: TrendTable
     summary: dict[str, Any]
     timings: dict[str, Any]
     run: int = 0
@@ -144,20 +145,20 @@ class FleetResult:
                  engine: dict[str, Any], *, run: int, epoch: dt.datetime | None,
                  state_dir: str | pathlib.Path | None, loaded: state.Loaded | None,
                  saved: Mapping[str, SpacecraftRecord],
-                 prior_history: list[history.Entry], prior_trend: list[TrendRow],
+                 prior_history: list[history.Entry], prior_trend: TrendTable,
                  timings: dict[str, Any], config: str) -> 'FleetResult':
         """Return the result of the gathered spacecraft (history, trend, summary)."""
         continued = [c.id for c in crafts if c.chain is not None]
         found: list[history.Entry] = []
-        trend = list(prior_trend)
+        new_rows: list[TrendRow] = []
         for c in crafts:
             if c.chain is not None:
                 found += history.entries(c.id, c.chain.events, run)
                 found += history.entries(c.id, c.chain.end_of_run, run, end_of_run=True)
-                trend += c.chain.trend
+                new_rows += c.chain.trend
         past = history.supersede(prior_history, continued)
         full = history.order(past + found)
-        trend.sort(key=lambda r: (r.spacecraft, r.wheel, r.t_start, r.pass_name))
+        trend = prior_trend.plus(new_rows).sorted()
         result = cls(crafts, full, trend, {}, timings, run, epoch,
                      None if state_dir is None else pathlib.Path(state_dir), loaded, saved)
         result.summary = result._summary(blocks, engine, config)
@@ -211,7 +212,7 @@ class FleetResult:
                    'operating_point': {name: blocks['llr'][name] for name in OPERATING_POINT},
                    'state': None if self.state_dir is None else str(self.state_dir)}
         limits = trend_limits(blocks['fleet'])
-        self.trends = wheel_trends([r.fields() for r in self.trend], limits)
+        self.trends = wheel_trends(self.trend, limits)
         add_trends(summary, self.trends, limits)
         return summary
 
@@ -223,7 +224,6 @@ class FleetResult:
         for c in self.crafts:
             if c.record is not None:
                 records[c.id] = c.record
-        from rwa_monitor.fleet.history import parquet, to_parquet
-        from rwa_monitor.fleet.outputs import TREND_COLUMNS
-        trend = parquet([r.fields() for r in self.trend], TREND_COLUMNS)
-        state.commit(self.state_dir, self.loaded, records, trend, to_parquet(self.history))
+        from rwa_monitor.fleet.history import to_parquet
+        state.commit(self.state_dir, self.loaded, records, self.trend.to_parquet(),
+                     to_parquet(self.history))

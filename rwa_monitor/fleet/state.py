@@ -44,7 +44,8 @@ from rwa_monitor.core.records import decode, encode, RecordError
 from rwa_monitor.core.wheel_runner import WheelRunnerState
 from rwa_monitor.exceptions import ConfigError
 from rwa_monitor.fleet.history import Entry, from_parquet
-from rwa_monitor.fleet.records import SpacecraftRecord, TrendRow
+from rwa_monitor.fleet.records import SpacecraftRecord
+from rwa_monitor.fleet.trend_table import TrendTable
 from rwa_monitor.telemetry.atomic import write_text_atomic
 
 FORMAT = 'rwa_monitor.fleet.state'
@@ -73,7 +74,7 @@ class Loaded:
     """A state read from its folder: its generation, records, trend rows, event history."""
 
     def __init__(self, generation: int, records: dict[str, SpacecraftRecord],
-                 trend: list[TrendRow], history: list[Entry]) -> None:
+                 trend: TrendTable, history: list[Entry]) -> None:
         self.generation = generation
         self.records = records
         self.trend = trend
@@ -125,20 +126,11 @@ def load(folder: pathlib.Path) -> Loaded | None:
                          'edited or mixed with another state)')
     records = _records(gen / FILES[0], blobs)
     try:
-        trend = [TrendRow.from_fields(r) for r in _table(blobs[FILES[2]])]
+        trend = TrendTable.from_parquet(blobs[FILES[2]])
         events = from_parquet(blobs[FILES[3]])
     except (ValueError, KeyError, TypeError, RecordError) as err:
         raise StateError(f'{gen}: its trend or event history cannot be read: {err}') from None
     return Loaded(int(match.group(1)), records, trend, events)
-
-
-def _table(data: bytes) -> list[dict[str, Any]]:
-    import pyarrow as pa
-    import pyarrow.parquet as pq
-    try:
-        return pq.read_table(io.BytesIO(data)).to_pylist()
-    except (pa.ArrowException, OSError) as err:
-        raise ValueError(str(err)) from None
 
 
 def _records(path: pathlib.Path, blobs: Mapping[str, bytes]) -> dict[str, SpacecraftRecord]:

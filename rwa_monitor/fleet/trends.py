@@ -7,7 +7,6 @@ report.html draws the same entries (it does not fit them again).
 
 from __future__ import annotations
 
-from collections import defaultdict
 from dataclasses import dataclass
 import math
 from typing import Any, Mapping, Sequence
@@ -15,6 +14,7 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 from rwa_monitor.core.trend import wheel_trend
+from rwa_monitor.fleet.trend_table import TrendTable
 
 LEVELS = ('dry', 'viscous')
 
@@ -45,16 +45,6 @@ def trend_limits(fleet_block: Mapping[str, object]) -> TrendLimits:
     return TrendLimits(limit('dry'), limit('viscous'))
 
 
-def by_wheel(rows: Sequence[Mapping[str, Any]]) -> dict[tuple[str, str], list]:
-    """Return the trend rows per (spacecraft, wheel), each group in time order."""
-    groups: dict[tuple[str, str], list] = defaultdict(list)
-    for row in rows:
-        groups[(str(row.get('spacecraft')), str(row.get('wheel')))].append(row)
-    for group in groups.values():
-        group.sort(key=lambda r: number(r.get('t_start')))
-    return dict(groups)
-
-
 def number(value: Any) -> float:
     """Return ``value`` as a float, NaN if it is none."""
     try:
@@ -63,12 +53,13 @@ def number(value: Any) -> float:
         return math.nan
 
 
-def wheel_trends(trend_rows: Sequence[Mapping[str, Any]],
+def wheel_trends(trend_rows: TrendTable | Sequence[Mapping[str, Any]],
                  limits: TrendLimits | Mapping[str, float] | None = None
                  ) -> list[dict[str, Any]]:
     """Return one row per spacecraft and wheel: the trend of its dry and viscous levels.
 
-    Each pass's level is placed at its mid time ``(t_start + t_end) / 2``; the trend is
+    ``trend_rows``: the trend table, or its rows as mappings. Each pass's level is placed
+    at its mid time ``(t_start + t_end) / 2``; the trend is
     :func:`rwa_monitor.core.trend.wheel_trend`; ``limits`` (``dry``/``viscous``, in the
     levels' own reference: ``relative_to`` of the rows) adds the projected crossing. A
     wheel whose passes mix references (a calibration added later) is fitted on the passes
@@ -79,16 +70,16 @@ def wheel_trends(trend_rows: Sequence[Mapping[str, Any]],
     """
     limits = limits.as_dict() if isinstance(limits, TrendLimits) else dict(limits or {})
     out = []
-    for (craft, wheel), rows in sorted(by_wheel(trend_rows).items()):
-        latest = rows[-1].get('relative_to', '')
-        rows = [r for r in rows if r.get('relative_to', '') == latest]
-        mid = np.array([0.5 * (number(r.get('t_start')) + number(r.get('t_end')))
-                        for r in rows])
-        entry: dict[str, Any] = {'spacecraft': craft, 'wheel': wheel, 'passes': len(rows),
+    for (craft, wheel), columns in TrendTable.of(trend_rows).by_wheel().items():
+        latest = str(columns['relative_to'][-1])
+        mine = columns['relative_to'] == latest
+        mid = 0.5 * (columns['t_start'][mine] + columns['t_end'][mine])
+        entry: dict[str, Any] = {'spacecraft': craft, 'wheel': wheel,
+                                 'passes': int(np.count_nonzero(mine)),
                                  'relative_to': latest}
         for level in LEVELS:
-            values = np.array([number(r.get(level)) for r in rows])
-            errors = np.array([number(r.get(f'{level}_se')) for r in rows])
+            values = columns[level][mine]
+            errors = columns[f'{level}_se'][mine]
             trend = wheel_trend(mid, values, errors, limits.get(level))
             crossing = trend.crossing
             entry.update({f'{level}_slope_per_day': trend.slope,
