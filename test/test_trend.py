@@ -173,7 +173,7 @@ def test_compiled_sums_equal_the_matrix_products():
     from rwa_monitor.core.llr_noise import lag_gram
     from rwa_monitor.core.trend_sums import level_sums, residual_lag_gram
     rng = np.random.default_rng(77)
-    for top in (0, 1, 3):
+    for top in (0, 1, 3, 5):
         n = 700
         t = 0.1 * np.arange(n)
         w = rng.uniform(-80.0, 80.0, n)
@@ -193,3 +193,17 @@ def test_compiled_sums_equal_the_matrix_products():
         lags = residual_lag_gram(t, w, y, 2.0, x[0], x[1], int(kept.sum()), top)
         assert np.allclose(lags[:top + 1], lag_gram(e, top), rtol=1e-12)
         assert lags[top + 1, 0] == pytest.approx(e @ e, rel=1e-12)
+
+
+def test_autocorrelation_sums_add_in_order_whatever_the_lags():
+    """The scalar walk (up to UNROLLED_LAGS) and the array walk give the in-order floats."""
+    from rwa_monitor.core.trend_sums import _autocorrelation, UNROLLED_LAGS
+    rng = np.random.default_rng(78)
+    for n in (0, 1, 2, 3, 4, 7, 500):
+        e = rng.normal(0.0, 1e-4, n) * rng.uniform(0.5, 2e3, n)
+        for top in range(UNROLLED_LAGS + 3):
+            expected = [0.0] * (top + 1)
+            for lag in range(top + 1):
+                for u in range(lag, n):
+                    expected[lag] += float(e[u]) * float(e[u - lag])
+            assert _autocorrelation(e, top).tolist() == expected, (n, top)
