@@ -530,8 +530,9 @@ def markdown(results: dict[str, Any]) -> str:
                       f'The c0 + c1 model above would say '
                       f'{s["daily_model_year_hours"]:.3g} h: its c1 holds the plots of wheels '
                       'with events, which grow with the days, not the spacecraft. Not '
-                      "counted: the history and trend tables a day's run rewrites, and the "
-                      'wheels with changes the report draws, grow through the year.']
+                      "counted here: the history and trend tables a day's run rewrites, "
+                      'which grow through the year; `python -m bench fleet_year` measures '
+                      'what they add (section "A daily fleet run late in the year").']
     lines += ['',
               f'Start-up, median of 5 (goal <= {GOALS["start_s"]} s each): ' + ', '.join(
                   f'`{k}` {v:.2f} s' for k, v in results['start'].items())
