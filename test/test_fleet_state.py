@@ -175,12 +175,21 @@ def test_random_edits_and_truncations_are_refused(saved, tmp_path_factory, file,
         return
     else:
         data[at] = byte
+    if file == state.POINTER and _same_json(path.read_bytes(), bytes(data)):
+        return      # white space of the pointer (its last newline cut): the same document
     path.write_bytes(bytes(data))
     try:
         state.load(folder)
     except state.StateError:
         return
     pytest.fail(f'an edit of {file} at {at} was accepted')
+
+
+def _same_json(before: bytes, after: bytes) -> bool:
+    try:
+        return json.loads(before) == json.loads(after)
+    except ValueError:
+        return False
 
 
 def test_a_commit_cut_short_leaves_a_whole_state(saved, client, tmp_path, monkeypatch):
