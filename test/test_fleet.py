@@ -353,3 +353,17 @@ def test_not_examined_follows_detect_coverage_rule(client, tmp_path):
     missing = result.summary['spacecraft']['sat-u']['not_examined']
     assert missing == {'rw2': f'llr: unknown: {reference["rw2"]["verdict_reason"]}'}
     assert result.incomplete
+
+
+def test_worker_peak_memory_is_its_own_not_its_starters():
+    """A process started by a large one reports its own peak (ru_maxrss would not)."""
+    import subprocess
+    import sys
+    from rwa_monitor.fleet.chain import peak_memory_mb
+    ballast = np.ones(40_000_000)   # 320 MB in this process
+    parent = peak_memory_mb()
+    child = float(subprocess.run(
+        [sys.executable, '-c', 'from rwa_monitor.fleet.chain import peak_memory_mb; '
+         'print(peak_memory_mb())'], check=True, capture_output=True, text=True).stdout)
+    assert parent > 320.0 > child > 0.0
+    del ballast

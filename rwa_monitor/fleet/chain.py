@@ -243,7 +243,25 @@ def _account(work: Mapping[str, WorkFacts], cpu_s: float) -> dict[str, WorkFacts
         worker = get_worker().address
     except (ImportError, ValueError):
         worker = 'client'
-    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+    peak = peak_memory_mb()
     out = dict(work)
     out[worker] = out.get(worker, WorkFacts()).plus(WorkFacts(cpu_s, 1, peak))
     return out
+
+
+def peak_memory_mb() -> float:
+    """Return this process's peak resident memory in MB (its own, not its starter's).
+
+    ``VmHWM`` of /proc/self/status: the high-water mark of this process image, which a
+    new process starts afresh at exec. ``ru_maxrss`` where /proc is absent: Linux keeps
+    it across exec, so a spawned worker's figure would include the RSS of the process
+    that started it.
+    """
+    try:
+        with open('/proc/self/status', encoding='ascii') as status:
+            for line in status:
+                if line.startswith('VmHWM:'):
+                    return int(line.split()[1]) / 1024.0
+    except (OSError, ValueError, IndexError):
+        pass
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
