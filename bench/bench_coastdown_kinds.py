@@ -139,6 +139,9 @@ def first_after(events: list[dict[str, Any]], join: float) -> dict[str, Any]:
         return {'kind': 'none', 'before': before}
     last = max(changes[after[0][1]], key=lambda e: e.get('revision', 0))
     return {'kind': last['kind'], 'before': before, 'reason': last.get('kind_reason'),
+            'change_after_join_s': last['time'] - join,
+            'delta_dry_nm': last.get('delta_dry_nm'),
+            'delta_viscous_nms': last.get('delta_viscous_nms'),
             'declared_after_join_s': after[0][0] - join, 'z_dry': last.get('z_dry'),
             'z_viscous': last.get('z_viscous')}
 
@@ -199,7 +202,9 @@ def run(out_dir: pathlib.Path, quick: bool) -> dict[str, Any]:
             join = write_record(csv, [(cs[r]['time'], cs[r]['speed'], cs[r]['friction'])
                                       for r in (first, second)])
             joined[f'{first[:-4]}+{second[:-4]}'] = {
-                **first_after(detect(csv, calibration)['events'], join), 'flat': flat}
+                **first_after(detect(csv, calibration)['events'], join), 'flat': flat,
+                **{f'fitted_{k}_difference': cs[second][k] - cs[first][k]
+                   for k in ('dry', 'viscous', 'drag')}}
     results.update(singles=singles, self_joins=selfs, pairs=joined,
                    elapsed_s=time.perf_counter() - start)
     results['summary'] = summarise(results)

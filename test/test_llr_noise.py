@@ -274,3 +274,61 @@ def test_inline_whitened_path_equals_the_generic_two_column_path():
         assert det.noise_model is not None and len(det.noise_model.ar) >= 1
         runs.append(([e.to_json() for e in events], det.counters))
     assert runs[0] == runs[1] and len(runs[0][0]) >= 2
+
+
+def _joined_records(seed: int, join: str):
+    """Two records of AR(1) noise (rho 0.7), the second slower, its dry level 0.3 higher.
+
+    ``join``: 'gap' (60 s between them), or 'rejected' (time runs on, 100 samples of
+    non-finite friction between them: speeds a calibration did not test).
+    """
+    rng = np.random.default_rng(seed)
+    n = 3000
+    k = np.arange(n) * 0.1
+    w = np.concatenate([30.0 + 10.0 * np.sin(k / 20.0), 6.0 + 2.0 * np.sin(k / 20.0)])
+    noise = 0.02 * ar1(2 * n, 0.7, rng)
+    f = -(1.0 + 0.3 * (np.arange(2 * n) >= n)) * np.sign(w) - 0.05 * w + noise
+    if join == 'gap':
+        return np.concatenate([k, k[-1] + 60.0 + k]), w, f, n
+    gap = np.full(100, np.nan)
+    t = np.arange(2 * n + 100) * 0.1
+    return (t, np.concatenate([w[:n], gap + 20.0, w[n:]]),
+            np.concatenate([f[:n], gap, f[n:]]), n + 100)
+
+
+@pytest.mark.parametrize('join', ['gap', 'rejected'])
+def test_a_dry_step_across_a_break_is_named_dry(join):
+    # The AR filter's memory is cleared where the sequence breaks (docs/llr.md "Noise beyond
+    # white", *Breaks*). Before that rule the lags of the first samples after the join came
+    # from before it: the whitened friction carried the step times sum(a) and the whitened
+    # speed column the jump of the speed, and every one of these 20 seeds ended `both` or
+    # `undecided` with z_viscous near -7. Filtered as at a start, the step is a dry step in
+    # the whitened model: its viscous z is standard normal, |z| <= 1.96 with probability
+    # 0.95, so at least 16 of 20 (binomial: P(fewer) < 0.003) end `dry` with it.
+    right = 0
+    for seed in range(20):
+        t, w, f, after = _joined_records(seed, join)
+        events = detect_batch(t, w, f, window=500)
+        first = [e for e in events if e.index >= after]
+        assert first and first[0].index == after
+        last = max((e for e in events if e.index == after), key=lambda e: e.revision)
+        right += last.kind == 'dry' and abs(last.details['z_viscous']) <= 1.96
+    assert right >= 16
+
+
+def test_the_filter_breaks_only_where_the_sequence_does():
+    from rwa_monitor.core import llr_kernel as kern
+    from rwa_monitor.core import llr_layout as layout
+    # A wheel sampled once a revolution: the time step grows smoothly as it slows down.
+    step = 0.05 * 1.002 ** np.arange(400)
+    t = np.cumsum(step)
+    det = LLRDetector('rw1', window=50, noise_ar_max_order=2, noise_fit_samples=120)
+    for ti, wi in zip(t, np.linspace(60.0, 20.0, t.size)):
+        det.update(float(ti), float(wi), -0.2 - 0.01 * wi)
+    live = det._live
+    j, row = int(live.ints[layout.I_POS]), int(live.ints[layout.I_ROWS])
+    last = float(t[-1])
+    assert not kern.sequence_breaks(live.floats, live.ints, j, row, last + step[-1] * 1.01)
+    assert not kern.sequence_breaks(live.floats, live.ints, j, row, last + step[-1] * 3.9)
+    assert kern.sequence_breaks(live.floats, live.ints, j, row, last + step[-1] * 4.1)
+    assert kern.sequence_breaks(live.floats, live.ints, j, row + 1, last + step[-1])

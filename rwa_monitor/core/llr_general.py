@@ -95,6 +95,13 @@ def test(live: Live, config: LLRConfig, k: int, total: np.ndarray) -> bool:
     return live.declares(k, config.log_r, config.k_verif)
 
 
+def forget_lags(live: Live) -> None:
+    """Clear the AR filter's memory at a break of the sequence (llr_kernel.breaks)."""
+    general = live.general
+    live.general = replace(general, lag_friction=general.lag_friction[:0],
+                           lag_regressors=general.lag_regressors[:0])
+
+
 def whiten(live: Live, ar: tuple[float, ...], f: float, h: np.ndarray
            ) -> tuple[float, np.ndarray]:
     """Apply the AR filter ``v_l - sum_i a_i v_(l-1-i)`` to one sample (missing lags omitted).

@@ -31,9 +31,16 @@ from rwa_monitor.core.jit import njit
 from rwa_monitor.core.llr_layout import (
     DECLARE, EXACT, F_DM, F_LAST_T, F_LOGPMIN, F_LOGR, F_MAX_F, F_MAX_W, F_PREF, F_SPEED_A,
     F_SPEED_B, F_SPEED_FLOOR, F_TR, F_Y, I_C_ROW, I_DOF, I_FLAGS, I_ILL, I_K,
-    I_KMIN, I_KVERIF, I_NLAGS, I_NON_FINITE, I_NON_INCREASING, I_O_AR, I_O_LAGS,
-    I_OUT_OF_RANGE, I_POS, I_ROWS, I_SCALARS, NON_NEGATIVE, REVISE, ring_row, setup)
+    I_KMIN, I_KVERIF, I_L, I_NLAGS, I_NON_FINITE, I_NON_INCREASING, I_O_AR, I_O_LAGS,
+    I_O_RTIME, I_OUT_OF_RANGE, I_POS, I_ROWS, I_SCALARS, NON_NEGATIVE, REVISE, ring_row,
+    setup)
 from rwa_monitor.core.llr_skip import below_skip, lower_bound, SKIP_REL
+
+# The AR filter runs over consecutive samples (docs/llr.md "Noise beyond white", *Breaks*):
+# its memory is cleared when an accepted sample does not follow the previous one, that is
+# when a sample between them was rejected, or when the time step grows more than this
+# factor over the step before it (a gap: between passes, between joined records).
+GAP_FACTOR = 4.0
 
 
 @njit(cache=True, error_model='numpy', inline='always')
@@ -139,6 +146,8 @@ def ingest_sample(fs, ints, cfg, row, t, f, h1, h2):
         o_ar = ints[I_O_AR]
         o_lag = ints[I_O_LAGS]
         n_lags = ints[I_NLAGS]
+        if n_lags > 0 and breaks(fs, ints, ints[I_POS], row, t):
+            n_lags = 0
         fw = f
         g1 = h1
         g2 = h2
@@ -195,6 +204,38 @@ def ingest_sample(fs, ints, cfg, row, t, f, h1, h2):
     if k > cfg.c + w:
         flags |= test(fs, ints, cfg, k, p0, p1, p2, p3, p4)
     return flags
+
+
+@njit(cache=True, inline='always')
+def breaks(fs, ints, j, row, t):
+    """Return True if the sample (``row``, time ``t``) at position ``j`` breaks the sequence.
+
+    Not in the paper, whose noise model is a stationary sequence without gaps. Compared
+    with the accepted samples at positions ``j - 1`` and ``j - 2`` in the ring: a row
+    index that is not the next one (a sample between them was rejected: not finite, out
+    of range, or outside the calibrated speeds), or a time step more than
+    :data:`GAP_FACTOR` times the previous one. Then the AR filter's memory holds samples
+    whose noise is not the one this sample's lags describe, and a level that changed
+    across the gap would leak into the whitened regressors of the first samples after it.
+    """
+    if j < 1:
+        return False
+    mask = ints[I_L] - 1
+    o_time = ints[I_O_RTIME]
+    prev = (j - 1) & mask
+    if ints[(I_SCALARS + prev) & NON_NEGATIVE] != row - 1:
+        return True
+    if j < 2:
+        return False
+    t1 = fs[(o_time + prev) & NON_NEGATIVE]
+    t2 = fs[(o_time + ((j - 2) & mask)) & NON_NEGATIVE]
+    return t - t1 > GAP_FACTOR * (t1 - t2)
+
+
+@njit('boolean(float64[::1], int64[::1], int64, int64, float64)', cache=True)
+def sequence_breaks(fs, ints, j, row, t):
+    """:func:`breaks` called from Python (the p > 2 path's AR filter)."""
+    return breaks(fs, ints, j, row, t)
 
 
 @njit(cache=True, inline='always')

@@ -173,6 +173,9 @@ def ingest_fitted(live: Live, config: LLRConfig, row: int, t: float, f: float, h
         flags = kern.ingest(live.floats, live.ints, row, t, f, float(h[0]), float(h[1]))
     else:
         if noise is not None and noise.ar:
+            if kern.sequence_breaks(live.floats, live.ints, int(live.ints[layout.I_POS]),
+                                    row, t):
+                llr_general.forget_lags(live)
             f, h = llr_general.whiten(live, noise.ar, f, h)
         flags = llr_general.ingest(live, config, row, t, f, np.asarray(h, dtype=float))
     return llr_changes.after(live, config, flags) if flags else []
