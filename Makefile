@@ -29,7 +29,12 @@ INTEROP := test/interop/node_modules/.installed
 # once); ROS tests lease their own domain id (test/ros_harness.py).
 TEST_WORKERS ?= 2
 
+# numba keys a cached kernel to its own file only: a kernel compiled inline into another
+# module keeps the old code after an edit. Machine code older than the newest source of
+# the package is dropped before the tests (compiled again at first use).
 test: $(STAMP) interop openmct browser
+	@newest=$$(ls -t $$(find rwa_monitor -name '*.py') | head -1); \
+	find rwa_monitor -name '*.nb[ic]' ! -newer "$$newest" -delete
 	$(PY) -m pytest test -n $(TEST_WORKERS) --dist loadfile
 
 interop:
