@@ -15,6 +15,10 @@ this process) on:
   mean; the lower dry level first; :func:`pairs`), and the "flat" ones among them, whose
   fitted difference stays within ``FLAT_REL`` of its mean over 4-36 rad/s.
 
+Besides, each self-join is run again commissioned on the two coasts of its own tyre and
+pressure (:func:`same_machine`), and each self-join not named dry gets the step check's
+statistics of bench/coastdown_growth.py (:func:`why_not_dry`).
+
 The score is the final kind of the first change declared after the join. Results:
 bench/results/coastdown_kinds.json, coastdown_kinds.png and the ``coastdown_kinds``
 section of docs/results.md.
@@ -146,6 +150,49 @@ def first_after(events: list[dict[str, Any]], join: float) -> dict[str, Any]:
             'z_viscous': last.get('z_viscous')}
 
 
+def why_not_dry(csv: pathlib.Path, calibration: pathlib.Path, join: float,
+                first: dict[str, Any]) -> dict[str, Any]:
+    """Return :func:`coastdown_growth.growth_statistics` of a self-join not named dry."""
+    import yaml
+    from bench.coastdown_growth import growth_statistics
+    from rwa_monitor.core.llr_config import LLRConfig
+    from rwa_monitor.core.nominal import NominalWheel
+    config = LLRConfig.from_parameters('drum')
+    wheel = NominalWheel(yaml.safe_load(calibration.read_text())['calibration']['wheels']['drum'])
+    t, w, f = np.loadtxt(csv, delimiter=',', skiprows=1).T
+    residual = wheel.residual(t, w, f)[0]
+    stats = growth_statistics(t, w, residual, join + first['change_after_join_s'],
+                              config.window, config.z_threshold)
+    stats['shared_speed_shape'] = {str(k): v for k, v in stats['shared_speed_shape'].items()}
+    return stats
+
+
+def same_machine(cs: dict[str, dict[str, Any]], folder: pathlib.Path) -> dict[str, Any]:
+    """Return the self-joins of each coast commissioned on its own tyre and pressure.
+
+    The commissioning: the left and the right coast of the same tyre at the same
+    pressure (the coast itself among them: the nominal of its own machine). A
+    commissioning that ``calibrate`` refuses is counted, not used.
+    """
+    out: dict[str, Any] = {'refused': 0, 'joins': {}}
+    for run in sorted(cs):
+        if run in COMMISSIONING:
+            continue
+        mate = run.replace('Left', 'Right') if 'Left' in run else run.replace('Right', 'Left')
+        if mate not in cs:
+            continue
+        sub = folder / f'same_{len(out["joins"]) + out["refused"]}'
+        sub.mkdir()
+        cal = calibrate(sorted([run, mate]), cs, sub)
+        if cal['exit'] != 0:
+            out['refused'] += 1
+            continue
+        csv = sub / 'self.csv'
+        join = write_record(csv, self_join(cs[run]))
+        out['joins'][run] = first_after(detect(csv, pathlib.Path(cal['path']))['events'], join)
+    return out
+
+
 def calibrate(runs: list[str], cs: dict[str, dict[str, Any]], folder: pathlib.Path
               ) -> dict[str, Any]:
     """Calibrate on ``runs``; return the exit code, message and tested speeds."""
@@ -196,6 +243,10 @@ def run(out_dir: pathlib.Path, quick: bool) -> dict[str, Any]:
             csv = folder / f'self_{len(selfs)}.csv'
             join = write_record(csv, self_join(c))
             selfs[run_name] = first_after(detect(csv, calibration)['events'], join)
+            if selfs[run_name]['kind'] not in ('dry', 'none'):
+                selfs[run_name]['growth'] = why_not_dry(csv, calibration, join,
+                                                        selfs[run_name])
+        results['same_machine'] = same_machine(cs, folder)
         joined = {}
         for first, second, flat in pairs(cs, others):
             csv = folder / f'pair_{len(joined)}.csv'
@@ -232,7 +283,25 @@ def summarise(results: dict[str, Any]) -> dict[str, Any]:
             'flat': _counts([p for p in pairs_ if p['flat']]),
             'flat_n': sum(p['flat'] for p in pairs_),
             'declared_before_join': sum(r['before'] > 0 for r in
-                                        [*results['self_joins'].values(), *pairs_])}
+                                        [*results['self_joins'].values(), *pairs_]),
+            'same_machine': _counts(list(results['same_machine']['joins'].values())),
+            'same_machine_n': len(results['same_machine']['joins']),
+            'same_machine_refused': results['same_machine']['refused'],
+            'not_dry': _growth_counts(results['self_joins'])}
+
+
+def _growth_counts(selfs: dict[str, dict[str, Any]]) -> dict[str, Any]:
+    """Return how the self-joins not named dry stand against the growth limit."""
+    rows = [r for r in selfs.values() if 'growth' in r]
+    limit = [r['growth']['limit'] for r in rows]
+    knots = list(rows[0]['growth']['shared_speed_shape']) if rows else []
+    below = {k: int(sum(r['growth']['shared_speed_shape'][k] <= x for r, x in zip(rows, limit)))
+             for k in knots}
+    return {'n': len(rows),
+            'after_only_above_limit': int(sum(r['growth']['after_only'] > x
+                                              for r, x in zip(rows, limit))),
+            'shared_speed_shape_at_or_below_limit': below,
+            'change_before_join': int(sum(r['change_after_join_s'] < 0 for r in rows))}
 
 
 def markdown(results: dict[str, Any]) -> str:
@@ -246,6 +315,16 @@ def markdown(results: dict[str, Any]) -> str:
         ('of which flat (fitted difference within 15 % of its mean, 4-36 rad/s)',
          s['flat_n'], s['flat']))]
     tested = ', '.join(f'{lo:.1f} to {hi:.1f}' for lo, hi in cal['tested_speeds_rad_s'])
+    growth = [[name[:-4], r['kind'], f'{r["change_after_join_s"]:.0f}',
+               f'{r["growth"]["after_only"]:.0f}',
+               *(f'{v:.1f}' for v in r['growth']['shared_speed_shape'].values()),
+               f'{r["growth"]["limit"]:.1f}']
+              for name, r in results['self_joins'].items() if 'growth' in r]
+    knots = list(next(iter(r['growth']['shared_speed_shape'] for r in
+                           results['self_joins'].values() if 'growth' in r), []))
+    rows.append(['the same coasts, each commissioned on the two coasts of its own tyre and '
+                 f'pressure ({s["same_machine_refused"]} such commissionings refused)',
+                 s['same_machine_n'], *(s['same_machine'][k] for k in KINDS)])
     return '\n'.join([
         '`python -m bench coastdown_kinds` (issue 35 item 3): drum coasts of '
         '../shared/data/measured/drum-coastdown read in place, friction J dw/dt; '
@@ -263,6 +342,14 @@ def markdown(results: dict[str, Any]) -> str:
         '',
         report.table(['records (final kind of the first change declared after the join)',
                       'n', *KINDS], rows),
+        '',
+        "Self-joins not named dry: the step check's statistic (bench/coastdown_growth.py: "
+        "white-noise least squares on the nominal residual, against the detector's "
+        'limit over its time shapes) on the after segment alone, and with a speed shape '
+        'of k knots shared by the before and the after segment.',
+        '',
+        report.table(['coast', 'kind', 'change after join (s)', 'after alone',
+                      *(f'shared shape, k = {k}' for k in knots), 'limit'], growth),
         '',
         'Plot: bench/results/coastdown_kinds.png.'])
 
