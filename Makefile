@@ -123,4 +123,4 @@ demo-bus: $(BSK_STAMP)
 	  $(DEMO_BUS)-calibration/calibration.yaml $(DEMO_BUS)-events-raw.json
 
 bench-bus: $(BSK_STAMP)
-	$(BSK_PY) -m bench bus bus_gyro
+	$(BSK_PY) -m bench bus bus_gyro bus_ramps
