@@ -23,7 +23,9 @@ from bench.report import table, update_section, write_json
 from rwa_monitor.sim.basilisk_config import available, INSTALL_HINT
 
 NAME = 'bus_ramps'
-SEEDS = tuple(range(7300, 7340))
+SEEDS = tuple(range(7500, 7540))
+# Spent: 7300-7339 (the rule of llr_kinds.stands_beside_growth was made on them) and
+# 7400-7439 (scored with a version of it that could name the other kind).
 GOAL = 0.9
 RAMPS = ('dry ramp', 'viscous ramp')
 
@@ -71,7 +73,8 @@ def run(out_dir: pathlib.Path, quick: bool) -> dict[str, Any]:
             results['runs'].append(result)
             print(f'  seed {result["seed"]} {result["fault"]} on {result["wheel"]}', flush=True)
     per_fault = acc.score(results['runs'], 'calibrated')['per_fault']
-    keys = ('runs', 'detected', 'right_kind', 'confirmed', 'right_confirmed', 'delay_median_s')
+    keys = ('runs', 'detected', 'right_kind', 'confirmed', 'right_confirmed', 'delay_median_s',
+            'extra_declarations')
     results['score'] = {name: {**{k: entry[k] for k in keys},
                                **interval(entry['right_kind'], entry['runs'])}
                         for name, entry in per_fault.items()}
@@ -87,7 +90,8 @@ def markdown(results: dict[str, Any]) -> str:
     """Return the docs/results.md section."""
     rows = [[name, s['runs'], s['detected'], s['right_kind'], s['right_confirmed'],
              f'{s["right_kind"] / s["runs"]:.0%}', f'{s["low"]:.0%}-{s["high"]:.0%}',
-             f'{s["p_at_goal"]:.2f}'] for name, s in sorted(results['score'].items())]
+             f'{s["p_at_goal"]:.2f}', s['extra_declarations']]
+            for name, s in sorted(results['score'].items())]
     lo, hi = results['seeds']
     return '\n'.join([
         f'`python -m bench bus_ramps`: ramps of the bus acceptance on fresh seeds {lo}-{hi} '
@@ -95,4 +99,5 @@ def markdown(results: dict[str, Any]) -> str:
         f'{results["calibration_seed"]}, LLR parameters of config/rwa_monitor.yaml; '
         f'{results["elapsed_s"]:.0f} s.', '',
         table(['ramp', 'runs', 'detected', 'right kind', 'right and confirmed', 'rate',
-               '95 % interval', f'P(<= right at {GOAL:.0%})'], rows)])
+               '95 % interval', f'P(<= right at {GOAL:.0%})',
+               'more declarations of the same ramp'], rows)])

@@ -154,8 +154,10 @@ def categorise(before: np.ndarray, n_before: int, after: np.ndarray, p: int,
     step verdict that stands is not confirmed when the after segment grows
     (:func:`grows`): the step model it rests on is rejected, and a step fit of a growing
     level shares the rise between the directions (``undecided``, guess the better single
-    kind). A step has no growth: a true single
-    step is named the other kind, or loses its confirmation, only through a false
+    kind), unless the kind stands beside the other kind's growth
+    (:func:`stands_beside_growth`; also for an ``ambiguous`` step verdict on a growing
+    segment): then it is confirmed with shape ``ramp``. A step has no growth: a true
+    single step is named the other kind, or loses its confirmation, only through a false
     significance at the category level.
     """
     before = np.asarray(before, dtype=float)
@@ -220,6 +222,17 @@ def categorise(before: np.ndarray, n_before: int, after: np.ndarray, p: int,
                                 explained)
     growing = step.confirmed and step.shape == SHAPES[0] and grows(
         after, shapes, s2, p, z_threshold)
+    single = step.guess in KINDS[:2] and (growing or (
+        step.reason == 'ambiguous' and grows(after, shapes, s2, p, z_threshold)))
+    if single:
+        # A single kind the step tests found, or nearly (the other component between the
+        # 5 % and the category level), on an after segment that grows.
+        h = KINDS.index(step.guess)
+        beside = steps_beside_growth(before, after, shapes, p)
+        if stands_beside_growth((beside[0] / s2, beside[1] / s2), h, limit, dx,
+                                detectable, mean_speed):
+            return Category(KINDS[h], dx[h].copy(), (z_d, z_v), s2, True, KINDS[h],
+                            detectable, SHAPES[1])
     if growing:
         h = 0 if explained[0] >= explained[1] else 1
         return step._replace(kind=UNDECIDED, dx=dx[h].copy(), confirmed=False,
@@ -227,6 +240,28 @@ def categorise(before: np.ndarray, n_before: int, after: np.ndarray, p: int,
     if step.kind == UNDECIDED and not step.reason:
         step = step._replace(reason='grows')
     return step
+
+
+def stands_beside_growth(chi: tuple[float, float], h: int, limit: float, dx: np.ndarray,
+                         detectable: tuple[float, float], mean_speed: float) -> bool:
+    """Return True if the step tests' kind ``h`` (0 dry, 1 viscous) stands beside growth.
+
+    Not in the paper (docs/llr.md "Kinds that survive collinearity", *A kind beside the
+    other kind's growth*). Used when the after segment grows (the step model is
+    rejected), so that the step tests cannot confirm their kind ``h``, and the growth
+    tests named none. ``chi[i]``: step component ``i`` beside the other kind's step and
+    growth, at the time shape most favourable to that other kind
+    (:func:`steps_beside_growth` / sigma^2). True when ``h``'s component is significant at
+    the category level there (``> limit = z*^2``: no change of the other kind, stepping or
+    growing in any candidate shape, explains it), the other kind's component is not
+    significant even at 5 % beside ``h``'s step and growth (``|z| <= Z_ABSENT``), and a
+    change of kind ``h`` of this size is separable (:func:`separable`): the step rule with
+    the other kind allowed to grow. It confirms the kind the step tests found, never
+    another: where time and speed move together (a coast-down) a growth of one kind can
+    mimic a step of the other, and these statistics alone then point the wrong way.
+    """
+    return (chi[h] > limit and chi[1 - h] <= Z_ABSENT * Z_ABSENT
+            and separable(dx, h, detectable, mean_speed))
 
 
 def refuted(step: Category, chi: tuple[float, float], reject: float, dx: np.ndarray
