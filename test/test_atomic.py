@@ -36,3 +36,43 @@ def test_missing_folder_is_created_or_named(tmp_path):
 def test_a_folder_is_not_overwritten(tmp_path):
     with pytest.raises(OutputError, match='is a folder'):
         write_text_atomic(tmp_path, 'x')
+
+
+def _interrupt_while_made(monkeypatch, name):
+    """Raise SIGINT inside tempfile.<name>: held there, it is delivered as the hold ends."""
+    import signal
+    import tempfile
+    real = getattr(tempfile, name)
+
+    def made_then_interrupted(*args, **kwargs):
+        out = real(*args, **kwargs)
+        signal.raise_signal(signal.SIGINT)
+        return out
+    monkeypatch.setattr(tempfile, name, made_then_interrupted)
+
+
+def test_an_interrupt_while_the_temporary_file_is_made_leaves_none(tmp_path, monkeypatch):
+    # The interrupt comes as the signals are released, after the file exists and its
+    # name is known; before, the name was dropped with the exception and the file stayed.
+    _interrupt_while_made(monkeypatch, 'mkstemp')
+    target = tmp_path / 'out.csv'
+    target.write_text('old')
+    with pytest.raises(KeyboardInterrupt):
+        write_text_atomic(target, 'new')
+    assert [p.name for p in tmp_path.iterdir()] == ['out.csv']
+    assert target.read_text() == 'old'
+
+
+def test_an_interrupt_while_the_work_folder_is_made_leaves_none(tmp_path, monkeypatch):
+    # The bare .mcap path: a recording folder is built in a work folder, then its file
+    # installed. The work folder used to come from tempfile.TemporaryDirectory, which
+    # loses it to an interrupt between its mkdir and its own cleanup's registration.
+    import numpy as np
+
+    from rwa_monitor.telemetry import rosbag_io
+    from rwa_monitor.telemetry.schema import Telemetry, Wheel
+    tele = Telemetry(time=np.arange(5.0), wheels={'rw1': Wheel(np.ones(5), np.zeros(5))})
+    _interrupt_while_made(monkeypatch, 'mkdtemp')
+    with pytest.raises(KeyboardInterrupt):
+        rosbag_io.write(tmp_path / 'out.mcap', tele)
+    assert list(tmp_path.iterdir()) == []

@@ -180,14 +180,23 @@ def atomic_write(path: str | os.PathLike, mode: str = 'w', *, encoding: str | No
         return
     _make_parent(path, target, make_parents)
     remove_stale(target)
+    tmp = None
     try:
         with _signals_held():
             fd, tmp_name = tempfile.mkstemp(prefix=temporary_prefix(target), suffix='.tmp',
                                             dir=target.parent)
             tmp = pathlib.Path(tmp_name)
-    except OSError as err:
-        raise OutputError(f'{path}: cannot write in {target.parent}: '
-                          f'{err.strerror or err}') from None
+    except BaseException as err:
+        # A signal held while the file was made is raised as the block ends: the name
+        # is known by then, so the file is removed before the interrupt goes on.
+        if tmp is not None:
+            with contextlib.suppress(OSError):
+                os.close(fd)
+                tmp.unlink()
+        if isinstance(err, OSError) and not isinstance(err, OutputError):
+            raise OutputError(f'{path}: cannot write in {target.parent}: '
+                              f'{err.strerror or err}') from None
+        raise
     try:
         os.chmod(fd, _mode_of(target, 0o666))
         with os.fdopen(fd, mode, **kwargs) as handle:
@@ -204,13 +213,43 @@ def atomic_write(path: str | os.PathLike, mode: str = 'w', *, encoding: str | No
 
 
 @contextlib.contextmanager
-def _signals_held() -> Iterator[None]:
-    """Hold SIGINT and SIGTERM while a temporary file is made and named.
+def work_folder(path: str | os.PathLike, contents: Iterable[str] = ()
+                ) -> Iterator[pathlib.Path]:
+    """Yield a temporary folder beside ``path``, removed when the block ends in any way.
 
-    A Ctrl-C that arrives after the file exists but before the code that removes it on
-    failure has its name would leave it behind; held, the signal is delivered when the
-    block ends, inside that code. Only the main thread receives these signals; elsewhere,
-    or where the platform has no signal masks, nothing is held.
+    For outputs built from several files before one of them is installed (a bare
+    ``.mcap`` written through a recording folder). Named as every temporary here
+    (telemetry/temporaries.py), so a killed run's is removed by the next write when it
+    holds only ``contents``, and made with the signals held, so that an interrupt cannot
+    leave one whose name is not known.
+    """
+    target = _resolve(path)
+    _make_parent(path, target, True)
+    remove_stale(target, contents)
+    work = None
+    try:
+        try:
+            with _signals_held():
+                work = pathlib.Path(tempfile.mkdtemp(prefix=temporary_prefix(target),
+                                                     suffix='.tmp', dir=target.parent))
+        except OSError as err:
+            raise OutputError(f'{path}: cannot write in {target.parent}: '
+                              f'{err.strerror or err}') from None
+        yield work
+    finally:
+        if work is not None:
+            shutil.rmtree(work, ignore_errors=True)
+
+
+@contextlib.contextmanager
+def _signals_held() -> Iterator[None]:
+    """Hold SIGINT and SIGTERM while a temporary is made and named.
+
+    A Ctrl-C that arrives after the temporary exists but before the code that removes it
+    on failure has its name would leave it behind. Held, the signal is raised as the
+    block ends, when the name is known: the callers assign it inside the block and
+    remove it on any exception, the interrupt included. Only the main thread receives
+    these signals; elsewhere, or where the platform has no signal masks, nothing is held.
     """
     mask = getattr(signal, 'pthread_sigmask', None)
     if mask is None or threading.current_thread() is not threading.main_thread():

@@ -24,14 +24,13 @@ from __future__ import annotations
 
 import os
 import pathlib
-import tempfile
 from typing import Any, Callable, Iterable, Mapping
 
 import numpy as np
 
 from rwa_monitor.exceptions import ConfigError, OutputError, TelemetrySchemaError
 from rwa_monitor.telemetry import codecs
-from rwa_monitor.telemetry.atomic import install_file
+from rwa_monitor.telemetry.atomic import install_file, work_folder
 from rwa_monitor.telemetry.recording_folder import recording_output
 from rwa_monitor.telemetry.schema import name_problem, Telemetry, TRUTH_PREFIX, Wheel
 from rwa_monitor.telemetry.yaml_file import read_yaml
@@ -274,9 +273,8 @@ def write(path: str | os.PathLike, tele: Telemetry,
             output.abort()
         return
     try:
-        target.parent.mkdir(parents=True, exist_ok=True)
-        with tempfile.TemporaryDirectory(prefix=f'.{target.name}.', dir=target.parent) as work:
-            bag = pathlib.Path(work) / target.stem
+        with work_folder(target, (target.stem,)) as work:
+            bag = work / target.stem
             _write_bag(bag, tele, storage, topics)
             install_file(next(bag.glob('*' + target.suffix.lower())), target)
     except OSError as err:
