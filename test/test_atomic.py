@@ -38,41 +38,59 @@ def test_a_folder_is_not_overwritten(tmp_path):
         write_text_atomic(tmp_path, 'x')
 
 
-def _interrupt_while_made(monkeypatch, name):
-    """Raise SIGINT inside tempfile.<name>: held there, it is delivered as the hold ends."""
-    import signal
-    import tempfile
-    real = getattr(tempfile, name)
-
-    def made_then_interrupted(*args, **kwargs):
-        out = real(*args, **kwargs)
-        signal.raise_signal(signal.SIGINT)
-        return out
-    monkeypatch.setattr(tempfile, name, made_then_interrupted)
+INTERRUPTED = '''
+import signal, sys, tempfile
+import numpy as np
+real = getattr(tempfile, sys.argv[1])
 
 
-def test_an_interrupt_while_the_temporary_file_is_made_leaves_none(tmp_path, monkeypatch):
-    # The interrupt comes as the signals are released, after the file exists and its
-    # name is known; before, the name was dropped with the exception and the file stayed.
-    _interrupt_while_made(monkeypatch, 'mkstemp')
+def made_then_interrupted(*args, **kwargs):
+    out = real(*args, **kwargs)
+    signal.raise_signal(signal.SIGINT)
+    return out
+
+
+setattr(tempfile, sys.argv[1], made_then_interrupted)
+from rwa_monitor.telemetry import rosbag_io
+from rwa_monitor.telemetry.atomic import write_text_atomic
+from rwa_monitor.telemetry.schema import Telemetry, Wheel
+try:
+    if sys.argv[1] == 'mkstemp':
+        write_text_atomic(sys.argv[2], 'new')
+    else:
+        tele = Telemetry(time=np.arange(5.0), wheels={'rw1': Wheel(np.ones(5), np.zeros(5))})
+        rosbag_io.write(sys.argv[2], tele)
+except KeyboardInterrupt:
+    sys.exit(130)
+'''
+
+
+def _interrupted(function: str, target) -> int:
+    """Run a write in a fresh process whose tempfile.<function> gets SIGINT inside it.
+
+    A fresh process: the signal must reach the main thread with Python's own handler
+    (test workers may run tests elsewhere or ignore SIGINT). Held while the temporary is
+    made, the signal is raised as the hold ends, after the temporary exists.
+    """
+    import subprocess
+    import sys
+    run = subprocess.run([sys.executable, '-c', INTERRUPTED, function, str(target)],
+                         capture_output=True, text=True, timeout=120)
+    return run.returncode
+
+
+def test_an_interrupt_while_the_temporary_file_is_made_leaves_none(tmp_path):
+    # Before, the name was dropped with the exception and the file stayed.
     target = tmp_path / 'out.csv'
     target.write_text('old')
-    with pytest.raises(KeyboardInterrupt):
-        write_text_atomic(target, 'new')
+    assert _interrupted('mkstemp', target) == 130
     assert [p.name for p in tmp_path.iterdir()] == ['out.csv']
     assert target.read_text() == 'old'
 
 
-def test_an_interrupt_while_the_work_folder_is_made_leaves_none(tmp_path, monkeypatch):
+def test_an_interrupt_while_the_work_folder_is_made_leaves_none(tmp_path):
     # The bare .mcap path: a recording folder is built in a work folder, then its file
     # installed. The work folder used to come from tempfile.TemporaryDirectory, which
     # loses it to an interrupt between its mkdir and its own cleanup's registration.
-    import numpy as np
-
-    from rwa_monitor.telemetry import rosbag_io
-    from rwa_monitor.telemetry.schema import Telemetry, Wheel
-    tele = Telemetry(time=np.arange(5.0), wheels={'rw1': Wheel(np.ones(5), np.zeros(5))})
-    _interrupt_while_made(monkeypatch, 'mkdtemp')
-    with pytest.raises(KeyboardInterrupt):
-        rosbag_io.write(tmp_path / 'out.mcap', tele)
+    assert _interrupted('mkdtemp', tmp_path / 'out.mcap') == 130
     assert list(tmp_path.iterdir()) == []
