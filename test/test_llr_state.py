@@ -308,6 +308,7 @@ EDITS = [
     ('general', lambda s: _with(s, general=GeneralPath(math.nan, np.zeros(6), np.zeros(0),
                                                        np.zeros((0, 2))))),
     ('change.kind', lambda s: _with(s, change=dataclasses.replace(s.change, kind='bogus'))),
+    ('change.shape', lambda s: _with(s, change=dataclasses.replace(s.change, shape='bogus'))),
     ('change: arrays', lambda s: _with(s, change=dataclasses.replace(
         s.change, before=np.zeros(5)))),
     ('change: sums', lambda s: _with(s, change=dataclasses.replace(

@@ -103,7 +103,7 @@ def _declare(live: Live, config: LLRConfig, n: int) -> list[AnomalyEvent]:
         n_before=tau - base, kind=cat.kind, guess=cat.guess, confirmed=cat.confirmed,
         revision=0, rows=rows, time=times[0], log_p=log_p, checks=tuple(checks),
         points=tuple(points[1:]), ramp_end=n, tau=tau, closed=not checks, tail=False,
-        finished=False, after_gap_s=gap, before=prefix[tau - first].copy(),
+        finished=False, after_gap_s=gap, shape=cat.shape, before=prefix[tau - first].copy(),
         gap=prefix[start - first] - prefix[tau - first], ramp=ramps[tau][None, :])
     return [event] + _restart_and_test(live, config, start, n)
 
@@ -179,7 +179,10 @@ def _continues(live: Live, config: LLRConfig, tau: int, n: int) -> bool:
     :func:`llr_growth.continues` on its segments up to ``n`` and on the samples ``[tau,
     n]``. If so, its ramp sums take in the samples up to ``n``. A closed change is tested
     too: a slow wear grows for days, past the last re-check (docs/llr.md "One declaration
-    per ramp").
+    per ramp"). Its growth is of its kind only when that kind was named for a growing
+    change (shape ``ramp``); a kind the step tests gave (shape ``step``) says nothing of
+    the direction in which the change grows (a step fit of a growing level can name the
+    other kind), so then it may grow in both.
     """
     prev = live.change
     if prev is None or prev.finished:
@@ -190,8 +193,9 @@ def _continues(live: Live, config: LLRConfig, tau: int, n: int) -> bool:
                                                  prev.time), prev.tail)
     after_sums = prev.gap + live.prefix_now()
     times = live.ring.time[np.arange(tau, n + 1) % len(live.ring.row)]
+    grows_as = prev.kind if prev.shape == llr_kinds.SHAPES[1] else llr_kinds.UNDECIDED
     if not llr_growth.continues(prev.before, prev.n_before, after_sums, blocks,
-                                _terms(live, config, tau, n), times - prev.time, prev.kind,
+                                _terms(live, config, tau, n), times - prev.time, grows_as,
                                 config.p, config.noise_var, config.z_threshold):
         return False
     live.change = replace(prev, ramp=blocks, ramp_end=n)
@@ -311,7 +315,7 @@ def _recheck(live: Live, config: LLRConfig, j: int, after_sums: np.ndarray,
                   and llr_kinds.adds_component(cat.kind, new.kind)):
         return []
     cat = replace(cat, kind=new.kind, guess=new.guess, confirmed=new.confirmed,
-                  revision=cat.revision + 1)
+                  shape=new.shape, revision=cat.revision + 1)
     live.change = cat
     ring = live.ring
     length = len(ring.row)

@@ -251,6 +251,8 @@ def _change(live: Live, config: LLRConfig) -> None:
         _fail('change', 'sums, time or p-value not finite')
     if change.kind not in _KINDS or change.guess not in _KINDS:
         _fail('change.kind', f'{change.kind!r} / {change.guess!r} is not a kind')
+    if change.shape not in llr_kinds.SHAPES:
+        _fail('change.shape', f'{change.shape!r} is not a shape')
     if not (0 <= change.tau <= change.ramp_end < pos and change.n_before > config.p
             and change.revision >= 0 and all(0 <= r < live.ints[layout.I_ROWS]
                                              for r in change.rows)):

@@ -52,7 +52,9 @@ class DeclaredChange:
     every ``window`` samples, into one last block (``tail``), for the continuation test
     of a later declaration and the end of record. ``finished``: ``finish`` has run.
     ``after_gap_s``: the change fell in a gap of the samples; the time from the last
-    sample before it (NaN: not in a gap).
+    sample before it (NaN: not in a gap). ``shape``: the shape of the kind given
+    (``step``, or ``ramp`` when it was named for a growing change; the continuation test
+    of a later declaration lets only a kind named so fix the direction of the growth).
     """
 
     n_before: int
@@ -71,6 +73,7 @@ class DeclaredChange:
     tail: bool
     finished: bool
     after_gap_s: float
+    shape: str
     before: np.ndarray = array_field('float64', 1)
     gap: np.ndarray = array_field('float64', 1)
     ramp: np.ndarray = array_field('float64', 2)
@@ -125,7 +128,7 @@ class LLRState:
     ``change``: the last declared change; ``last_event``: the latest event returned.
     """
 
-    VERSION: ClassVar[int] = 1
+    VERSION: ClassVar[int] = 2   # 2: DeclaredChange.shape
 
     parameters: dict[str, Scalar]
     counters: dict[str, int]
