@@ -358,3 +358,21 @@ def test_a_bus_viscous_ramp_is_named_beside_the_dry_growth():
     assert e_dry / s2 <= llr_kinds.Z_ABSENT ** 2 < z * z < e_viscous / s2
     cat = llr_kinds.categorise(before, n_before, after, 2, None, z, ramp)
     assert (cat.kind, cat.confirmed, cat.shape) == ('viscous', True, 'ramp')
+
+
+def test_a_step_kind_does_not_fix_the_direction_a_change_grows_in():
+    # Seed 58 (found while developing the rule): a dry ramp declared at 8134 (dry, ramp)
+    # and again at 9457, where the step tests confirmed `viscous` (shape step) on the few
+    # samples after it. The continuation test of the next declaration took that step kind
+    # as the direction of growth, so the ramp's dry growth was a new change (11505, and
+    # 12879: four declarations, the second ending `viscous`). A step kind says nothing of
+    # the direction a change grows in (a step fit of a growing level can name the other
+    # kind): the change may grow in both, the later declaration is its continuation, and
+    # the re-check on the longer segment names the growth dry (docs/llr.md "One
+    # declaration per ramp").
+    t, w, f = _ramp_run(58, 6.0, 0.0)
+    events = detect_batch(t, w, f)
+    firsts = [e.index for e in events if e.revision == 0 and e.index >= 5500]
+    assert len(firsts) == 2, firsts
+    final = max((e for e in events if e.index == firsts[1]), key=lambda e: e.revision)
+    assert final.kind == 'dry' and final.details[keys.KIND_SHAPE] == 'ramp'
