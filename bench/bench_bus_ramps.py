@@ -23,9 +23,11 @@ from bench.report import table, update_section, write_json
 from rwa_monitor.sim.basilisk_config import available, INSTALL_HINT
 
 NAME = 'bus_ramps'
-SEEDS = tuple(range(7500, 7540))
-# Spent: 7300-7339 (the rule of llr_kinds.stands_beside_growth was made on them) and
-# 7400-7439 (scored with a version of it that could name the other kind).
+SEEDS = tuple(range(7700, 7740))
+# Spent: 7300-7339 (the rule of llr_kinds.stands_beside_growth was made on them),
+# 7400-7439 (scored with a version of it that could name the other kind), 7500-7539 (the
+# continuation rule of llr_changes.growth_kind was found on them) and 7600-7639 (scored
+# with a first version of that rule).
 GOAL = 0.9
 RAMPS = ('dry ramp', 'viscous ramp')
 

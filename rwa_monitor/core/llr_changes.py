@@ -30,7 +30,7 @@ from rwa_monitor.core.llr_state import DeclaredChange, Live
 # median interval fell in a gap of the stream (docs/llr.md "Changes in a gap").
 GAP_FACTOR = 10.0
 
-__all__ = ['after', 'DeclaredChange', 'finish']
+__all__ = ['after', 'DeclaredChange', 'finish', 'growth_kind']
 
 
 def after(live: Live, config: LLRConfig, flags: int) -> list[AnomalyEvent]:
@@ -179,10 +179,7 @@ def _continues(live: Live, config: LLRConfig, tau: int, n: int) -> bool:
     :func:`llr_growth.continues` on its segments up to ``n`` and on the samples ``[tau,
     n]``. If so, its ramp sums take in the samples up to ``n``. A closed change is tested
     too: a slow wear grows for days, past the last re-check (docs/llr.md "One declaration
-    per ramp"). Its growth is of its kind only when that kind was named for a growing
-    change (shape ``ramp``); a kind the step tests gave (shape ``step``) says nothing of
-    the direction in which the change grows (a step fit of a growing level can name the
-    other kind), so then it may grow in both.
+    per ramp"). The kind it may grow in: :func:`growth_kind`.
     """
     prev = live.change
     if prev is None or prev.finished:
@@ -193,10 +190,10 @@ def _continues(live: Live, config: LLRConfig, tau: int, n: int) -> bool:
                                                  prev.time), prev.tail)
     after_sums = prev.gap + live.prefix_now()
     times = live.ring.time[np.arange(tau, n + 1) % len(live.ring.row)]
-    grows_as = prev.kind if prev.shape == llr_kinds.SHAPES[1] else llr_kinds.UNDECIDED
     if not llr_growth.continues(prev.before, prev.n_before, after_sums, blocks,
-                                _terms(live, config, tau, n), times - prev.time, grows_as,
-                                config.p, config.noise_var, config.z_threshold):
+                                _terms(live, config, tau, n), times - prev.time,
+                                growth_kind(prev, after_sums, config), config.p,
+                                config.noise_var, config.z_threshold):
         return False
     live.change = replace(prev, ramp=blocks, ramp_end=n)
     return True
@@ -325,3 +322,23 @@ def _recheck(live: Live, config: LLRConfig, j: int, after_sums: np.ndarray,
                                  cat.revision, j - cat.tau + 1 if final else None,
                                  cat.after_gap_s)
     return [live.last_event]
+
+
+def growth_kind(prev: DeclaredChange, after_sums: np.ndarray, config: LLRConfig) -> str:
+    """Return the kind in which the continuation test lets the change ``prev`` grow.
+
+    Not in the paper (docs/llr.md "One declaration per ramp", *Which kind grows*): its
+    kind (``undecided`` and ``both``: either direction), except a single kind the step
+    tests confirmed (shape ``step``) that the step tests on its after segment up to now
+    (``after_sums``) no longer find (:func:`llr_kinds.supports`): a step fit of a growing
+    level can name the other kind on the first samples, and that verdict says nothing of
+    the direction the change grows in, so it may grow in both.
+    """
+    if not prev.confirmed or prev.shape != llr_kinds.SHAPES[0] \
+            or prev.kind not in llr_kinds.KINDS[:2]:
+        return prev.kind
+    now = llr_kinds.categorise(prev.before, prev.n_before, after_sums, config.p,
+                               config.noise_var, config.z_threshold)
+    if llr_kinds.supports(now, prev.kind, config.z_threshold):
+        return prev.kind
+    return llr_kinds.UNDECIDED
