@@ -250,8 +250,11 @@ def continues(before: np.ndarray, n_before: int, after: np.ndarray, blocks: np.n
     (its single-kind ramp, or the full ramp for ``both`` / ``undecided``, over every time
     shape of :func:`ramp_shapes`); H1: H0 plus a free step (``p`` parameters) at the new
     change position. The new declaration is a new change when H1 explains more by
-    ``chi2_p`` at the category level (each hypothesis at its best time shape); else it
-    is the same change, as its own ramp explains the samples that triggered it.
+    ``chi2_p`` at the category level, both at the time shape that fits H0 best (the
+    growth profiled under H0); else it is the same change, as its own ramp explains the
+    samples that triggered it. Each hypothesis at its own best shape (before 2026-11-28)
+    let H1 pair an earlier knot with a step that took up the rest of the growth: a ramp
+    that stopped between two knots was declared again at its end.
     """
     shapes = ramp_shapes(blocks, p)
     knots = np.atleast_2d(np.asarray(blocks, dtype=float))[:, 0]
@@ -278,12 +281,14 @@ def continues(before: np.ndarray, n_before: int, after: np.ndarray, blocks: np.n
     big[:, p + 2:, :p + 2] = np.swapaxes(big[:, :p + 2, p + 2:], 1, 2)
     big[:, p + 2:, p + 2:] = pi_t
     full_rhs = np.concatenate([rhs, np.broadcast_to(q_t, (m, p))], axis=-1)
-    best = []
+    explained = []
     for cols in (change, change + step):
         # x (before and after) first, then the after-only change columns.
         idx = list(range(p)) + cols
         joint, v = submatrix(big, idx), full_rhs[:, idx]
         joint[:, :p, :p] += pi_b
         v[:, :p] += q_b
-        best.append(float(np.max(explained_sum(joint, v))))
-    return (best[1] - best[0]) / noise_var <= ramp_limits(p, z_threshold)[0]
+        explained.append(explained_sum(joint, v))
+    i = int(np.argmax(explained[0]))
+    return (float(explained[1][i]) - float(explained[0][i])) / noise_var \
+        <= ramp_limits(p, z_threshold)[0]
