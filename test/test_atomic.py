@@ -41,6 +41,9 @@ def test_a_folder_is_not_overwritten(tmp_path):
 INTERRUPTED = '''
 import signal, sys, tempfile
 import numpy as np
+# A child inherits an ignored SIGINT (a test worker, or a test before it, may ignore it):
+# Python's own handler, as a user's command has it.
+signal.signal(signal.SIGINT, signal.default_int_handler)
 real = getattr(tempfile, sys.argv[1])
 
 
@@ -69,7 +72,8 @@ def _interrupted(function: str, target) -> int:
     """Run a write in a fresh process whose tempfile.<function> gets SIGINT inside it.
 
     A fresh process: the signal must reach the main thread with Python's own handler
-    (test workers may run tests elsewhere or ignore SIGINT). Held while the temporary is
+    (test workers may run tests elsewhere or ignore SIGINT, and a child inherits an
+    ignored signal, so the script sets the handler again). Held while the temporary is
     made, the signal is raised as the hold ends, after the temporary exists.
     """
     import subprocess
