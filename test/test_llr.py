@@ -459,7 +459,7 @@ def test_memory_is_bounded_by_the_windows():
     stream(det, t, w, f)
     # Rings of the last samples: the smallest power of two >= 2 w + k_verif + 2 (the kernel
     # indexes them by mask), whatever the length of the stream.
-    assert [len(ring) for ring in det._live.ring] == [256] * 4
+    assert [len(ring) for ring in det._live.ring] == [256] * 5
 
 
 # -- parameter validation ------------------------------------------------------------------

@@ -387,7 +387,8 @@ def _declared(kind: str, shape: str, before: np.ndarray, n_before: int) -> Decla
                           revision=1, rows=(0, 0, 0), time=0.0, log_p=-30.0, checks=(),
                           points=(), ramp_end=0, tau=0, closed=False, tail=False,
                           finished=False, after_gap_s=math.nan, shape=shape, before=before,
-                          gap=np.zeros_like(before), ramp=np.zeros((1, 19)))
+                          gap=np.zeros_like(before), ramp=np.zeros((1, 19)),
+                          speeds=np.zeros((1, 2)))
 
 
 def test_a_step_kind_the_data_no_longer_find_does_not_fix_the_growth():

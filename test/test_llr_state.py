@@ -309,6 +309,10 @@ EDITS = [
                                                        np.zeros((0, 2))))),
     ('change.kind', lambda s: _with(s, change=dataclasses.replace(s.change, kind='bogus'))),
     ('change.shape', lambda s: _with(s, change=dataclasses.replace(s.change, shape='bogus'))),
+    ('change.speeds', lambda s: _with(s, change=dataclasses.replace(
+        s.change, speeds=s.change.speeds[:, ::-1] + [[1.0, 0.0]]))),
+    ('change.speeds', lambda s: _with(s, change=dataclasses.replace(
+        s.change, speeds=np.zeros((s.change.ramp.shape[0] + 1, 2))))),
     ('change: arrays', lambda s: _with(s, change=dataclasses.replace(
         s.change, before=np.zeros(5)))),
     ('change: sums', lambda s: _with(s, change=dataclasses.replace(

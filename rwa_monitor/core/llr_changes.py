@@ -104,7 +104,8 @@ def _declare(live: Live, config: LLRConfig, n: int) -> list[AnomalyEvent]:
         revision=0, rows=rows, time=times[0], log_p=log_p, checks=tuple(checks),
         points=tuple(points[1:]), ramp_end=n, tau=tau, closed=not checks, tail=False,
         finished=False, after_gap_s=gap, shape=cat.shape, before=prefix[tau - first].copy(),
-        gap=prefix[start - first] - prefix[tau - first], ramp=ramps[tau][None, :])
+        gap=prefix[start - first] - prefix[tau - first], ramp=ramps[tau][None, :],
+        speeds=_speed_range(live, tau, n)[None, :])
     return [event] + _restart_and_test(live, config, start, n)
 
 
@@ -184,10 +185,11 @@ def _continues(live: Live, config: LLRConfig, tau: int, n: int) -> bool:
     prev = live.change
     if prev is None or prev.finished:
         return False
-    blocks = prev.ramp
+    blocks, speeds = prev.ramp, prev.speeds
     if prev.ramp_end < n:
         blocks = _with_block(blocks, _ramp_block(live, config, prev.ramp_end + 1, n,
                                                  prev.time), prev.tail)
+        speeds = _with_range(speeds, _speed_range(live, prev.ramp_end + 1, n), prev.tail)
     after_sums = prev.gap + live.prefix_now()
     times = live.ring.time[np.arange(tau, n + 1) % len(live.ring.row)]
     if not llr_growth.continues(prev.before, prev.n_before, after_sums, blocks,
@@ -195,7 +197,7 @@ def _continues(live: Live, config: LLRConfig, tau: int, n: int) -> bool:
                                 growth_kind(prev, after_sums, config), config.p,
                                 config.noise_var, config.z_threshold):
         return False
-    live.change = replace(prev, ramp=blocks, ramp_end=n)
+    live.change = replace(prev, ramp=blocks, speeds=speeds, ramp_end=n)
     return True
 
 
@@ -204,6 +206,20 @@ def _ramp_block(live: Live, config: LLRConfig, first: int, last: int, t0: float
     """Return :func:`llr_growth.ramp_sums` of positions ``first..last`` (in the ring)."""
     times = live.ring.time[np.arange(first, last + 1) % len(live.ring.row)]
     return llr_growth.ramp_sums(_terms(live, config, first, last), times - t0)
+
+
+def _speed_range(live: Live, first: int, last: int) -> np.ndarray:
+    """Return the lowest and highest ``|w|`` of positions ``first..last`` (in the ring)."""
+    speeds = live.ring.speed[np.arange(first, last + 1) % len(live.ring.row)]
+    return np.array([speeds.min(), speeds.max()])
+
+
+def _with_range(speeds: np.ndarray, new: np.ndarray, tail: bool) -> np.ndarray:
+    """Return the blocks' speed ranges with ``new`` appended, or merged (:func:`_with_block`)."""
+    if tail:
+        merged = np.array([min(speeds[-1, 0], new[0]), max(speeds[-1, 1], new[1])])
+        return np.concatenate([speeds[:-1], merged[None, :]])
+    return np.concatenate([speeds, new[None, :]])
 
 
 def _terms(live: Live, config: LLRConfig, first: int, last: int) -> np.ndarray:
@@ -245,7 +261,8 @@ def _take_ramp(live: Live, config: LLRConfig, j: int) -> None:
         return
     ramp = _with_block(cat.ramp, _ramp_block(live, config, cat.ramp_end + 1, j, cat.time),
                        cat.tail)
-    live.change = replace(cat, ramp=ramp, tail=cat.closed, ramp_end=j)
+    speeds = _with_range(cat.speeds, _speed_range(live, cat.ramp_end + 1, j), cat.tail)
+    live.change = replace(cat, ramp=ramp, speeds=speeds, tail=cat.closed, ramp_end=j)
 
 
 def _with_block(ramp: np.ndarray, block: np.ndarray, tail: bool) -> np.ndarray:
@@ -301,7 +318,7 @@ def _recheck(live: Live, config: LLRConfig, j: int, after_sums: np.ndarray,
     cat = live.change
     z = config.z_threshold
     new = llr_kinds.categorise(cat.before, cat.n_before, after_sums, config.p,
-                               config.noise_var, z, cat.ramp)
+                               config.noise_var, z, cat.ramp, cat.speeds)
     if not final and not revision_due(cat.kind, cat.guess, cat.confirmed, new):
         return []
     if final and cat.confirmed and not new.confirmed and \

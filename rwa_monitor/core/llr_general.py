@@ -43,6 +43,7 @@ def ingest(live: Live, config: LLRConfig, row: int, t: float, f: float, h: np.nd
     ring.term[s] = term
     ring.row[s] = row
     ring.time[s] = t
+    ring.speed[s] = math.nan   # a model's columns need not hold the speed
     ring.pref[(j + 1) % length] = total
     flags = layout.REVISE if j == ints[layout.I_CHECKPOINT] else 0
     k = j - config.window + 1

@@ -140,7 +140,11 @@ def ingest_sample(fs, ints, cfg, row, t, f, h1, h2):
 
     AR filter ``v_l - sum_i a_i v_(l-1-i)`` (missing lags omitted; the operations of
     :func:`llr_common.whiten`), then the six products in the order of ``llr_batch._Terms``.
+    The ring of speeds keeps ``|w| = h2 / h1`` of the regressors before the filter (the
+    same for a noise level dividing both; 0 at rest), for the kind rules' speed order
+    (core/llr_kinds.py ``speed_ordered``).
     """
+    speed = h2 / h1 if h1 != 0.0 else 0.0
     order = cfg.ar_order
     if order > 0:
         o_ar = ints[I_O_AR]
@@ -190,6 +194,7 @@ def ingest_sample(fs, ints, cfg, row, t, f, h1, h2):
     fs[(o + 1) & NON_NEGATIVE] = h2
     fs[(o + 2) & NON_NEGATIVE] = f
     fs[(cfg.o_rtime + s) & NON_NEGATIVE] = t
+    fs[(cfg.o_rspeed + s) & NON_NEGATIVE] = speed
     ints[(I_SCALARS + s) & NON_NEGATIVE] = row
     o = cfg.o_rpref + 6 * ((j + 1) & cfg.mask)
     fs[(o + 0) & NON_NEGATIVE] = p0

@@ -117,7 +117,8 @@ def separable(dx: np.ndarray, h: int, detectable: tuple[float, float], mean_spee
 
 def categorise(before: np.ndarray, n_before: int, after: np.ndarray, p: int,
                noise_var: float | None, z_threshold: float,
-               ramp: np.ndarray | None = None) -> Category:
+               ramp: np.ndarray | None = None, speeds: np.ndarray | None = None
+               ) -> Category:
     """Return the :class:`Category` (kind, dx, z, sigma^2, confirmed) of one change.
 
     Not in the paper (which promises a categorisation but gives none); the design and its
@@ -137,7 +138,10 @@ def categorise(before: np.ndarray, n_before: int, after: np.ndarray, p: int,
     (constrained fit for a single component), never the free fit of an unidentifiable
     segment.
 
-    ``ramp``: the block rows (:func:`ramp_sums`) of the after segment. Given, the growth
+    ``ramp``: the block rows (:func:`ramp_sums`) of the after segment; ``speeds``: each
+    block's lowest and highest ``|w|``, or None. A single kind the step tests confirmed
+    stands without the growth tests when the blocks' speeds are in one order
+    (:func:`speed_ordered`). Given, the growth
     tests (:func:`ramp_kind` on the best time shape of each hypothesis,
     :func:`ramp_shapes`; docs/llr.md "Kinds on ramps") may name the kind in which the
     change grows; if it differs from the step outcome and a growth of the other kind of
@@ -204,6 +208,12 @@ def categorise(before: np.ndarray, n_before: int, after: np.ndarray, p: int,
         # step outcome, stands (undecided: with its own reason); a confirmed step verdict
         # cannot be checked for growth.
         return step
+    if step.confirmed and step.kind in KINDS[:2] and speeds is not None \
+            and speed_ordered(speeds):
+        # Every candidate time shape is a function of the speed here: a growth cannot be
+        # told from a speed shape the nominal misses, and the step tests found one kind
+        # alone (docs/llr.md "Kinds that survive collinearity", *Speed in one order*).
+        return step
     m = shapes.shape[0]
     named = ramp_kind(best, s2, z_threshold, m)
     if named is not None and step.kind == KINDS[named]:
@@ -240,6 +250,24 @@ def categorise(before: np.ndarray, n_before: int, after: np.ndarray, p: int,
     if step.kind == UNDECIDED and not step.reason:
         step = step._replace(reason='grows')
     return step
+
+
+def speed_ordered(speeds: np.ndarray) -> bool:
+    """Return True if the blocks' speed ranges follow each other without overlap.
+
+    Not in the paper (docs/llr.md "Kinds that survive collinearity", *Speed in one
+    order*). ``speeds``: per block of the after segment, in time order, its lowest and
+    highest ``|w|``. At least two blocks, each one's range wholly above the next one's
+    (a wheel slowing down through the segment) or wholly below it (speeding up). Then
+    each candidate time shape of :func:`ramp_shapes`, whose knots are the blocks' ends,
+    is a function of ``|w|`` on the after segment: its growth columns are a speed shape,
+    and a speed shape of the residual that the nominal model misses fits them as well.
+    """
+    speeds = np.asarray(speeds, dtype=float)
+    if speeds.ndim != 2 or speeds.shape[0] < 2 or not np.all(np.isfinite(speeds)):
+        return False
+    low, high = speeds[:, 0], speeds[:, 1]
+    return bool(np.all(low[:-1] > high[1:]) or np.all(high[:-1] < low[1:]))
 
 
 def stands_beside_growth(chi: tuple[float, float], h: int, limit: float, dx: np.ndarray,

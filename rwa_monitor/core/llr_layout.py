@@ -1,8 +1,8 @@
 """State layout of the LLR detector's compiled per-sample path (core/llr_kernel.py).
 
 The detector's per-sample state lives in two preallocated arrays (:func:`allocate`):
-``fs`` (floats: the named scalars ``F_*``, then the rings of prefix rows, terms and times,
-the AR coefficients and lags) and ``ints`` (the named scalars ``I_*``: counters,
+``fs`` (floats: the named scalars ``F_*``, then the rings of prefix rows, terms, times and
+speeds, the AR coefficients and lags) and ``ints`` (the named scalars ``I_*``: counters,
 positions, offsets of the rings, then the ring of row indices). Python code reads and
 writes them by these names; the kernels read the values only Python changes once per call
 (:class:`Setup`, :func:`setup`). Also the flags the kernels return (``REVISE``, ``EXACT``,
@@ -69,7 +69,8 @@ I_OUT_OF_RANGE = 22
 I_NON_INCREASING = 23
 I_SPEED_MODEL = 24    # 1: samples divided by the modelled noise level before the sums
 I_FLAGS = 25          # flags of the sample where llr_kernel.run stopped
-I_SCALARS = 26
+I_O_RSPEED = 26
+I_SCALARS = 27
 
 # Flags returned by llr_kernel's step / ingest / test (0: nothing to do, the usual case).
 REVISE = 2    # the position is a revision point of the last declared change
@@ -93,7 +94,8 @@ def allocate(length: int, width: int, term_width: int, ar_max: int
     o_rpref = F_SCALARS
     o_rterm = o_rpref + length * width
     o_rtime = o_rterm + length * term_width
-    o_ar = o_rtime + length
+    o_rspeed = o_rtime + length
+    o_ar = o_rspeed + length
     o_lags = o_ar + ar_max
     fs = np.zeros(o_lags + 3 * ar_max)
     ints = np.zeros(I_SCALARS + length, dtype=np.int64)
@@ -101,6 +103,7 @@ def allocate(length: int, width: int, term_width: int, ar_max: int
     ints[I_O_RPREF] = o_rpref
     ints[I_O_RTERM] = o_rterm
     ints[I_O_RTIME] = o_rtime
+    ints[I_O_RSPEED] = o_rspeed
     ints[I_O_AR] = o_ar
     ints[I_O_LAGS] = o_lags
     return fs, ints
@@ -118,6 +121,7 @@ class Setup(NamedTuple):
     o_rpref: int
     o_rterm: int
     o_rtime: int
+    o_rspeed: int
     w: int
     r: int
     c: int
@@ -135,7 +139,8 @@ class Setup(NamedTuple):
 @njit(cache=True, inline='always')
 def setup(fs, ints):
     """Return the :class:`Setup` of the state arrays."""
-    return Setup(ints[I_L] - 1, ints[I_O_RPREF], ints[I_O_RTERM], ints[I_O_RTIME], ints[I_W],
+    return Setup(ints[I_L] - 1, ints[I_O_RPREF], ints[I_O_RTERM], ints[I_O_RTIME],
+                 ints[I_O_RSPEED], ints[I_W],
                  ints[I_R], ints[I_C], ints[I_ESTIMATED], ints[I_AR_ORDER],
                  ints[I_SPEED_MODEL], ints[I_CHECKPOINT], fs[F_MIN_EXC], fs[F_YSTAR],
                  fs[F_FLOOR_REL], fs[F_FLOOR_ABS], fs[F_NOISE_VAR])

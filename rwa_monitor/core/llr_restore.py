@@ -38,7 +38,7 @@ from rwa_monitor.core.records import RecordError
 
 # Slots of the kernel arrays set from the parameters (equal to a fresh detector's).
 _INT_SLOTS = ('I_W', 'I_KVERIF', 'I_R', 'I_L', 'I_ESTIMATED', 'I_O_RPREF', 'I_O_RTERM',
-              'I_O_RTIME', 'I_O_AR', 'I_O_LAGS')
+              'I_O_RTIME', 'I_O_RSPEED', 'I_O_AR', 'I_O_LAGS')
 _FLOAT_SLOTS = ('F_LOGR', 'F_MIN_EXC', 'F_NOISE_VAR', 'F_MAX_W', 'F_MAX_F', 'F_FLOOR_REL',
                 'F_FLOOR_ABS')
 # Relative tolerance of the float slots and of the skip bound: values computed by the
@@ -246,6 +246,9 @@ def _change(live: Live, config: LLRConfig) -> None:
     if change.before.shape != (width,) or change.gap.shape != (width,) \
             or change.ramp.shape[0] < 1 or change.ramp.shape[1] != 1 + 3 * width:
         _fail('change', f'arrays not of the prefix width {width} of this model')
+    if change.speeds.shape != (change.ramp.shape[0], 2) or (
+            config.p == 2 and not np.all(change.speeds[:, 0] <= change.speeds[:, 1])):
+        _fail('change.speeds', 'not one speed range (lowest <= highest) per ramp block')
     if not all(np.all(np.isfinite(a)) for a in (change.before, change.gap, change.ramp)) \
             or not math.isfinite(change.time) or not change.log_p <= 0.0:
         _fail('change', 'sums, time or p-value not finite')

@@ -55,6 +55,8 @@ class DeclaredChange:
     sample before it (NaN: not in a gap). ``shape``: the shape of the kind given
     (``step``, or ``ramp`` when it was named for a growing change; the continuation test
     of a later declaration lets only a kind named so fix the direction of the growth).
+    ``speeds``: per ``ramp`` block the lowest and highest ``|w|`` of its samples (NaN for
+    p > 2), for the kind rules' speed order (core/llr_kinds.py ``speed_ordered``).
     """
 
     n_before: int
@@ -77,6 +79,7 @@ class DeclaredChange:
     before: np.ndarray = array_field('float64', 1)
     gap: np.ndarray = array_field('float64', 1)
     ramp: np.ndarray = array_field('float64', 2)
+    speeds: np.ndarray = array_field('float64', 2)
 
 
 @dataclass(frozen=True)
@@ -128,7 +131,7 @@ class LLRState:
     ``change``: the last declared change; ``last_event``: the latest event returned.
     """
 
-    VERSION: ClassVar[int] = 2   # 2: DeclaredChange.shape
+    VERSION: ClassVar[int] = 3   # 2: DeclaredChange.shape; 3: its speeds, the speed ring
 
     parameters: dict[str, Scalar]
     counters: dict[str, int]
@@ -147,6 +150,7 @@ class Rings(NamedTuple):
     pref: np.ndarray   # (L, width): prefix-sum row at each position
     term: np.ndarray   # (L, 3) (h1, h2, f) for p = 2, else (L, width) terms
     time: np.ndarray   # (L,) sample time
+    speed: np.ndarray  # (L,) |w| for p = 2 (llr_kernel.ingest_sample), NaN for p > 2
     row: np.ndarray    # (L,) row index
 
 
@@ -154,10 +158,11 @@ def rings(floats: np.ndarray, ints: np.ndarray) -> Rings:
     """Return the ring views of the kernel arrays (core/llr_layout.py ``allocate``)."""
     length = int(ints[layout.I_L])
     o_pref, o_term = int(ints[layout.I_O_RPREF]), int(ints[layout.I_O_RTERM])
-    o_time, o_ar = int(ints[layout.I_O_RTIME]), int(ints[layout.I_O_AR])
+    o_time, o_speed = int(ints[layout.I_O_RTIME]), int(ints[layout.I_O_RSPEED])
+    o_ar = int(ints[layout.I_O_AR])
     return Rings(floats[o_pref:o_term].reshape(length, -1),
-                 floats[o_term:o_time].reshape(length, -1), floats[o_time:o_ar],
-                 ints[layout.I_SCALARS:layout.I_SCALARS + length])
+                 floats[o_term:o_time].reshape(length, -1), floats[o_time:o_speed],
+                 floats[o_speed:o_ar], ints[layout.I_SCALARS:layout.I_SCALARS + length])
 
 
 class SampleBuffer:
@@ -323,7 +328,7 @@ def snapshot(live: Live, config: LLRConfig) -> LLRState:
     change = live.change
     if change is not None:
         change = replace(change, before=change.before.copy(), gap=change.gap.copy(),
-                         ramp=change.ramp.copy())
+                         ramp=change.ramp.copy(), speeds=change.speeds.copy())
     general = live.general
     if general is not None:
         general = replace(general, reference_sums=general.reference_sums.copy(),
