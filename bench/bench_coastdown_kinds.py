@@ -16,8 +16,10 @@ this process) on:
   fitted difference stays within ``FLAT_REL`` of its mean over 4-36 rad/s.
 
 Besides, each self-join is run again commissioned on the two coasts of its own tyre and
-pressure (:func:`same_machine`), and each self-join not named dry gets the step check's
-statistics of bench/coastdown_growth.py (:func:`why_not_dry`).
+pressure (:func:`same_machine`), each self-join not named dry gets the step check's
+statistics of bench/coastdown_growth.py (:func:`why_not_dry`), and the self-joins are run
+with other rises and another commissioning (:func:`variants`: data the kind rules were
+not developed on).
 
 The score is the final kind of the first change declared after the join. Results:
 bench/results/coastdown_kinds.json, coastdown_kinds.png and the ``coastdown_kinds``
@@ -42,6 +44,10 @@ from bench.bench_identify import MEASURED, NOT_A_FREE_COAST
 
 COMMISSIONING = ('Greenspeed_Scorcher__Separate__Left__90_psi.csv',
                  'Greenspeed_Scorcher__Separate__Right__90_psi.csv')
+# Another tyre's two coasts, for the self-joins of :func:`variants`.
+OTHER_COMMISSIONING = ('Grandprix__Separate__Left__100_psi.csv',
+                       'Grandprix__Separate__Right__100_psi.csv')
+FLYWHEEL_FACTOR = 3.7     # the dry rise of the issue's flywheel case, as a factor
 GAP_S = 30.0
 DRY_STEP = 0.05           # N m
 VISCOUS_REL, DRAG_REL, FLAT_REL = 0.10, 0.03, 0.15
@@ -91,6 +97,40 @@ def self_join(coast: dict[str, Any]) -> list[tuple[np.ndarray, np.ndarray, np.nd
     """Return a coast and the same coast with its dry level raised by ``DRY_STEP``."""
     t, w, f = coast['time'], coast['speed'], coast['friction']
     return [(t, w, f), (t, w, f - DRY_STEP * np.sign(w))]
+
+
+def variants(cs: dict[str, dict[str, Any]], others: list[str], calibration: pathlib.Path,
+             folder: pathlib.Path) -> dict[str, Any]:
+    """Return the self-joins' kinds with other dry rises and another commissioning.
+
+    Rises of 0.02 and 0.10 N m and of the coast's own fitted dry level times
+    ``FLYWHEEL_FACTOR - 1`` (commissioning as in the main table), and the rise of
+    ``DRY_STEP`` commissioned on :data:`OTHER_COMMISSIONING` (its two coasts left out).
+    """
+    sub = folder / 'other'
+    sub.mkdir()
+    other = calibrate(list(OTHER_COMMISSIONING), cs, sub)
+    cases = [('a rise of 0.02 N m', calibration, lambda c: 0.02, others),
+             ('a rise of 0.10 N m', calibration, lambda c: 0.10, others),
+             (f'the dry level x{FLYWHEEL_FACTOR:g}', calibration,
+              lambda c: (FLYWHEEL_FACTOR - 1.0) * abs(c['dry']), others)]
+    if other['exit'] == 0:
+        cases.append((f'a rise of {DRY_STEP:g} N m, commissioned on '
+                      f'{OTHER_COMMISSIONING[0].split("__")[0]} at '
+                      f'{OTHER_COMMISSIONING[0].split("__")[-1][:-4].replace("_", " ")}',
+                      pathlib.Path(other['path']), lambda c: DRY_STEP,
+                      [r for r in others if r not in OTHER_COMMISSIONING]))
+    out: dict[str, Any] = {'other_commissioning': other, 'cases': {}}
+    for name, calib, rise, runs in cases:
+        rows = {}
+        for run in runs:
+            c = cs[run]
+            t, w, f = c['time'], c['speed'], c['friction']
+            csv = folder / f'variant_{len(rows)}.csv'
+            join = write_record(csv, [(t, w, f), (t, w, f - rise(c) * np.sign(w))])
+            rows[run] = first_after(detect(csv, calib)['events'], join)
+        out['cases'][name] = rows
+    return out
 
 
 def _rel(a: float, b: float) -> float:
@@ -247,6 +287,7 @@ def run(out_dir: pathlib.Path, quick: bool) -> dict[str, Any]:
                 selfs[run_name]['growth'] = why_not_dry(csv, calibration, join,
                                                         selfs[run_name])
         results['same_machine'] = same_machine(cs, folder)
+        results['variants'] = variants(cs, others, calibration, folder)
         joined = {}
         for first, second, flat in pairs(cs, others):
             csv = folder / f'pair_{len(joined)}.csv'
@@ -287,6 +328,8 @@ def summarise(results: dict[str, Any]) -> dict[str, Any]:
             'same_machine': _counts(list(results['same_machine']['joins'].values())),
             'same_machine_n': len(results['same_machine']['joins']),
             'same_machine_refused': results['same_machine']['refused'],
+            'variants': {name: _counts(list(rows.values())) for name, rows
+                         in results['variants']['cases'].items()},
             'not_dry': _growth_counts(results['self_joins'])}
 
 
@@ -325,6 +368,10 @@ def markdown(results: dict[str, Any]) -> str:
     rows.append(['the same coasts, each commissioned on the two coasts of its own tyre and '
                  f'pressure ({s["same_machine_refused"]} such commissionings refused)',
                  s['same_machine_n'], *(s['same_machine'][k] for k in KINDS)])
+    for name, counts in s['variants'].items():
+        rows.append([f'a coast joined with itself with {name} (not used while developing '
+                     'the speed-order rule)', len(results['variants']['cases'][name]),
+                     *(counts[k] for k in KINDS)])
     return '\n'.join([
         '`python -m bench coastdown_kinds` (issue 35 item 3): drum coasts of '
         '../shared/data/measured/drum-coastdown read in place, friction J dw/dt; '
