@@ -425,6 +425,7 @@ def throughput(tele, cal_path: str, params: dict[str, Any],
                             found.extend(out)
                 rates['stream' + ('_cal' if mode else '')].append(n / (time.process_time()
                                                                        - start))
+                found.extend(detector.finish())   # the end of record, as detect_batch
                 name = 'calibrated' if mode else 'plain'
                 same[name] &= [e.to_json() for e in batch] == [e.to_json() for e in found]
                 keys_batch = [_event_key(e) for e in batch]
