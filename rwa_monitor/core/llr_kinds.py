@@ -138,10 +138,7 @@ def categorise(before: np.ndarray, n_before: int, after: np.ndarray, p: int,
     (constrained fit for a single component), never the free fit of an unidentifiable
     segment.
 
-    ``ramp``: the block rows (:func:`ramp_sums`) of the after segment; ``speeds``: each
-    block's lowest and highest ``|w|``, or None. A single kind the step tests confirmed
-    stands without the growth tests when the blocks' speeds are in one order
-    (:func:`speed_ordered`). Given, the growth
+    ``ramp``: the block rows (:func:`ramp_sums`) of the after segment. Given, the growth
     tests (:func:`ramp_kind` on the best time shape of each hypothesis,
     :func:`ramp_shapes`; docs/llr.md "Kinds on ramps") may name the kind in which the
     change grows; if it differs from the step outcome and a growth of the other kind of
@@ -154,7 +151,9 @@ def categorise(before: np.ndarray, n_before: int, after: np.ndarray, p: int,
     growth test compares the best of the ``m`` time shapes with its limit at
     ``category_level / m`` (:func:`ramp_limits`). When the growth columns cannot be told
     from the step offsets and each other (:func:`growth_separation` below
-    :data:`MIN_SEPARATION`) the growth tests are not used and the step outcome stands. A
+    :data:`MIN_SEPARATION`) the growth tests are not used and the step outcome stands;
+    nor are they when ``speeds`` (each block's lowest and highest ``|w|``, or None) are
+    in one order (:func:`speed_ordered`) and the step tests confirmed a single kind. A
     step verdict that stands is not confirmed when the after segment grows
     (:func:`grows`): the step model it rests on is rejected, and a step fit of a growing
     level shares the rise between the directions (``undecided``, guess the better single
