@@ -332,3 +332,53 @@ def test_the_filter_breaks_only_where_the_sequence_does():
     assert not kern.sequence_breaks(live.floats, live.ints, j, row, last + step[-1] * 3.9)
     assert kern.sequence_breaks(live.floats, live.ints, j, row, last + step[-1] * 4.1)
     assert kern.sequence_breaks(live.floats, live.ints, j, row + 1, last + step[-1])
+
+
+def _reference_order(e: np.ndarray, top: int) -> tuple[int, np.ndarray, float]:
+    """BIC order by least squares on the lagged columns (numpy's lstsq, roots by np.roots)."""
+    n = e.size
+    m = n - top
+    target = e[top:]
+    best = (np.inf, 0, np.zeros(0), 0.0)
+    for q in range(top + 1):
+        if q:
+            lagged = np.column_stack([e[top - i:n - i] for i in range(1, q + 1)])
+            coef = np.linalg.lstsq(lagged, target, rcond=None)[0]
+            rss = float(np.sum((target - lagged @ coef) ** 2))
+        else:
+            coef, rss = np.zeros(0), float(target @ target)
+        bic = m * np.log(rss / m) + q * np.log(m)
+        stationary = q == 0 or np.all(np.abs(np.roots(np.r_[1.0, -coef])) < 0.999)
+        if bic < best[0] and stationary:
+            best = (bic, q, coef, rss / m)
+    return best[1:]
+
+
+@pytest.mark.parametrize('seed', range(5))
+def test_compiled_order_selection_equals_least_squares_on_the_lags(seed):
+    from rwa_monitor.core.llr_noise import lag_gram, select_ar_order
+    rng = np.random.default_rng(4100 + seed)
+    n, top = 3000, 3
+    e = ar1(n, (-0.6, 0.0, 0.3, 0.8, 0.95)[seed], rng)
+    ar, s2u = select_ar_order(lag_gram(e, top), n)
+    order, coef, s2 = _reference_order(e, top)
+    assert ar.size == order
+    assert np.allclose(ar, coef, rtol=1e-9, atol=1e-12)
+    assert s2u == pytest.approx(s2, rel=1e-9)
+
+
+def test_order_selection_skips_singular_and_explosive_orders():
+    from rwa_monitor.core.llr_noise import lag_gram, select_ar_order
+    # An explosive AR(1) (root 1.005) fits best but is not stationary: order 0 stays.
+    u = np.random.default_rng(4110).standard_normal(2000)
+    series = np.empty(u.size)
+    series[0] = u[0]
+    for i in range(1, u.size):
+        series[i] = 1.005 * series[i - 1] + u[i]
+    ar, _ = select_ar_order(lag_gram(series, 1), series.size)
+    assert ar.size == 0
+    # Lags that are all zero: every order above 0 is singular.
+    gram = np.zeros((4, 4))
+    gram[0, 0] = 5.0
+    ar, s2u = select_ar_order(gram, 100)
+    assert ar.size == 0 and s2u == pytest.approx(5.0 / 97)

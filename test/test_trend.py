@@ -207,3 +207,30 @@ def test_autocorrelation_sums_add_in_order_whatever_the_lags():
                 for u in range(lag, n):
                     expected[lag] += float(e[u]) * float(e[u - lag])
             assert _autocorrelation(e, top).tolist() == expected, (n, top)
+
+
+@pytest.mark.parametrize('ar', [0.0, 0.7])
+def test_compiled_fit_gives_the_noise_models_standard_errors(ar):
+    """pass_levels' errors are noise_model_from_gram's arithmetic on the pass's lag sums."""
+    from rwa_monitor.core.llr_noise import lag_top, noise_model_from_gram
+    from rwa_monitor.core.trend_sums import level_sums, residual_lag_gram
+    rng = np.random.default_rng(79)
+    t = 0.1 * np.arange(6000)
+    w = 60.0 * np.sin(2 * np.pi * t / 400.0) + 5.0
+    noise = np.empty(t.size)
+    prev = 0.0
+    for i, u in enumerate(rng.normal(0.0, 2e-5, t.size)):
+        prev = ar * prev + u
+        noise[i] = prev
+    f = -2e-4 * np.sign(w) - 3e-7 * w + noise
+    levels = pass_levels(t, w, f)
+    sums = level_sums(t, w, f, MIN_SPEED_RAD_S)
+    n = int(sums[0])
+    top = lag_top(n, 3)
+    lags = residual_lag_gram(t, w, f, MIN_SPEED_RAD_S, levels.dry, levels.viscous, n, top)
+    model = noise_model_from_gram(lags[:top + 1], n, float(lags[top + 1, 0]), 2)
+    inverse = np.linalg.inv(np.array([[sums[5], sums[6]], [sums[6], sums[7]]]))
+    variance = model.residual_std ** 2 * model.long_run_ratio
+    assert levels.ar_order == len(model.ar) and (levels.ar_order > 0) == (ar > 0)
+    assert levels.dry_se == math.sqrt(variance * inverse[0, 0])
+    assert levels.viscous_se == math.sqrt(variance * inverse[1, 1])

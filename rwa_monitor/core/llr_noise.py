@@ -16,6 +16,7 @@ import math
 import numpy as np
 
 from rwa_monitor.core import llr_stats
+from rwa_monitor.core.jit import njit
 from rwa_monitor.core.schema import LLR_AUTO_AR_ORDER
 
 # The order of ``noise_ar_max_order`` auto (its range: core/schema.py).
@@ -108,44 +109,62 @@ def noise_model_from_gram(gram: np.ndarray, n: int, sum_squares: float, fitted: 
                           ) -> NoiseModel:
     """Return the AR model of a residual of ``n`` samples from its lag Gram matrix.
 
+    The order by :func:`select_ar_order`; ``sum_squares`` is ``e @ e``, ``fitted`` the
+    parameters the residual was fitted with.
+    """
+    ar, s2u = select_ar_order(np.ascontiguousarray(gram, dtype=float), int(n))
+    coefficients = tuple(float(a) for a in ar)
+    s2e = max(sum_squares / max(n - fitted, 1), 1e-300)
+    ratio = s2u / (1.0 - sum(coefficients)) ** 2 / s2e
+    return NoiseModel(coefficients, math.sqrt(s2u), math.sqrt(s2e), ratio, speed_std)
+
+
+@njit('Tuple((float64[::1], float64))(float64[:, ::1], int64)', cache=True)
+def select_ar_order(gram: np.ndarray, n: int) -> tuple:
+    """Return the AR coefficients and innovation variance of the order BIC selects.
+
     Conditional least squares of ``e[Q:]`` on its ``q`` lags for each ``q <= Q`` (``Q`` =
     ``gram``'s size - 1; common targets), solved by the normal equations of the lag Gram
     matrix (the lags of a residual are far from collinear, so this equals the orthogonal
     solution to rounding, at a fraction of its cost); ``BIC_q`` as in
     :func:`fit_noise_model`; an order is kept only if its characteristic roots lie inside
-    the unit circle (checked only for an order whose BIC would win). ``sum_squares`` is
-    ``e @ e``, ``fitted`` the parameters the residual was fitted with.
+    the unit circle (checked only for an order whose BIC would win); a singular order is
+    skipped. Compiled (the detector's calibration and every pass level of the fleet's
+    trend call it): 21 -> 4 us for ``Q = 3`` against the same steps in numpy calls, the
+    same floats (20,000 random lag Gram matrices).
     """
     top = gram.shape[0] - 1
     m = n - top
-    best: tuple[float, tuple[float, ...], float] = (math.inf, (), 0.0)
+    best_bic = np.inf
+    best = np.zeros(0)
+    best_s2 = 0.0
     for q in range(top + 1):
         if q == 0:
             coef = np.zeros(0)
-            rss = float(gram[0, 0])
+            rss = gram[0, 0]
         else:
-            coef = _solve_lags(gram[1:q + 1, 1:q + 1], gram[1:q + 1, 0])
-            if coef is None:
+            lags = np.ascontiguousarray(gram[1:q + 1, 1:q + 1])
+            right = np.ascontiguousarray(gram[1:q + 1, 0])
+            try:
+                coef = np.linalg.solve(lags, right)
+            except Exception:  # noqa: BLE001 - singular: this order is not fitted
                 continue
-            rss = float(gram[0, 0] - 2.0 * coef @ gram[1:q + 1, 0]
-                        + coef @ gram[1:q + 1, 1:q + 1] @ coef)
+            rss = gram[0, 0] - 2.0 * np.dot(coef, right) + np.dot(np.dot(coef, lags), coef)
         s2 = max(rss / m, 1e-300)
         bic = m * math.log(s2) + q * math.log(m)
-        if bic < best[0] and (q == 0 or np.all(np.abs(np.roots(
-                np.concatenate([[1.0], -coef]))) < 0.999)):
-            best = (bic, tuple(float(a) for a in coef), s2)
-    _, ar, s2u = best
-    s2e = max(sum_squares / max(n - fitted, 1), 1e-300)
-    ratio = s2u / (1.0 - sum(ar)) ** 2 / s2e
-    return NoiseModel(ar, math.sqrt(s2u), math.sqrt(s2e), ratio, speed_std)
+        if bic < best_bic and (q == 0 or _stationary(coef)):
+            best_bic, best, best_s2 = bic, coef, s2
+    return best, best_s2
 
 
-def _solve_lags(gram: np.ndarray, right: np.ndarray) -> np.ndarray | None:
-    """Return the AR coefficients of the lag normal equations, None if they are singular."""
-    try:
-        return np.linalg.solve(gram, right)
-    except np.linalg.LinAlgError:
-        return None
+@njit(cache=True)
+def _stationary(coef: np.ndarray) -> bool:
+    """Return True if the roots of ``1 - sum coef[i] z^-(i+1)`` lie inside |z| < 0.999."""
+    polynomial = np.empty(coef.size + 1, dtype=np.complex128)
+    polynomial[0] = 1.0
+    for i in range(coef.size):
+        polynomial[i + 1] = -coef[i]
+    return bool(np.all(np.abs(np.roots(polynomial)) < 0.999))
 
 
 def fit_speed_std(h: np.ndarray, f: np.ndarray, abs_speed: np.ndarray

@@ -17,9 +17,10 @@ import numpy as np
 import scipy.linalg
 import scipy.stats
 
-from rwa_monitor.core.llr_noise import DEFAULT_AR_ORDER, lag_top, noise_model_from_gram
+from rwa_monitor.core.llr_noise import DEFAULT_AR_ORDER
 from rwa_monitor.core.params import check_int, check_real
-from rwa_monitor.core.trend_sums import level_sums, residual_lag_gram
+from rwa_monitor.core.trend_sums import (ESTIMATED, FIT_FIELDS, NOT_EXCITED, pass_fit,
+                                         TOO_FEW_SAMPLES)
 
 SECONDS_PER_DAY = 86400.0
 # Samples slower than this are dropped from a pass fit: at rest sign(w) carries no dry
@@ -104,8 +105,8 @@ def pass_levels(time: np.ndarray, speed: np.ndarray, friction: np.ndarray,
     nominal_friction`` (or ``friction``). Samples with any non-finite value, or ``|w| <
     min_speed``, are dropped and counted. Standard errors: the residual of the fit gets
     the project's AR noise model (llr_noise.noise_model_from_gram, fit_noise_model's order
-    selection by BIC up to ``max_ar_order``); the sums walk the pass compiled
-    (core/trend_sums.py); the covariance is ``sigma_LR^2 (H^T H)^-1``
+    selection by BIC up to ``max_ar_order``); the whole fit runs compiled
+    (core/trend_sums.py ``pass_fit``); the covariance is ``sigma_LR^2 (H^T H)^-1``
     with ``sigma_LR^2`` the long-run variance of the residual (its variance times
     ``long_run_ratio``), which is the sandwich covariance of least squares under serially
     correlated noise when the regressors vary slowly against the noise's correlation time
@@ -119,38 +120,26 @@ def pass_levels(time: np.ndarray, speed: np.ndarray, friction: np.ndarray,
                          f'got {t.size}, {w.size}, {f.size}')
     min_speed = check_real('min_speed', min_speed, 0.0)
     max_ar_order = check_int('max_ar_order', max_ar_order, 0, 10)
-    kept, nonfinite, slow, t_min, t_max, g00, g01, g11, b0, b1 = level_sums(
-        t, w, f, min_speed)
+    fit = pass_fit(t, w, f, min_speed, max_ar_order, MIN_PASS_SAMPLES, MIN_EXCITATION)
+    (kept, nonfinite, slow, t_min, t_max, dry, viscous, s2u, s2e, inverse_dry,
+     inverse_viscous, order, code) = fit[:len(FIT_FIELDS)].tolist()
     n = int(kept)
     span = (t_min, t_max) if n else (
         (float(np.nanmin(t)), float(np.nanmax(t))) if np.isfinite(t).any() else
         (math.nan, math.nan))
     counts = {'nonfinite': int(nonfinite), 'slow': int(slow)}
-    nan = math.nan
-    if n < MIN_PASS_SAMPLES:
-        return PassLevels(*span, n, nan, nan, nan, nan, **counts, reason='too_few_samples')
-    # The scaling by the diagonal in floats (math.sqrt and np.sqrt both round correctly,
-    # d_i d_j as np.outer forms it): the same numbers as the array expressions without
-    # their calls (71 -> 64 us a pass of 6000 samples, the same floats on
-    # 840 of bench fleet's pass-wheels).
-    d0, d1 = math.sqrt(g00), math.sqrt(g11)
-    if not (d0 > 0 and d1 > 0):
-        return PassLevels(*span, n, nan, nan, nan, nan, **counts, reason='not_excited')
-    gram = np.array([[g00, g01], [g01, g11]])
-    correlation = np.array([[g00 / (d0 * d0), g01 / (d0 * d1)],
-                            [g01 / (d1 * d0), g11 / (d1 * d1)]])
-    if np.linalg.det(correlation) < MIN_EXCITATION:
-        return PassLevels(*span, n, nan, nan, nan, nan, **counts, reason='not_excited')
-    # Normal equations on the unit-diagonal Gram (condition below 4 / MIN_EXCITATION).
-    scaled = np.linalg.solve(correlation, np.array([b0 / d0, b1 / d1]))
-    dry, viscous = float(scaled[0]) / d0, float(scaled[1]) / d1
-    top = lag_top(n, max_ar_order)
-    lags = residual_lag_gram(t, w, f, min_speed, dry, viscous, n, top)
-    noise = noise_model_from_gram(lags[:top + 1], n, float(lags[top + 1, 0]), 2)
-    variance = noise.residual_std ** 2 * noise.long_run_ratio
-    inverse = np.linalg.inv(gram)
-    return PassLevels(*span, n, dry, math.sqrt(variance * inverse[0, 0]), viscous,
-                      math.sqrt(variance * inverse[1, 1]), **counts, ar_order=len(noise.ar))
+    if code != ESTIMATED:
+        nan = math.nan
+        return PassLevels(*span, n, nan, nan, nan, nan, **counts, reason=_REASONS[int(code)])
+    ar = fit[len(FIT_FIELDS):len(FIT_FIELDS) + int(order)].tolist()
+    # noise_model_from_gram's long-run ratio and residual_std ** 2, in Python's floats.
+    ratio = s2u / (1.0 - sum(ar)) ** 2 / s2e
+    variance = math.sqrt(s2e) ** 2 * ratio
+    return PassLevels(*span, n, dry, math.sqrt(variance * inverse_dry), viscous,
+                      math.sqrt(variance * inverse_viscous), **counts, ar_order=int(order))
+
+
+_REASONS = {ESTIMATED: '', TOO_FEW_SAMPLES: 'too_few_samples', NOT_EXCITED: 'not_excited'}
 
 
 def _column(values: np.ndarray) -> np.ndarray:
