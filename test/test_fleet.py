@@ -45,9 +45,13 @@ def client():
         yield c
 
 
-def test_events_equal_detect_on_joined_passes(archive, client):
+def test_events_equal_detect_on_joined_passes(archive, client, monkeypatch):
+    from rwa_monitor.fleet import plan
     folder, reference, _ = archive
+    # A scan task per 3 passes, their chunks across the spacecraft's boundary.
+    monkeypatch.setattr(plan, 'SCAN_TASK_PASSES', 3)
     result = run_archive(folder, client=client, task_bytes=1)   # a task per pass
+    monkeypatch.undo()
     assert len(client.scheduler_info()['workers']) == 2
     for craft, events in reference.items():
         assert events, 'the reference must find something for the test to mean anything'
@@ -55,6 +59,7 @@ def test_events_equal_detect_on_joined_passes(archive, client):
     grouped = run_archive(folder, client=client)            # all passes in one task
     assert [h.event.to_json() for h in grouped.history] == \
         [h.event.to_json() for h in result.history]
+    assert grouped.summary['spacecraft'] == result.summary['spacecraft']
     assert [r.fields() for r in grouped.trend] == [r.fields() for r in result.trend] or \
         json.dumps([r.fields() for r in grouped.trend]) == json.dumps(
             [r.fields() for r in result.trend])               # NaN-safe

@@ -134,7 +134,7 @@ def scan_pass(path: str) -> PassFile | str:
 
 
 def scan_passes(paths: list[str]) -> list[PassFile | str]:
-    """Return :func:`scan_pass` of each path (one task per spacecraft)."""
+    """Return :func:`scan_pass` of each path (one ``scan`` task, fleet/plan.py)."""
     return [scan_pass(path) for path in paths]
 
 

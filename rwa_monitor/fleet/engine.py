@@ -1,7 +1,7 @@
 """The fleet engine on Dask distributed: every spacecraft's passes through its runners.
 
-Graph (docs/fleet.md "Engine"): one ``scan`` task per spacecraft (first stamp and columns
-of its candidate passes, fleet/plan.py), then per spacecraft a chain of ``step`` tasks
+Graph (docs/fleet.md "Engine"): ``scan`` tasks of up to 1000 candidate passes (first
+stamp and columns, fleet/plan.py), then per spacecraft a chain of ``step`` tasks
 (fleet/chain.py), each feeding a group of consecutive passes (about ``task_bytes`` of
 files) to all the spacecraft's runners and handing their states, as data, to the next.
 Spacecraft run in parallel; a spacecraft's passes run in time order. Every task is pure:

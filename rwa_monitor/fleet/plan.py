@@ -1,11 +1,11 @@
 """What a fleet run will do, per spacecraft: its runners' spec, prior state, passes to run.
 
 :func:`plan` reads the archive's folders, the saved state (if any) and each candidate
-pass's first stamp and columns (one ``scan`` task per spacecraft), and returns one
-:class:`SpacecraftPlan` per spacecraft: the passes to run in time order, those already
-processed (same name and size as in the state), those that cannot be read or run (with
-the reason: unreadable, other components than the spacecraft's, late) and the spec its
-runners are made from. A pass that starts before the last pass the state processed is
+pass's first stamp and columns (``scan`` tasks of up to SCAN_TASK_PASSES passes), and
+returns one :class:`SpacecraftPlan` per spacecraft: the passes to run in time order, those
+already processed (same name and size as in the state), those that cannot be read or run
+(with the reason: unreadable, other components than the spacecraft's, late) and the spec
+its runners are made from. A pass that starts before the last pass the state processed is
 late: a full run would have fed it earlier, and a run cannot go back in time, so it is
 reported, by name, as not examined. A pass that starts after it is fed as a full run would
 feed it (its rows at or before the last stamp fed are dropped and counted).
@@ -28,6 +28,10 @@ if TYPE_CHECKING:
     from distributed import Client
 
 CALIBRATION_KEY = 'calibration_file'
+# Candidate passes scanned by one task, whatever their spacecraft: a pass's scan costs
+# about 0.05 ms and a task a few ms of the engine's own, so one task per spacecraft (bench
+# fleet: 20 tasks of 42 passes) cost the client more than the scans.
+SCAN_TASK_PASSES = 1000
 Blocks = Mapping[str, Mapping[str, object]]
 MODEL_KEY = 'friction_model_file'
 
@@ -57,9 +61,11 @@ def plan(client: Client, fleet: Sequence[arc.Spacecraft], blocks: Blocks,
     """Return the plans of the spacecraft; StateError if a saved state does not fit the run."""
     first = [_prior(craft, blocks, saved.get(craft.id)) for craft in fleet]
     batches = [(p, _to_scan(p)) for p in first if p.error is None]
-    found = client.gather(client.map(arc.scan_passes, [paths for _, paths in batches],
-                                     pure=False)) if batches else []
-    scans = {p.id: dict(zip(paths, results)) for (p, paths), results in zip(batches, found)}
+    paths = [path for _, batch in batches for path in batch]
+    chunks = [paths[i:i + SCAN_TASK_PASSES] for i in range(0, len(paths), SCAN_TASK_PASSES)]
+    found = iter([f for chunk in client.gather(client.map(arc.scan_passes, chunks, pure=False))
+                  for f in chunk] if chunks else [])
+    scans = {p.id: {path: next(found) for path in batch} for p, batch in batches}
     return [_complete(p, scans.get(p.id, {}), blocks) for p in first]
 
 
