@@ -25,6 +25,25 @@ def test_parquet_round_trip_and_detect_reader(record, tmp_path):
         assert np.array_equal(back.columns()[name], values)
 
 
+def test_read_pass_reads_each_format_as_detect_does_and_never_raises(record, tmp_path):
+    """A Parquet pass takes the reader's direct path: the same record, the same refusals."""
+    write_parquet(tmp_path / 'p.parquet', record)
+    write_telemetry(tmp_path / 'c.csv', record)
+    for name in ('p.parquet', 'c.csv'):
+        got, want = archive.read_pass(str(tmp_path / name)), read_telemetry(tmp_path / name)
+        assert got.columns().keys() == want.columns().keys()
+        for column, values in want.columns().items():
+            assert np.array_equal(got.columns()[column], values)
+    (tmp_path / 'text.parquet').write_bytes(b'PAR1 not really')
+    pq.write_table(pa.table({'time': [1.0, 1.0]}), tmp_path / 'back.parquet')
+    pq.write_table(pa.table({'time': pa.array([], pa.float64())}), tmp_path / 'empty.parquet')
+    assert archive.read_pass(str(tmp_path / 'text.parquet')).startswith(
+        'unreadable: TelemetrySchemaError')
+    assert 'strictly increasing' in archive.read_pass(str(tmp_path / 'back.parquet'))
+    assert archive.read_pass(str(tmp_path / 'empty.parquet')) == 'no rows'
+    assert archive.read_pass(str(tmp_path / 'gone.parquet')).startswith('unreadable:')
+
+
 @pytest.mark.parametrize('table, message', [
     ({'t': [0.0, 1.0]}, "column 'time'"),
     ({'time': [0.0, 0.0], 'rw1_speed': [1.0, 2.0]}, 'strictly increasing'),

@@ -162,9 +162,17 @@ def components(columns: tuple[str, ...]) -> list[str]:
 
 
 def read_pass(path: str) -> Telemetry | str:
-    """Return a pass's telemetry, or the reason it cannot be read (never raises on data)."""
+    """Return a pass's telemetry, or the reason it cannot be read (never raises on data).
+
+    A Parquet pass goes to its reader directly, as :func:`scan_pass` takes it: the general
+    entry's checks for other formats cost 33 us of the 430 us of a pass of bench fleet's
+    archive (6000 rows; 0.03 s of CPU over its 840 passes).
+    """
     try:
-        tele = read_telemetry(path)
+        if parquet_io.is_parquet(path):
+            tele = parquet_io.read_parquet(path)
+        else:
+            tele = read_telemetry(path)
     except Exception as err:  # noqa: BLE001 - a pass is outside data: any failure is its own
         return f'unreadable: {type(err).__name__}: {err}'
     if not len(tele):
