@@ -100,3 +100,41 @@ def test_one_call_calibrated_update_equals_lookup_then_update():
                                                      'outside_calibrated_range')}
     assert min(counts.values()) > 0
     assert one_call.not_tested == two_calls.not_tested == counts
+
+
+def _read_only(*arrays):
+    out = []
+    for a in arrays:
+        a = np.array(a, dtype=float)
+        a.setflags(write=False)
+        out.append(a)
+    return out
+
+
+def test_read_only_arrays_give_the_events_of_writable_ones():
+    # np.load(mmap_mode='r'), np.frombuffer and zero-copy Arrow columns are read-only;
+    # the compiled kernels' signatures are of writable arrays (a TypeError before), so
+    # the entries copy such inputs (jit.kernel_array) and never write into the caller's.
+    from rwa_monitor.core.jit import kernel_array
+    from rwa_monitor.core.schema import LLR
+    from rwa_monitor.core.trend import pass_levels
+    from rwa_monitor.core.wheel_runner import WheelRunner
+    t, w, f = friction_signal(4000, 65, ((2000, 0.6, 0.0),), profile='crossing')
+    frozen = _read_only(t, w, f)
+    expected = LLRDetector('rw1', window=150).process_arrays(t, w, f)
+    got = LLRDetector('rw1', window=150).process_arrays(*frozen)
+    assert expected and [e.to_json() for e in got] == [e.to_json() for e in expected]
+    block = {'friction_model': {'effects': [], 'weights': {'dry': 0.5, 'viscous': 0.02}},
+             'noise': {'low_speed_band': {'speed_abs_below_rad_s': 1.0}},
+             'speed_range_rad_s': [-12.0, 16.0]}
+    runs = []
+    for arrays in ((t, w, f), frozen):
+        runner = WheelRunner('rw1', {**LLR.defaults(), 'window': 150},
+                             nominal=NominalWheel(block))
+        runs.append([e.to_json() for e in runner.feed(*arrays)] + [runner.facts()])
+    assert runs[0] == runs[1]
+    assert pass_levels(*frozen) == pass_levels(t, w, f)
+    assert not any(a.flags.writeable for a in frozen)
+    assert np.array_equal(frozen[2], f)
+    writable = np.arange(3.0)
+    assert kernel_array(writable) is writable and kernel_array(frozen[0]) is not frozen[0]

@@ -23,7 +23,9 @@ import threading
 import time
 from typing import Any, Callable, Iterator
 
-__all__ = ['njit', 'reporting', 'set_reporter', 'warm']
+import numpy as np
+
+__all__ = ['kernel_array', 'njit', 'reporting', 'set_reporter', 'warm']
 
 # reporter(event, kernel, seconds, compiling): event 'start' (seconds 0) or 'end' (seconds
 # taken); compiling() is True once the kernel missed the cache (it is being compiled).
@@ -68,6 +70,20 @@ def njit(*args: Any, **kwargs: Any) -> Any:
         _lazy.append(dispatcher)
         return dispatcher
     return decorate
+
+
+def kernel_array(values: Any, dtype: Any = float) -> np.ndarray:
+    """Return ``values`` as a C-contiguous array of ``dtype`` that the kernels take.
+
+    The kernels' declared signatures are of writable arrays: numba types a read-only
+    array apart and finds no match for it (a TypeError from deep inside a detector). A
+    read-only input, as ``np.load(..., mmap_mode='r')``, ``np.frombuffer`` or a zero-copy
+    Arrow column give, is therefore copied; any other array goes as
+    ``np.ascontiguousarray`` gives it (itself when it already fits). Copying at the entry
+    rather than compiling read-only variants keeps one compiled version per kernel.
+    """
+    array = np.ascontiguousarray(values, dtype=dtype)
+    return array if array.flags.writeable else array.copy()
 
 
 def _misses(*dispatchers: Any) -> int:

@@ -19,6 +19,7 @@ import numpy as np
 from rwa_monitor.core import llr_changes, llr_general, llr_kernel as kern
 from rwa_monitor.core import llr_layout as layout
 from rwa_monitor.core.events import AnomalyEvent
+from rwa_monitor.core.jit import kernel_array
 from rwa_monitor.core.llr_config import LLRConfig
 from rwa_monitor.core.llr_noise import (fit_noise_model, speed_fit_done, speed_fit_ready,
                                         speed_scale)
@@ -29,7 +30,7 @@ def as_arrays(time, speed, friction) -> tuple[np.ndarray, np.ndarray, np.ndarray
     """Return the columns as contiguous 1-D float arrays of one length (ValueError if not)."""
     arrays = []
     for name, values in (('time', time), ('speed', speed), ('friction', friction)):
-        a = np.ascontiguousarray(values, dtype=float)
+        a = kernel_array(values)
         if a.ndim != 1:
             raise ValueError(f'{name} must be a 1-D array, got shape {a.shape}')
         arrays.append(a)

@@ -17,6 +17,7 @@ import numpy as np
 import scipy.linalg
 import scipy.stats
 
+from rwa_monitor.core.jit import kernel_array
 from rwa_monitor.core.llr_noise import DEFAULT_AR_ORDER
 from rwa_monitor.core.params import check_int, check_real
 from rwa_monitor.core.trend_sums import (ESTIMATED, FIT_FIELDS, NOT_EXCITED, pass_fit,
@@ -143,11 +144,14 @@ _REASONS = {ESTIMATED: '', TOO_FEW_SAMPLES: 'too_few_samples', NOT_EXCITED: 'not
 
 
 def _column(values: np.ndarray) -> np.ndarray:
-    """Return ``values`` as a contiguous 1-D float array (itself when it is one already)."""
+    """Return ``values`` as a contiguous, writable 1-D float array (the kernels' input).
+
+    Itself when it is one already; a read-only array is copied (jit ``kernel_array``).
+    """
     if (isinstance(values, np.ndarray) and values.dtype == np.float64 and values.ndim == 1
-            and values.flags.c_contiguous):
+            and values.flags.c_contiguous and values.flags.writeable):
         return values
-    return np.ascontiguousarray(np.asarray(values, dtype=float).reshape(-1))
+    return kernel_array(np.asarray(values, dtype=float).reshape(-1))
 
 
 def wheel_trend(times: np.ndarray, levels: np.ndarray, standard_errors: np.ndarray,

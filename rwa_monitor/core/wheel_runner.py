@@ -31,6 +31,7 @@ import numpy as np
 from rwa_monitor.core.coverage import judge, llr_samples_needed
 from rwa_monitor.core.events import AnomalyEvent
 from rwa_monitor.core.friction import RegressorSet
+from rwa_monitor.core.jit import kernel_array
 from rwa_monitor.core.llr import LLRDetector
 from rwa_monitor.core.llr_state import LLRState
 from rwa_monitor.core.nominal import NominalWheel, tested_text
@@ -130,7 +131,7 @@ class WheelRunner:
         :attr:`last_input` is then what the detector was given (the residual against the
         nominal with a calibration, NaN where not tested).
         """
-        t, w, f = (np.ascontiguousarray(a, dtype=float) for a in (time, speed, friction))
+        t, w, f = (kernel_array(a) for a in (time, speed, friction))
         if self._nominal is not None:
             f, skipped = self._nominal.residual(t, w, f)
             for reason, count in skipped.items():
