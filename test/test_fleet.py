@@ -68,6 +68,9 @@ def test_events_equal_detect_on_joined_passes(archive, client, monkeypatch):
     assert summary['sat-a']['passes'] == [name for _, _, name in CUTS_A]
     assert summary['sat-b']['passes'] == [name for _, _, name in CUTS_B]
     assert summary['sat-a']['rows_dropped'] == 100
+    assert summary['sat-a']['overlapping'] == {'pass_b.parquet': (
+        '100 of 11100 rows stamped at or before the last one fed before it (it overlaps an '
+        'earlier pass): not fed again')} and summary['sat-b']['overlapping'] == {}
     assert summary['sat-a']['components']['rw1']['samples'] == 42000
     assert set(summary['sat-a']['components']) == {'rw1', 'rw2', 'gyro'}
     assert summary['sat-b']['components']['rw1']['not_tested']['outside_calibrated_range'] > 0

@@ -146,3 +146,10 @@ def test_a_state_of_other_parameters_is_refused_naming_the_file(archive, tmp_pat
     err = capsys.readouterr().err
     assert code == 2 and 'saved with other parameters' in err, err
     assert err.rstrip().endswith('fleet.yaml'), err
+
+
+def test_the_printed_line_counts_current_and_superseded_events():
+    from rwa_monitor.cli.cmd_fleet import _history
+    assert _history({'events': 2, 'superseded': 1}) == \
+        '2 current events in the history, 1 superseded by later revisions'
+    assert _history({'events': 3, 'superseded': 0}) == '3 current events in the history'

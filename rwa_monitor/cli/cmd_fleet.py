@@ -82,14 +82,15 @@ def report(out: pathlib.Path, result) -> int:
     else:
         print(f'wrote {out}: {result.summary["new_events"]} new events from '
               f'{result.new_passes} new passes of {len(crafts)} spacecraft in '
-              f'{result.timings["wall_s"]:.1f} s ({result.summary["events"]} events in the '
-              'history)')
+              f'{result.timings["wall_s"]:.1f} s ({_history(result.summary)})')
     point = result.summary['operating_point']
     print(f'changes tested at false-alarm rate r = {point["false_alarm_rate"]:g} per test '
           f'(parameters: {result.summary["config"]})')
     for craft, entry in crafts.items():
         for what, why in entry['not_examined'].items():
             print(f'not examined: {craft} {what}: {why}')
+        for name, why in entry['overlapping'].items():
+            print(f'rows dropped: {craft} pass {name}: {why}')
     flagged = [f'{craft} {name} ({block["health"]})' for craft, entry in crafts.items()
                for name, block in entry['components'].items()
                if any(kind != 'healthy' for kind in block['by_kind'])]
@@ -102,3 +103,11 @@ def report(out: pathlib.Path, result) -> int:
     print(f'components with events: {", ".join(flagged) or "none"}; exit {code}: '
           f'{MEANING[code]}')
     return code
+
+
+def _history(summary: dict) -> str:
+    """Return what the cumulative history holds: current events, and superseded ones."""
+    text = f'{summary["events"]} current events in the history'
+    if summary.get('superseded'):
+        text += f', {summary["superseded"]} superseded by later revisions'
+    return text

@@ -19,7 +19,7 @@ from rwa_monitor.core.events import AnomalyEvent
 from rwa_monitor.core.runner_facts import ComponentFacts
 from rwa_monitor.fleet import history, state
 from rwa_monitor.fleet.plan import Blocks, SpacecraftPlan
-from rwa_monitor.fleet.records import Chain, GYRO, SpacecraftRecord, TrendRow
+from rwa_monitor.fleet.records import Chain, GYRO, PassFacts, SpacecraftRecord, TrendRow
 from rwa_monitor.fleet.trend_table import TrendTable
 
 # LLR parameters an operator needs beside the events (summary.json, report.html): how
@@ -82,9 +82,18 @@ class SpacecraftResult:
                 'unreadable': dict(p.unreadable), 'late': dict(p.late),
                 'ignored': dict(p.craft.ignored),
                 'rows_dropped': sum(f.rows_dropped for f in passes),
+                'overlapping': {f.name: _overlap(f) for f in passes if f.rows_dropped},
                 'last_time_s': self.record.last_time if self.record else None,
                 'events': len(events), 'components': components,
                 'not_examined': self.not_examined()}
+
+
+def _overlap(facts: PassFacts) -> str:
+    """Return why a pass lost rows: they repeat stamps an earlier pass already fed."""
+    whole = facts.rows + facts.rows_dropped
+    what = 'all' if facts.rows == 0 else f'{facts.rows_dropped} of'
+    return (f'{what} {whole} rows stamped at or before the last one fed before it '
+            '(it overlaps an earlier pass): not fed again')
 
 
 def _owner(event: AnomalyEvent) -> str:
