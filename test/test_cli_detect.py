@@ -71,6 +71,22 @@ def test_detect_round_trip_finds_the_step(simulated):
     assert llr['components']['rw1']['rejected']['non_finite'] == 0
 
 
+def test_a_parquet_path_is_written_as_parquet_and_detected_alike(simulated, tmp_path):
+    """``-o x.parquet`` writes Parquet (it once wrote CSV text the reader refused)."""
+    import pyarrow.parquet as pq
+    folder, path, config = simulated
+    target = tmp_path / 'wheels.parquet'
+    write_telemetry(target, read_telemetry(path))
+    assert pq.ParquetFile(target).metadata.num_rows == 12000
+    assert read_telemetry(target).columns().keys() == read_telemetry(path).columns().keys()
+    answers = []
+    for source in (path, target):
+        out = tmp_path / f'{source.suffix[1:]}.json'
+        assert main(['detect', str(source), '--config', str(config), '-o', str(out)]) == 1
+        answers.append(json.loads(out.read_text())['events'])
+    assert answers[0] == answers[1] and answers[0]
+
+
 def test_non_finite_samples_are_counted_not_fatal(tmp_path):
     tele = simulate_friction(n_wheels=1, n_samples=3000, seed=4)
     tele.wheels['rw1'].friction[[10, 20, 30]] = np.nan

@@ -8,8 +8,9 @@ CCSDS space packets (ccsds: its XTCE and map from the arguments, else ``FILE.xml
 packet reader counted and skipped is logged as warnings); anything else is read as CSV.
 Writing: a ``.mcap`` or ``.db3`` path writes a bare file, a path without a suffix (or an
 existing recording folder) a rosbag2 folder, a ``.bin`` path packets with their XTCE and
-map beside them (ccsds_write), any other path CSV; a FIFO or a device (``-o /dev/null``)
-gets CSV written straight into it (telemetry/atomic.py).
+map beside them (ccsds_write), a ``.parquet`` path Parquet (parquet_io), any other path
+CSV; a FIFO or a device (``-o /dev/null``) gets CSV written straight into it
+(telemetry/atomic.py).
 """
 
 from __future__ import annotations
@@ -150,7 +151,8 @@ def write_telemetry(path: str | os.PathLike, telemetry: Telemetry,
     path : str or path
         ``.mcap`` or ``.db3``: a bare recording file; no suffix (or an existing recording
         folder): a rosbag2 folder; ``.bin``: space packets with ``FILE.xml`` and
-        ``FILE_map.yaml`` beside them; anything else: CSV.
+        ``FILE_map.yaml`` beside them; ``.parquet``: Parquet (parquet_io); anything else:
+        CSV.
     telemetry : Telemetry
         The record to write (atomically: a reader never sees half a file).
     topics : str, optional
@@ -170,7 +172,7 @@ def write_telemetry(path: str | os.PathLike, telemetry: Telemetry,
     >>> path.read_text().splitlines()[0]
     'time,rw1_speed'
     """
-    from rwa_monitor.telemetry import rosbag_io
+    from rwa_monitor.telemetry import parquet_io, rosbag_io
     target = pathlib.Path(path)
     recording = not is_stream(target) and not is_packets(target) and (
         rosbag_io.is_recording(target) or not target.suffix)
@@ -184,5 +186,7 @@ def write_telemetry(path: str | os.PathLike, telemetry: Telemetry,
         write_packets(target, telemetry)
     elif recording:
         rosbag_io.write(target, telemetry, topics)
+    elif parquet_io.is_parquet(target):
+        parquet_io.write_parquet(target, telemetry)
     else:
         write_csv(target, telemetry)
