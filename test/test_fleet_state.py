@@ -236,3 +236,42 @@ def test_commit_removes_only_what_it_wrote(saved, client, tmp_path):
     assert all(path.read_text() == 'user file' for path in mine)
     assert _generation(folder) != old and old.is_dir()     # kept: it holds a user file
     assert sorted(p.name for p in old.iterdir()) == ['notes.txt']
+
+
+def test_a_second_run_on_a_state_in_use_is_refused_naming_the_holder(saved, tmp_path,
+                                                                      capsys):
+    archive, kept, full = saved
+    folder = _copy(kept, tmp_path)
+    before = (folder / state.POINTER).read_bytes()
+    args = ['fleet', str(archive), '-o', str(tmp_path / 'out'), '--state', str(folder),
+            '--workers', '1']
+    with state.locked(folder):                   # another run holds it
+        assert main(args) == 2
+    assert f'in use by another fleet run (process {os.getpid()})' in capsys.readouterr().err
+    assert (folder / state.POINTER).read_bytes() == before
+    assert main(args) in (0, 1)                  # released: the run goes on
+    assert (folder / state.POINTER).read_bytes() != before
+
+
+def test_a_lock_that_is_a_link_is_refused(tmp_path):
+    folder = tmp_path / 'state'
+    folder.mkdir()
+    (folder / state.LOCK).symlink_to(tmp_path / 'elsewhere')
+    with pytest.raises(state.StateError, match='cannot open the lock'):
+        with state.locked(folder):
+            pass
+    assert not (tmp_path / 'elsewhere').exists()
+
+
+def test_a_commit_after_another_run_moved_the_state_on_is_refused(saved, client, tmp_path):
+    """Two runs that both loaded generation N: the second commit would undo the first's."""
+    archive, kept, full = saved
+    folder = _copy(kept, tmp_path)
+    first = run_archive(archive, client=client, state_dir=folder)
+    second = run_archive(archive, client=client, state_dir=folder)
+    first.commit()
+    moved = (folder / state.POINTER).read_bytes()
+    with pytest.raises(state.StateError, match='another run moved the state on'):
+        second.commit()
+    assert (folder / state.POINTER).read_bytes() == moved
+    assert events_of(run_archive(archive, client=client, state_dir=folder), 'sat') == full

@@ -14,6 +14,7 @@ parameters, a refused state, an unwritable output).
 from __future__ import annotations
 
 import argparse
+import contextlib
 import pathlib
 import sys
 
@@ -67,10 +68,11 @@ def run(args: argparse.Namespace) -> int:
                               f'{args.archive} (it would be read as a spacecraft)')
     state.check_folders(args.state, args.output)
     outputs.check_output(args.output)
-    result = run_archive(args.archive, workers=args.workers, scheduler=args.scheduler,
-                         config=args.config, state_dir=args.state, log=sys.stderr)
-    outputs.write_outputs(args.output, result)
-    result.commit()          # the state moves on only once this run's outputs are written
+    with state.locked(args.state) if args.state else contextlib.nullcontext():
+        result = run_archive(args.archive, workers=args.workers, scheduler=args.scheduler,
+                             config=args.config, state_dir=args.state, log=sys.stderr)
+        outputs.write_outputs(args.output, result)
+        result.commit()      # the state moves on only once this run's outputs are written
     return report(args.output, result)
 
 

@@ -23,10 +23,18 @@ A commit writes a new generation in a hidden folder, renames it into place, then
 the pointer atomically, then removes the previous generation: a crash at any point
 leaves the old or the new state whole, and only files this module wrote (by their fixed
 names, inside folders it named) are ever removed.
+
+One run at a time: ``rwa-monitor fleet --state`` holds :func:`locked` (an exclusive
+``flock`` on ``STATE/.lock``, released by the system when the process ends, however it
+ends) from loading the state to committing it; a second run on the same folder is
+refused at once, naming the process that holds it (two daily runs that overlap would
+otherwise both load generation N and both write N + 1). :func:`commit` checks as well
+that the pointer is still the one loaded, for callers of the engine that take no lock.
 """
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import io
 import json
@@ -34,7 +42,7 @@ import os
 import pathlib
 import re
 import stat
-from typing import Any, Iterable, Mapping
+from typing import Any, Iterable, Iterator, Mapping
 
 import numpy as np
 
@@ -51,6 +59,7 @@ from rwa_monitor.telemetry.atomic import write_text_atomic
 FORMAT = 'rwa_monitor.fleet.state'
 VERSION = 2
 POINTER = 'current.json'
+LOCK = '.lock'
 FILES = ('state.json', 'arrays.npz', 'trend.parquet', 'history.parquet')
 GENERATION = re.compile(r'gen-(\d{6})')
 PARTIAL = re.compile(r'\.gen-(\d{6})\.partial')
@@ -71,14 +80,47 @@ def record_versions() -> dict[str, int]:
 
 
 class Loaded:
-    """A state read from its folder: its generation, records, trend rows, event history."""
+    """A state read from its folder: its generation, records, trend rows, event history.
+
+    ``pointer``: the bytes of ``current.json`` as loaded (:func:`commit` checks them).
+    """
 
     def __init__(self, generation: int, records: dict[str, SpacecraftRecord],
-                 trend: TrendTable, history: list[Entry]) -> None:
+                 trend: TrendTable, history: list[Entry], pointer: bytes = b'') -> None:
         self.generation = generation
         self.records = records
         self.trend = trend
         self.history = history
+        self.pointer = pointer
+
+
+@contextlib.contextmanager
+def locked(folder: pathlib.Path) -> Iterator[None]:
+    """Hold the state folder for one run (created if missing); StateError if held."""
+    import fcntl
+    if _exists(folder) and not _is_dir(folder):
+        raise StateError(f'{folder}: the state folder is not a folder')
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        handle = os.open(folder / LOCK, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW
+                         | os.O_NONBLOCK, 0o644)
+    except OSError as err:
+        raise StateError(f'{folder / LOCK}: cannot open the lock: {err.strerror or err}'
+                         ) from None
+    try:
+        if not stat.S_ISREG(os.fstat(handle).st_mode):
+            raise StateError(f'{folder / LOCK}: not a regular file')
+        try:
+            fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            holder = os.pread(handle, 32, 0).decode(errors='replace').strip() or 'unknown'
+            raise StateError(f'{folder}: in use by another fleet run (process {holder}): let '
+                             'it finish, or give another --state folder') from None
+        os.ftruncate(handle, 0)
+        os.pwrite(handle, f'{os.getpid()}\n'.encode(), 0)
+        yield
+    finally:
+        os.close(handle)
 
 
 def fingerprint(parts: Mapping[str, Any]) -> str:
@@ -104,8 +146,9 @@ def load(folder: pathlib.Path) -> Loaded | None:
         if _exists(folder) and not _is_dir(folder):
             raise StateError(f'{folder}: the state folder is not a folder')
         return None
+    raw = _read(pointer, 1 << 16)
     try:
-        document = json.loads(_read(pointer, 1 << 16))
+        document = json.loads(raw)
     except ValueError as err:
         raise StateError(f'{pointer}: not a state pointer: {err}') from None
     if not isinstance(document, dict) or document.get('format') != FORMAT:
@@ -130,7 +173,7 @@ def load(folder: pathlib.Path) -> Loaded | None:
         events = from_parquet(blobs[FILES[3]])
     except (ValueError, KeyError, TypeError, RecordError) as err:
         raise StateError(f'{gen}: its trend or event history cannot be read: {err}') from None
-    return Loaded(int(match.group(1)), records, trend, events)
+    return Loaded(int(match.group(1)), records, trend, events, raw)
 
 
 def _records(path: pathlib.Path, blobs: Mapping[str, bytes]) -> dict[str, SpacecraftRecord]:
@@ -172,6 +215,12 @@ def commit(folder: pathlib.Path, previous: Loaded | None,
     """Write ``records`` (every spacecraft) as the next generation and switch to it."""
     generation = (previous.generation if previous else 0) + 1
     name = f'gen-{generation:06d}'
+    pointer = folder / POINTER
+    now = _read(pointer, 1 << 16) if _exists(pointer) else None
+    if now != (previous.pointer if previous else None):
+        raise StateError(f'{folder}: another run moved the state on during this one (its '
+                         'pointer changed since it was loaded); this run is not saved: run '
+                         'again to go on from the new state')
     try:
         folder.mkdir(parents=True, exist_ok=True)
         _remove_partials(folder)
