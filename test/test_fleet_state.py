@@ -238,8 +238,8 @@ def test_commit_removes_only_what_it_wrote(saved, client, tmp_path):
     assert sorted(p.name for p in old.iterdir()) == ['notes.txt']
 
 
-def test_a_second_run_on_a_state_in_use_is_refused_naming_the_holder(saved, tmp_path,
-                                                                      capsys):
+def test_a_second_run_on_a_state_in_use_is_refused_naming_the_holder(
+        saved, tmp_path, capsys):
     archive, kept, full = saved
     folder = _copy(kept, tmp_path)
     before = (folder / state.POINTER).read_bytes()
