@@ -49,6 +49,7 @@ def test_read_pass_reads_each_format_as_detect_does_and_never_raises(record, tmp
     ({'time': [0.0, 0.0], 'rw1_speed': [1.0, 2.0]}, 'strictly increasing'),
     ({'time': [0.0, 1.0], 'rw1_speed': ['a', 'b']}, 'not a numeric column'),
     ({'time': [0.0, 1.0], 'rw1_friction': [1.0, 2.0]}, 'rw1_speed'),
+    ({'time': pa.array([0, 10**8], pa.timestamp('ns'))}, 'times are seconds as numbers'),
 ])
 def test_parquet_schema_errors_name_file_and_column(tmp_path, table, message):
     path = tmp_path / 'bad.parquet'

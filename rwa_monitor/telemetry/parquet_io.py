@@ -68,7 +68,10 @@ def read_parquet(path: str | os.PathLike, columns: list[str] | None = None) -> T
     for name in table.column_names:
         column = table.column(name)
         if not (pa.types.is_floating(column.type) or pa.types.is_integer(column.type)):
-            raise TelemetrySchemaError(path, f'not a numeric column ({column.type})',
+            hint = (': times are seconds as numbers (docs/contracts.md); write the stamps '
+                    'as seconds, e.g. since the archive epoch' if pa.types.is_temporal(
+                        column.type) else '')
+            raise TelemetrySchemaError(path, f'not a numeric column ({column.type}){hint}',
                                        column=name)
         data[name] = column.to_numpy(zero_copy_only=False).astype(float)
     _check_time(path, data[TIME])
