@@ -126,6 +126,8 @@ def test_late_pass_and_no_new_pass(archive, tmp_path, capsys):
     assert 'pass_z.csv' in summary['late'] and 'late' in summary['not_examined'][
         'pass pass_z.csv']
     assert code == 3 and 'not examined: sat-a pass pass_z.csv: late' in printed
+    assert ('not calibrated (no calibration.yaml: friction tested without a nominal model, '
+            'trends in absolute levels): sat-a\n') in printed          # sat-b is calibrated
     assert 'changes tested at false-alarm rate r = 3e-06 per test (parameters: ' in printed
     (grown / 'sat-a' / 'pass_z.csv').unlink()
     assert main(['fleet', str(grown), '-o', str(out), '--state', str(kept),

@@ -88,6 +88,10 @@ def report(out: pathlib.Path, result) -> int:
     point = result.summary['operating_point']
     print(f'changes tested at false-alarm rate r = {point["false_alarm_rate"]:g} per test '
           f'(parameters: {result.summary["config"]})')
+    bare = [craft for craft, entry in crafts.items() if not entry['calibration']]
+    if bare:
+        print('not calibrated (no calibration.yaml: friction tested without a nominal '
+              f'model, trends in absolute levels): {", ".join(bare)}')
     for craft, entry in crafts.items():
         for what, why in entry['not_examined'].items():
             print(f'not examined: {craft} {what}: {why}')
