@@ -117,3 +117,13 @@ def test_bad_settings_are_config_errors(tmp_path, capsys):
     assert 'fewer than 20 samples' in capsys.readouterr().err
     with pytest.raises(ValueError, match='pass_s'):
         plan_fleet(passes_per_day=48, pass_s=3600.0)
+
+
+def test_ccsds_archive_truth_names_the_packet_files(tmp_path):
+    out = tmp_path / 'archive'
+    assert main(['simulate', 'fleet', '-o', str(out), '--spacecraft', '1', '--days', '1',
+                 '--rate', '2', '--passes-per-day', '3', '--pass-minutes', '5',
+                 '--seed', '6', '--format', 'ccsds']) == 0
+    passes = json.loads((out / 'truth.json').read_text())['spacecraft']['sc1']['passes']
+    assert sorted(p['file'] for p in passes) == sorted(
+        p.name for p in (out / 'sc1').glob('*.bin')) and len(passes) == 3

@@ -196,8 +196,11 @@ def pass_telemetry(plan: FleetPlan, craft: Spacecraft, index: int) -> Telemetry:
     return tele
 
 
-def truth_document(plan: FleetPlan) -> dict:
-    """Return the truth.json content (docs/fleet.md, "Simulated archive")."""
+def truth_document(plan: FleetPlan, suffix: str = '.csv') -> dict:
+    """Return the truth.json content (docs/fleet.md, "Simulated archive").
+
+    ``suffix``: the passes' file suffix, so that each pass's ``file`` names its file.
+    """
     n = int(math.floor(plan.pass_s * plan.rate_hz + 1e-9))
     fleet = {}
     for craft in plan.spacecraft:
@@ -206,7 +209,7 @@ def truth_document(plan: FleetPlan) -> dict:
                       'faults': [_fault(f, craft, plan) for f in craft.faults
                                  if f.wheel == w]}
                   for w in plan.wheels}
-        passes = [{'file': f'{p.pass_id}.csv', 't_start_s': p.start_s,
+        passes = [{'file': f'{p.pass_id}{suffix}', 't_start_s': p.start_s,
                    't_end_s': p.start_s + (n - 1) / plan.rate_hz, 'samples': n}
                   for p in craft.passes]
         fleet[craft.name] = {'noise_std_nm': craft.noise_std, 'wheels': wheels,
@@ -255,5 +258,5 @@ def write_fleet(out: str | os.PathLike, plan: FleetPlan, suffix: str = '.csv',
             if progress is not None:
                 progress(len(written))
     truth = root / 'truth.json'
-    write_text_atomic(truth, json.dumps(truth_document(plan), indent=1) + '\n')
+    write_text_atomic(truth, json.dumps(truth_document(plan, suffix), indent=1) + '\n')
     return written + [truth]
