@@ -272,7 +272,8 @@ def test_refined_friction_model_equals_detect(client, tmp_path):
 
 def test_limits_from_the_config_reach_summary(archive, client, tmp_path):
     """The fleet block's limits: each wheel's trend in summary.json; detectors unchanged."""
-    from rwa_monitor.fleet.trends import wheel_trends
+    from rwa_monitor.fleet.history import current
+    from rwa_monitor.fleet.trends import trend_starts, wheel_trends
     folder, reference, _ = archive
     config = tmp_path / 'limits.yaml'
     config.write_text('fleet:\n  ros__parameters:\n    dry_limit: 2.0e-4\n'
@@ -282,12 +283,14 @@ def test_limits_from_the_config_reach_summary(archive, client, tmp_path):
     assert result.summary['trend_limits'] == limits
     for craft, events in reference.items():
         assert events_of(result, craft) == events
-    expected = wheel_trends([r.fields() for r in result.trend], limits)
+    starts = trend_starts((h.spacecraft, h.event) for h in current(result.history))
+    expected = wheel_trends([r.fields() for r in result.trend], limits, starts)
     assert len(expected) == 4
     for entry in expected:
         shown = result.summary['spacecraft'][entry['spacecraft']]['components'][
             entry['wheel']]['trend']
         assert shown['passes'] == entry['passes'] > 0
+        assert shown['since_s'] == starts.get((entry['spacecraft'], entry['wheel']))
         assert shown['dry_limit'] == 2.0e-4 and shown['viscous_limit'] == 3.0e-6
         for key, value in shown.items():
             want = entry[key]

@@ -7,9 +7,10 @@ import re
 import numpy as np
 import pytest
 
+from rwa_monitor.core.events import AnomalyEvent
 from rwa_monitor.core.trend import SECONDS_PER_DAY
 from rwa_monitor.fleet.report import render
-from rwa_monitor.fleet.trends import add_trends, trend_limits, wheel_trends
+from rwa_monitor.fleet.trends import add_trends, trend_limits, trend_starts, wheel_trends
 
 
 def write_report(path, events, summary, rows, limits=None, epoch=None):
@@ -75,6 +76,35 @@ def test_trend_table_finds_the_wearing_wheel_and_projects_the_limit():
         row['relative_to'] = 'nominal'          # sc1 rw1: calibrated for its first passes
     mixed = wheel_trends(rows)[0]
     assert (mixed['wheel'], mixed['passes'], mixed['relative_to']) == ('rw1', 20, 'zero')
+
+
+def step_event(time, kind='dry', shape='step', confirmed=True, component='rw1'):
+    return AnomalyEvent('llr', component, kind, time, 0, time + 60.0, 0, p_value=0.0,
+                        details={'kind_shape': shape, 'kind_confirmed': confirmed})
+
+
+def test_a_confirmed_step_starts_the_trend_anew_a_ramp_or_unconfirmed_kind_does_not():
+    rows = rows_of('sc1', 'rw1', 0.0, 5)
+    step = 10 * SECONDS_PER_DAY / 3                       # the start of pass 10
+    for row in rows[10:]:
+        row['dry'] += 1.5e-4                              # a dry step, no wear
+    across = wheel_trends(rows)[0]
+    assert across['dry_p_value'] < 1e-3 and across['since_s'] is None   # flagged: a false slope
+    events = [('sc1', step_event(step - 900.0, kind='undecided')),
+              ('sc1', step_event(step)), ('sc1', step_event(2.0, 'dry')),
+              ('sc1', step_event(step + 1e5, shape='ramp')),
+              ('sc1', step_event(step + 2e5, confirmed=False)),
+              ('sc1', step_event(step + 3e5, component='gyro', kind='bias'))]
+    starts = trend_starts(events)
+    assert starts == {('sc1', 'rw1'): step}
+    after = wheel_trends(rows, starts=starts)[0]
+    assert after['since_s'] == step and after['passes'] == 20
+    # No slope after the step: |t| below the 0.999 quantile of Student's t with 18 dof.
+    assert after['dry_p_value'] > 1e-3
+    assert after['dry_slope_per_day'] == pytest.approx(0.0, abs=4 * after['dry_slope_se'])
+    ramp = trend_starts([('sc1', step_event(step, shape='ramp')),
+                         ('sc1', step_event(step, confirmed=False))])
+    assert ramp == {}
 
 
 def test_report_is_self_contained_shows_every_wheel_and_plots_those_to_look_at(tmp_path):

@@ -168,6 +168,14 @@ def needs_plot(entry: Mapping[str, Any], per_wheel: Mapping[tuple[str, str], lis
     return css != 'ok' or bool(per_wheel.get(key)) or crossing
 
 
+def _passes(entry: Mapping[str, Any]) -> str:
+    """Return the passes the trend is fitted on, and since when after a confirmed step."""
+    since = number(entry.get('since_s'))
+    if not math.isfinite(since):
+        return str(entry['passes'])
+    return f'{entry["passes"]} since the step (day {since / SECONDS_PER_DAY:.2f})'
+
+
 def _block(summary: Mapping[str, Any], key: tuple[str, str]) -> Mapping[str, Any]:
     craft = (summary.get('spacecraft') or {}).get(key[0]) or {}
     return (craft.get('components') or {}).get(key[1]) or {}
@@ -187,7 +195,7 @@ def _table(trends: Sequence[Mapping[str, Any]], per_wheel: Mapping[tuple[str, st
         name = (f'<a href="#{_anchor(key)}">{_e(key[0])}</a>' if key in drawn
                 else _e(key[0]))
         cells = [name, _e(key[1]), _e(text),
-                 str(len(per_wheel.get(key, []))), str(entry['passes']),
+                 str(len(per_wheel.get(key, []))), _passes(entry),
                  _e(entry['relative_to'])]
         for lv in LEVELS:
             cells += [f'{_fmt(entry[f"{lv}_slope_per_day"])} &plusmn; '
@@ -293,9 +301,12 @@ class _Canvas:
             slope = number(entry[f'{level}_slope_per_day'])
             intercept = number(entry[f'{level}_intercept'])
             if math.isfinite(slope) and days.size:
-                grid = np.array([np.nanmin(days), np.nanmax(days)])
+                since = number(entry.get('since_s')) / SECONDS_PER_DAY
+                grid = np.array([since if math.isfinite(since) else np.nanmin(days),
+                                 np.nanmax(days)])
+                after = ' since the step' if math.isfinite(since) else ''
                 ax.plot(grid, intercept + slope * grid, 'C1-',
-                        label=f'trend, p = {number(entry[f"{level}_p_value"]):.2g}')
+                        label=f'trend{after}, p = {number(entry[f"{level}_p_value"]):.2g}')
             if entry.get(f'{level}_limit') is not None:
                 ax.axhline(entry[f'{level}_limit'], color='C3', ls=':', label='limit')
             for i, change in enumerate(changes):

@@ -204,7 +204,8 @@ class FleetResult:
 
     def _summary(self, blocks: Blocks, engine: dict[str, Any],
                  config: str) -> dict[str, Any]:
-        from rwa_monitor.fleet.trends import add_trends, trend_limits, wheel_trends
+        from rwa_monitor.fleet.trends import (add_trends, trend_limits, trend_starts,
+                                              wheel_trends)
         current = history.current(self.history)
         crafts = {}
         for c in self.crafts:
@@ -221,7 +222,8 @@ class FleetResult:
                    'operating_point': {name: blocks['llr'][name] for name in OPERATING_POINT},
                    'state': None if self.state_dir is None else str(self.state_dir)}
         limits = trend_limits(blocks['fleet'])
-        self.trends = wheel_trends(self.trend, limits)
+        starts = trend_starts((h.spacecraft, h.event) for h in current)
+        self.trends = wheel_trends(self.trend, limits, starts)
         add_trends(summary, self.trends, limits)
         return summary
 

@@ -1,22 +1,26 @@
 """Each wheel's friction trend over its passes, computed once per run for every output.
 
 :func:`wheel_trends` fits core/trend.py's weighted line through a wheel's pass levels
-(docs/fleet.md "Trend of a wheel"); :func:`add_trends` writes them into summary.json, and
-report.html draws the same entries (it does not fit them again).
+(docs/fleet.md "Trend of a wheel") since its latest confirmed step (:func:`trend_starts`);
+:func:`add_trends` writes them into summary.json, and report.html draws the same entries
+(it does not fit them again).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 import math
-from typing import Any, Mapping, Sequence
+from typing import Any, Iterable, Mapping, Sequence
 
 import numpy as np
 
+from rwa_monitor.core.events import AnomalyEvent
 from rwa_monitor.core.trend import wheel_trend
 from rwa_monitor.fleet.trend_table import TrendTable
 
 LEVELS = ('dry', 'viscous')
+# The kinds of a step in the levels: a confirmed one starts the wheel's trend anew.
+STEP_KINDS = frozenset({'dry', 'viscous', 'both'})
 
 
 @dataclass(frozen=True)
@@ -53,8 +57,31 @@ def number(value: Any) -> float:
         return math.nan
 
 
+def trend_starts(events: Iterable[tuple[str, AnomalyEvent]]) -> dict[tuple[str, str], float]:
+    """Return (spacecraft, wheel) -> change time of the wheel's latest confirmed step.
+
+    ``events``: (spacecraft, event) of the current (not superseded) events. A step is an
+    event of a level kind (STEP_KINDS) that the step tests confirmed (``kind_shape``
+    ``step``, ``kind_confirmed``): the levels before and after it lie on two lines, and
+    one line through both would turn the step into a slope (docs/fleet.md "Trend of a
+    wheel"). A ramp (``kind_shape`` ``ramp``) or an unconfirmed kind does not restart the
+    trend: a wear goes on through the declarations it draws.
+    """
+    starts: dict[tuple[str, str], float] = {}
+    for craft, event in events:
+        details = event.details
+        confirmed = details.get('kind_confirmed')
+        if (event.kind in STEP_KINDS and details.get('kind_shape') == 'step'
+                and isinstance(confirmed, (bool, np.bool_)) and confirmed
+                and math.isfinite(event.time)):
+            key = (craft, event.component)
+            starts[key] = max(starts.get(key, -math.inf), float(event.time))
+    return starts
+
+
 def wheel_trends(trend_rows: TrendTable | Sequence[Mapping[str, Any]],
-                 limits: TrendLimits | Mapping[str, float] | None = None
+                 limits: TrendLimits | Mapping[str, float] | None = None,
+                 starts: Mapping[tuple[str, str], float] | None = None
                  ) -> list[dict[str, Any]]:
     """Return one row per spacecraft and wheel: the trend of its dry and viscous levels.
 
@@ -63,8 +90,11 @@ def wheel_trends(trend_rows: TrendTable | Sequence[Mapping[str, Any]],
     :func:`rwa_monitor.core.trend.wheel_trend`; ``limits`` (``dry``/``viscous``, in the
     levels' own reference: ``relative_to`` of the rows) adds the projected crossing. A
     wheel whose passes mix references (a calibration added later) is fitted on the passes
-    in the reference of its latest pass only (``passes`` counts them).
-    Keys: ``spacecraft``, ``wheel``, ``passes``, ``relative_to`` and per level ``<level>_``
+    in the reference of its latest pass only (``passes`` counts them). ``starts``
+    (:func:`trend_starts`): a wheel with a confirmed step is fitted on the passes that
+    start at or after the step's change time only (``since_s``; None: all its passes).
+    Keys: ``spacecraft``, ``wheel``, ``passes``, ``relative_to``, ``since_s`` and per
+    level ``<level>_``
     ``slope_per_day``, ``slope_se``, ``p_value``, ``intercept``, ``limit``,
     ``crossing_s``, ``crossing_low_s``, ``crossing_high_s`` (None without a crossing).
     """
@@ -73,10 +103,13 @@ def wheel_trends(trend_rows: TrendTable | Sequence[Mapping[str, Any]],
     for (craft, wheel), columns in TrendTable.of(trend_rows).by_wheel().items():
         latest = str(columns['relative_to'][-1])
         mine = columns['relative_to'] == latest
+        since = (starts or {}).get((craft, wheel))
+        if since is not None:
+            mine &= columns['t_start'] >= since
         mid = 0.5 * (columns['t_start'][mine] + columns['t_end'][mine])
         entry: dict[str, Any] = {'spacecraft': craft, 'wheel': wheel,
                                  'passes': int(np.count_nonzero(mine)),
-                                 'relative_to': latest}
+                                 'relative_to': latest, 'since_s': since}
         for level in LEVELS:
             values = columns[level][mine]
             errors = columns[f'{level}_se'][mine]
