@@ -79,7 +79,8 @@ def fleet_outputs(tmp_path):
     trend = {'passes': 6, 'relative_to': 'zero', 'dry_slope_per_day': 2.4e-5,
              'dry_intercept': 1.99e-4, 'viscous_slope_per_day': 0.0,
              'viscous_intercept': 5e-7}
-    summary = {'spacecraft': {c: {'components': {'rw1': {'trend': trend}},
+    since = {'sc1': trend, 'sc2': {**trend, 'passes': 4, 'since_s': 7200.0}}   # a step
+    summary = {'spacecraft': {c: {'components': {'rw1': {'trend': since[c]}},
                                   'not_examined': {'pass p9': 'unreadable'} if c == 'sc1'
                                   else {}} for c in ('sc1', 'sc2')},
                'epoch_utc': '2026-03-01T00:00:00Z'}
@@ -102,6 +103,9 @@ def test_a_fleets_outputs_become_levels_trend_lines_states_and_notes(fleet_outpu
     assert dry[0]['utc'] == (1772323200.0 + 300.0) * 1000.0
     line = store.history('sc1.rw1.dry_trend', -1, 1e9)
     assert line[2]['value'] == pytest.approx(1.99e-4 + 2.4e-5 * 7500.0 / 86400.0)
+    assert len(line) == 6
+    after = store.history('sc2.rw1.dry_trend', -1, 1e9)     # drawn from the step only
+    assert [d['met'] for d in after] == [3600.0 * k + 300.0 for k in range(2, 6)]
     assert [d['value'] for d in store.history('sc1.rw1.state', -1, 1e9)] == [0.0]
     states = store.history('sc2.rw1.state', -1, 1e9)
     assert [(d['met'], d['value'], d['kind']) for d in states] == [

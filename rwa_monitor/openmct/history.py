@@ -157,11 +157,18 @@ def fleet_epoch(summary: Mapping[str, Any]) -> float | None:
 
 def _add_trend_line(store: GroundStore, craft: str, wheel: str,
                     trend: Mapping[str, Any] | None, rows: list[dict[str, Any]]) -> None:
-    """Add the trend lines of one wheel at its passes' mid times (summary's numbers)."""
+    """Add the trend lines of one wheel at its fitted passes' mid times (summary's numbers).
+
+    The passes fitted: those in the trend's reference, from its ``since_s`` (a confirmed
+    step) when it has one (fleet/trends.py).
+    """
     if not trend:
         return
+    since = trend.get('since_s')
+    since = -math.inf if since is None else _number(since)
     mine = [r for r in rows if r['spacecraft'] == craft and r['wheel'] == wheel
-            and r.get('relative_to') == trend.get('relative_to')]
+            and r.get('relative_to') == trend.get('relative_to')
+            and _number(r.get('t_start')) >= since]
     mids = sorted(0.5 * (_number(r.get('t_start')) + _number(r.get('t_end'))) for r in mine)
     for level in ('dry', 'viscous'):
         slope, intercept = trend.get(f'{level}_slope_per_day'), trend.get(f'{level}_intercept')
