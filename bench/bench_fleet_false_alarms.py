@@ -104,10 +104,14 @@ def detect_spacecraft(plan: Any, craft: Any, folder: pathlib.Path,
     passes = joined.aux.pop('pass')
     events, summary = detect(joined.only('wheels'), config)
     wheels = summary['pipelines']['llr']['components'] if 'pipelines' in summary else {}
+    from rwa_monitor.fleet.trends import trend_starts
     residuals = nominal_residuals(document['calibration']['wheels'], joined)
-    return {'events': [e for e in events if e.detector == 'llr'], 'summary': wheels,
+    llr_events = [e for e in events if e.detector == 'llr']
+    starts = {wheel: t for (_, wheel), t in
+              trend_starts((craft.name, e) for e in llr_events).items()}
+    return {'events': llr_events, 'summary': wheels,
             'warnings': warnings, 'time': joined.time,
-            'trend': trends(residuals, joined, passes),
+            'trend': trends(residuals, joined, passes, starts),
             'tested': {w: (joined.wheels[w].speed, np.isfinite(r))
                        for w, r in residuals.items()},
             'limits': data_limits(config)}
@@ -159,13 +163,15 @@ def kind_z(kind: str, delta_dry: float, delta_viscous: float, speed: np.ndarray,
     return out
 
 
-def trends(residuals: dict[str, np.ndarray], joined: Any,
-           passes: np.ndarray) -> dict[str, Any]:
+def trends(residuals: dict[str, np.ndarray], joined: Any, passes: np.ndarray,
+           starts: dict[str, float] | None = None) -> dict[str, Any]:
     """Return per wheel the dry trend of the pass levels against nominal (the fleet's).
 
     As the fleet engine does (docs/fleet.md): ``pass_levels`` of each pass on the
     calibrated detector's input (``NominalWheel.residual``: NaN where not tested), then
-    ``wheel_trend`` of the dry levels at the passes' mid times.
+    ``wheel_trend`` of the dry levels at the passes' mid times, from the passes that
+    start at or after the wheel's latest confirmed step (``starts``: fleet/trends.py
+    ``trend_starts``).
     """
     from rwa_monitor.core.trend import pass_levels, wheel_trend
     bounds = np.flatnonzero(np.diff(passes)) + 1
@@ -173,14 +179,18 @@ def trends(residuals: dict[str, np.ndarray], joined: Any,
     for wheel, residual in residuals.items():
         ch = joined.wheels[wheel]
         mids, levels, errors = [], [], []
+        since = (starts or {}).get(wheel, -math.inf)
         for seg in np.split(np.arange(len(joined)), bounds):
             lv = pass_levels(joined.time[seg], ch.speed[seg], residual[seg])
+            if lv.t_start < since:
+                continue
             mids.append(0.5 * (lv.t_start + lv.t_end))
             levels.append(lv.dry)
             errors.append(lv.dry_se)
         line = wheel_trend(np.array(mids), np.array(levels), np.array(errors))
         out[wheel] = {'dry_slope_nm_per_day': line.slope, 'dry_slope_se': line.slope_se,
-                      'p_value': line.p_value, 'passes': line.passes}
+                      'p_value': line.p_value, 'passes': line.passes,
+                      'since_s': (starts or {}).get(wheel)}
     return out
 
 

@@ -78,8 +78,9 @@ def test_trend_table_finds_the_wearing_wheel_and_projects_the_limit():
     assert (mixed['wheel'], mixed['passes'], mixed['relative_to']) == ('rw1', 20, 'zero')
 
 
-def step_event(time, kind='dry', shape='step', confirmed=True, component='rw1'):
-    return AnomalyEvent('llr', component, kind, time, 0, time + 60.0, 0, p_value=0.0,
+def step_event(time, kind='dry', shape='step', confirmed=True, component='rw1', revision=0):
+    return AnomalyEvent('llr', component, kind, time, int(time), time + 60.0, int(time) + 600,
+                        p_value=0.0, revision=revision,
                         details={'kind_shape': shape, 'kind_confirmed': confirmed})
 
 
@@ -103,8 +104,11 @@ def test_a_confirmed_step_starts_the_trend_anew_a_ramp_or_unconfirmed_kind_does_
     assert after['dry_p_value'] > 1e-3
     assert after['dry_slope_per_day'] == pytest.approx(0.0, abs=4 * after['dry_slope_se'])
     ramp = trend_starts([('sc1', step_event(step, shape='ramp')),
-                         ('sc1', step_event(step, confirmed=False))])
+                         ('sc1', step_event(step + 10.0, confirmed=False))])
     assert ramp == {}
+    revised = trend_starts([('sc1', step_event(step)),         # revised to unconfirmed
+                            ('sc1', step_event(step, kind='undecided', revision=1))])
+    assert revised == {}
 
 
 def test_report_is_self_contained_shows_every_wheel_and_plots_those_to_look_at(tmp_path):

@@ -60,15 +60,22 @@ def number(value: Any) -> float:
 def trend_starts(events: Iterable[tuple[str, AnomalyEvent]]) -> dict[tuple[str, str], float]:
     """Return (spacecraft, wheel) -> change time of the wheel's latest confirmed step.
 
-    ``events``: (spacecraft, event) of the current (not superseded) events. A step is an
-    event of a level kind (STEP_KINDS) that the step tests confirmed (``kind_shape``
-    ``step``, ``kind_confirmed``): the levels before and after it lie on two lines, and
-    one line through both would turn the step into a slope (docs/fleet.md "Trend of a
-    wheel"). A ramp (``kind_shape`` ``ramp``) or an unconfirmed kind does not restart the
-    trend: a wear goes on through the declarations it draws.
+    ``events``: (spacecraft, event) of the current (not superseded) events; each change
+    counts at its latest revision (fleet/result.py ``latest_kinds``, as the health
+    column). A step is a change of a level kind (STEP_KINDS) that the step tests
+    confirmed (``kind_shape`` ``step``, ``kind_confirmed``): the levels before and after
+    it lie on two lines, and one line through both would turn the step into a slope
+    (docs/fleet.md "Trend of a wheel"). A ramp (``kind_shape`` ``ramp``) or an
+    unconfirmed kind does not restart the trend: a wear goes on through the declarations
+    it draws.
     """
-    starts: dict[tuple[str, str], float] = {}
+    from rwa_monitor.fleet.result import latest_kinds
+    by_craft: dict[str, list[AnomalyEvent]] = {}
     for craft, event in events:
+        by_craft.setdefault(craft, []).append(event)
+    starts: dict[tuple[str, str], float] = {}
+    for craft, event in ((c, e) for c, mine in by_craft.items()
+                         for e in latest_kinds(mine).values()):
         details = event.details
         confirmed = details.get('kind_confirmed')
         if (event.kind in STEP_KINDS and details.get('kind_shape') == 'step'
