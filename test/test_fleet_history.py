@@ -92,6 +92,9 @@ def test_daily_runs_equal_the_full_run(archive, client, tmp_path):
     full = run_archive(folder, client=client)
     assert json.dumps([r.fields() for r in results[-1].trend]) == json.dumps(
         [r.fields() for r in full.trend])
+    # And so do the fitted trends, each from its wheel's confirmed step (``since_s``).
+    assert json.dumps(results[-1].trends) == json.dumps(full.trends)
+    assert any(t['since_s'] is not None for t in full.trends)
     # Nothing new: said so, exit 0 if everything else is fine, and the answer kept.
     again = run_archive(tmp_path / 'grown', client=client, state_dir=tmp_path / 'state')
     assert again.new_passes == 0 and again.already_processed == 7
