@@ -49,7 +49,7 @@ import pathlib
 import sys
 import tempfile
 import time
-from typing import Any, Iterable
+from typing import Any, Iterable, Sequence
 
 import numpy as np
 
@@ -104,14 +104,11 @@ def detect_spacecraft(plan: Any, craft: Any, folder: pathlib.Path,
     passes = joined.aux.pop('pass')
     events, summary = detect(joined.only('wheels'), config)
     wheels = summary['pipelines']['llr']['components'] if 'pipelines' in summary else {}
-    from rwa_monitor.fleet.trends import trend_starts
     residuals = nominal_residuals(document['calibration']['wheels'], joined)
     llr_events = [e for e in events if e.detector == 'llr']
-    starts = {wheel: t for (_, wheel), t in
-              trend_starts((craft.name, e) for e in llr_events).items()}
     return {'events': llr_events, 'summary': wheels,
             'warnings': warnings, 'time': joined.time,
-            'trend': trends(residuals, joined, passes, starts),
+            'trend': trends(residuals, joined, passes, llr_events),
             'tested': {w: (joined.wheels[w].speed, np.isfinite(r))
                        for w, r in residuals.items()},
             'limits': data_limits(config)}
@@ -164,33 +161,33 @@ def kind_z(kind: str, delta_dry: float, delta_viscous: float, speed: np.ndarray,
 
 
 def trends(residuals: dict[str, np.ndarray], joined: Any, passes: np.ndarray,
-           starts: dict[str, float] | None = None) -> dict[str, Any]:
+           events: Sequence[Any] = ()) -> dict[str, Any]:
     """Return per wheel the dry trend of the pass levels against nominal (the fleet's).
 
     As the fleet engine does (docs/fleet.md): ``pass_levels`` of each pass on the
     calibrated detector's input (``NominalWheel.residual``: NaN where not tested), then
-    ``wheel_trend`` of the dry levels at the passes' mid times, from the passes that
-    start at or after the wheel's latest confirmed step (``starts``: fleet/trends.py
-    ``trend_starts``).
+    fleet/trends.py ``wheel_trends`` of them, with a jump at each confirmed step of
+    ``events`` (``trend_steps``).
     """
-    from rwa_monitor.core.trend import pass_levels, wheel_trend
+    from rwa_monitor.core.trend import pass_levels
+    from rwa_monitor.fleet.trends import trend_steps, wheel_trends
     bounds = np.flatnonzero(np.diff(passes)) + 1
-    out = {}
+    rows = []
     for wheel, residual in residuals.items():
         ch = joined.wheels[wheel]
-        mids, levels, errors = [], [], []
-        since = (starts or {}).get(wheel, -math.inf)
-        for seg in np.split(np.arange(len(joined)), bounds):
+        for i, seg in enumerate(np.split(np.arange(len(joined)), bounds)):
             lv = pass_levels(joined.time[seg], ch.speed[seg], residual[seg])
-            if lv.t_start < since:
-                continue
-            mids.append(0.5 * (lv.t_start + lv.t_end))
-            levels.append(lv.dry)
-            errors.append(lv.dry_se)
-        line = wheel_trend(np.array(mids), np.array(levels), np.array(errors))
-        out[wheel] = {'dry_slope_nm_per_day': line.slope, 'dry_slope_se': line.slope_se,
-                      'p_value': line.p_value, 'passes': line.passes,
-                      'since_s': (starts or {}).get(wheel)}
+            rows.append({'spacecraft': '', 'wheel': wheel, 'pass': str(i),
+                         't_start': lv.t_start, 't_end': lv.t_end, 'samples': lv.samples,
+                         'dry': lv.dry, 'dry_se': lv.dry_se, 'viscous': lv.viscous,
+                         'viscous_se': lv.viscous_se, 'relative_to': 'nominal'})
+    steps = trend_steps(('', e) for e in events)
+    out = {}
+    for entry in wheel_trends(rows, None, steps):
+        out[entry['wheel']] = {'dry_slope_nm_per_day': entry['dry_slope_per_day'],
+                               'dry_slope_se': entry['dry_slope_se'],
+                               'p_value': entry['dry_p_value'], 'passes': entry['passes'],
+                               'steps_s': entry['steps_s']}
     return out
 
 

@@ -10,7 +10,7 @@ import pytest
 from rwa_monitor.core.events import AnomalyEvent
 from rwa_monitor.core.trend import SECONDS_PER_DAY
 from rwa_monitor.fleet.report import render
-from rwa_monitor.fleet.trends import add_trends, trend_limits, trend_starts, wheel_trends
+from rwa_monitor.fleet.trends import add_trends, trend_limits, trend_steps, wheel_trends
 
 
 def write_report(path, events, summary, rows, limits=None, epoch=None):
@@ -84,31 +84,38 @@ def step_event(time, kind='dry', shape='step', confirmed=True, component='rw1', 
                         details={'kind_shape': shape, 'kind_confirmed': confirmed})
 
 
-def test_a_confirmed_step_starts_the_trend_anew_a_ramp_or_unconfirmed_kind_does_not():
-    rows = rows_of('sc1', 'rw1', 0.0, 5)
+def test_a_confirmed_step_is_fitted_as_a_jump_a_ramp_or_unconfirmed_kind_is_not(tmp_path):
+    rows = rows_of('sc1', 'rw1', 2e-6, 5)                 # a wear of 2e-6 N m per day
     step = 10 * SECONDS_PER_DAY / 3                       # the start of pass 10
     for row in rows[10:]:
-        row['dry'] += 1.5e-4                              # a dry step, no wear
+        row['dry'] += 1.5e-4                              # and a dry step
     across = wheel_trends(rows)[0]
-    assert across['dry_p_value'] < 1e-3 and across['since_s'] is None   # flagged: a false slope
+    assert across['steps_s'] == [] and across['since_s'] is None
+    assert across['dry_slope_per_day'] > 2e-6 + 4 * across['dry_slope_se']    # biased
     events = [('sc1', step_event(step - 900.0, kind='undecided')),
-              ('sc1', step_event(step)), ('sc1', step_event(2.0, 'dry')),
+              ('sc1', step_event(step)),
               ('sc1', step_event(step + 1e5, shape='ramp')),
               ('sc1', step_event(step + 2e5, confirmed=False)),
               ('sc1', step_event(step + 3e5, component='gyro', kind='bias'))]
-    starts = trend_starts(events)
-    assert starts == {('sc1', 'rw1'): step}
-    after = wheel_trends(rows, starts=starts)[0]
-    assert after['since_s'] == step and after['passes'] == 20
-    # No slope after the step: |t| below the 0.999 quantile of Student's t with 18 dof.
-    assert after['dry_p_value'] > 1e-3
-    assert after['dry_slope_per_day'] == pytest.approx(0.0, abs=4 * after['dry_slope_se'])
-    ramp = trend_starts([('sc1', step_event(step, shape='ramp')),
-                         ('sc1', step_event(step + 10.0, confirmed=False))])
-    assert ramp == {}
-    revised = trend_starts([('sc1', step_event(step)),         # revised to unconfirmed
-                            ('sc1', step_event(step, kind='undecided', revision=1))])
+    steps = trend_steps(events)
+    assert steps == {('sc1', 'rw1'): (step,)}
+    fitted = wheel_trends(rows, steps=steps)[0]
+    assert fitted['steps_s'] == [step] and fitted['since_s'] == step
+    assert fitted['passes'] == 30
+    # The wear, from every pass: within 4 standard errors of the truth.
+    assert fitted['dry_slope_per_day'] == pytest.approx(2e-6, abs=4 * fitted['dry_slope_se'])
+    assert fitted['dry_step_sizes'][0] == pytest.approx(1.5e-4, rel=0.05)
+    assert trend_steps([('sc1', step_event(step, shape='ramp')),
+                        ('sc1', step_event(step + 10.0, confirmed=False))]) == {}
+    revised = trend_steps([('sc1', step_event(step)),         # revised to unconfirmed
+                           ('sc1', step_event(step, kind='undecided', revision=1))])
     assert revised == {}
+    events, summary, _ = fleet_inputs()
+    summary['spacecraft']['sc1']['components']['rw1']['health'] = 'dry'
+    page = tmp_path / 'report.html'
+    trends = wheel_trends(rows, steps=steps)
+    page.write_text(render(events, summary, rows, trends))
+    assert '30 (step at day 3.33)' in page.read_text()
 
 
 def test_report_is_self_contained_shows_every_wheel_and_plots_those_to_look_at(tmp_path):

@@ -234,3 +234,66 @@ def test_compiled_fit_gives_the_noise_models_standard_errors(ar):
     assert levels.ar_order == len(model.ar) and (levels.ar_order > 0) == (ar > 0)
     assert levels.dry_se == math.sqrt(variance * inverse[0, 0])
     assert levels.viscous_se == math.sqrt(variance * inverse[1, 1])
+
+
+def stepped_case(seed, rate=0.0, n=30, days=120.0, jump=3e-5, limit=None):
+    """Return the trend of a wheel with a step of ``jump`` at day 50, a slope of ``rate``."""
+    rng = np.random.default_rng(seed)
+    t = np.sort(rng.uniform(0, days * SECONDS_PER_DAY, n))
+    se = rng.uniform(1e-6, 6e-6, n)
+    scale = rng.uniform(0.5, 2.0)
+    step = 50 * SECONDS_PER_DAY
+    y = 2e-4 + rate * t / SECONDS_PER_DAY + jump * (t >= step) + rng.normal(0, scale * se)
+    return wheel_trend(t, y, se, limit=limit, steps=[step]), step
+
+
+def test_a_step_is_a_jump_not_a_slope_the_same_regression_with_a_step_column():
+    rng = np.random.default_rng(8)
+    t = np.sort(rng.uniform(0, 90 * SECONDS_PER_DAY, 40))
+    step = 40 * SECONDS_PER_DAY
+    y = 2e-4 + 1e-8 * t / SECONDS_PER_DAY + 5e-5 * (t >= step) + rng.normal(0, 3e-6, 40)
+    se = np.full(t.size, 3e-6)
+    plain, tr = wheel_trend(t, y, se), wheel_trend(t, y, se, steps=[step])
+    assert plain.p_value < 1e-10                        # the step read as a slope
+    design = np.column_stack([np.ones(40), t / SECONDS_PER_DAY, t >= step])
+    beta, rss = np.linalg.lstsq(design, y, rcond=None)[:2]
+    cov = rss[0] / 37 * np.linalg.inv(design.T @ design)
+    assert tr.slope == pytest.approx(beta[1], rel=1e-9)
+    assert tr.slope_se == pytest.approx(math.sqrt(cov[1, 1]), rel=1e-9)
+    assert tr.p_value == pytest.approx(2 * scipy.stats.t.sf(abs(beta[1]) / tr.slope_se, 37),
+                                       rel=1e-7)
+    assert tr.step_times == (step,) and tr.step_sizes[0] == pytest.approx(beta[2], rel=1e-9)
+    assert tr.intercept == pytest.approx(beta[0] + beta[2], rel=1e-9)   # after the step
+    assert tr.dof == 37 and tr.passes == 40
+    # Steps outside the passes, or with no pass between them, add no column.
+    same = wheel_trend(t, y, se, steps=[-1.0, step - 1.0, step, 1e12])
+    assert same.step_times == (step,) and same.slope == pytest.approx(tr.slope, rel=1e-12)
+
+
+def test_p_value_is_uniform_under_a_zero_slope_with_a_step():
+    trials = 2000
+    p = np.array([stepped_case(40_000 + seed)[0].p_value for seed in range(trials)])
+    for level in (0.01, 0.05, 0.5):
+        low, high = binomial_bounds(trials, level)
+        assert low <= np.count_nonzero(p < level) <= high, level
+
+
+def test_crossing_after_a_step_covers_the_true_crossing_at_its_level():
+    trials = 400
+    misses = 0
+    for seed in range(trials):
+        tr, step = stepped_case(50_000 + seed, rate=1e-6, limit=4e-4)
+        truth = (4e-4 - 2e-4 - 3e-5) / 1e-6 * SECONDS_PER_DAY       # day 170
+        misses += not tr.crossing.low <= truth <= tr.crossing.high
+    low, high = binomial_bounds(trials, 0.05)
+    assert low <= misses <= high
+
+
+def test_too_few_passes_around_the_steps_give_nan():
+    t = np.array([0.0, 1.0, 2.0, 3.0]) * SECONDS_PER_DAY
+    tr = wheel_trend(t, [1.0, 1.1, 2.0, 2.1], np.ones(4), steps=[1.5 * SECONDS_PER_DAY])
+    assert tr.dof == 1 and math.isfinite(tr.p_value)
+    tr = wheel_trend(t, [1.0, 1.1, 2.0, 2.1], np.ones(4),
+                     steps=[0.5 * SECONDS_PER_DAY, 1.5 * SECONDS_PER_DAY,
+                            2.5 * SECONDS_PER_DAY])
+    assert math.isnan(tr.p_value) and math.isnan(tr.intercept) and tr.crossing is None

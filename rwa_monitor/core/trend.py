@@ -12,6 +12,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 import math
+from typing import Sequence
 
 import numpy as np
 import scipy.linalg
@@ -83,7 +84,9 @@ class Trend:
     time 0 of the time axis; ``scale``: the factor fitted on the given standard errors
     (sqrt of the reduced chi-square; 1 when they describe the scatter exactly);
     ``crossing``: the projection onto ``limit`` (None without limit or with a zero slope).
-    NaN statistics when fewer than 3 passes have finite levels.
+    NaN statistics when fewer than 3 passes have finite levels. With steps:
+    ``step_times`` (s) of the steps fitted, ``step_sizes`` their sizes; ``intercept``
+    and ``crossing`` are those of the line after the last step.
     """
 
     slope: float
@@ -94,6 +97,8 @@ class Trend:
     dof: int
     scale: float
     crossing: Crossing | None = None
+    step_times: tuple[float, ...] = ()
+    step_sizes: tuple[float, ...] = ()
 
 
 def pass_levels(time: np.ndarray, speed: np.ndarray, friction: np.ndarray,
@@ -155,7 +160,7 @@ def _column(values: np.ndarray) -> np.ndarray:
 
 
 def wheel_trend(times: np.ndarray, levels: np.ndarray, standard_errors: np.ndarray,
-                limit: float | None = None) -> Trend:
+                limit: float | None = None, steps: Sequence[float] = ()) -> Trend:
     """Return the weighted least-squares line through a wheel's pass levels.
 
     ``times`` in s (e.g. each pass's mid time), ``levels`` and ``standard_errors`` from
@@ -165,7 +170,10 @@ def wheel_trend(times: np.ndarray, levels: np.ndarray, standard_errors: np.ndarr
     t statistic ``b / se(b)`` has a Student t distribution with ``passes - 2`` degrees of
     freedom under a zero slope (exact under the model; docs/fleet.md lists what breaks
     it). With ``limit``: :class:`Crossing` of the line, its interval by inverting the
-    confidence band of the line (Fieller's method).
+    confidence band of the line (Fieller's method). ``steps``: times (s) of known steps
+    in the level (a confirmed step change): ``level_i = a + b t_i + sum_j c_j [t_i >=
+    s_j] + e_i``, one slope through every pass and a jump at each step, so that a step
+    is not read as a slope and a wear keeps all its passes (:func:`_stepped_trend`).
     """
     t = np.asarray(times, dtype=float).reshape(-1)
     y = np.asarray(levels, dtype=float).reshape(-1)
@@ -178,6 +186,9 @@ def wheel_trend(times: np.ndarray, levels: np.ndarray, standard_errors: np.ndarr
     ok = np.isfinite(t) & np.isfinite(y) & np.isfinite(se) & (se > 0)
     t, y, se = t[ok], y[ok], se[ok]
     n = int(t.size)
+    columns = _step_columns(t, steps)
+    if columns:
+        return _stepped_trend(t, y, se, columns, limit)
     if n < 3 or np.ptp(t) == 0:
         nan = math.nan
         return Trend(nan, nan, nan, nan, n, max(n - 2, 0), nan)
@@ -204,20 +215,83 @@ def wheel_trend(times: np.ndarray, levels: np.ndarray, standard_errors: np.ndarr
                  crossing)
 
 
+def _step_columns(t: np.ndarray, steps: Sequence[float]) -> dict[float, np.ndarray]:
+    """Return step time -> its column ``[t >= s]``, for the steps with passes on both sides.
+
+    A step before every pass or after the last one is not in the data; of steps with no
+    pass between them, the last stands for all (their columns are equal).
+    """
+    out: dict[float, np.ndarray] = {}
+    seen: set[bytes] = set()
+    for when in sorted({float(x) for x in steps if math.isfinite(float(x))}, reverse=True):
+        column = (t >= when).astype(float)
+        if 0 < column.sum() < t.size and column.tobytes() not in seen:
+            seen.add(column.tobytes())
+            out[when] = column
+    return dict(sorted(out.items()))
+
+
+def _stepped_trend(t: np.ndarray, y: np.ndarray, se: np.ndarray,
+                   columns: dict[float, np.ndarray], limit: float | None) -> Trend:
+    """Return the trend with a jump at each step: one slope through every pass.
+
+    Weighted least squares as :func:`wheel_trend`'s line, with a column ``[t >= s_j]``
+    per step; the covariance ``sigma^2 (X' W X)^-1``, ``sigma^2`` the reduced chi-square
+    with ``passes - 2 - steps`` degrees of freedom, and the t test of the slope on them.
+    Time is centred at the weighted mean time after the last step, where the line's level
+    (intercept plus every jump) is the one a crossing is projected from; its covariance
+    with the slope enters the crossing's band. NaN statistics when the passes cannot
+    separate a slope from the jumps (no segment with two distinct times, or no degree of
+    freedom left).
+    """
+    n, k = int(t.size), len(columns)
+    weight = 1.0 / se ** 2
+    last = np.column_stack(list(columns.values()))[:, -1] > 0
+    centre = float(np.sum(weight[last] * t[last]) / np.sum(weight[last]))
+    days = (t - centre) / SECONDS_PER_DAY
+    design = np.column_stack([np.ones(n), days, *columns.values()])
+    root_w = np.sqrt(weight)
+    weighted = design * root_w[:, None]
+    dof = n - 2 - k
+    times = tuple(columns)
+    if dof < 1 or np.linalg.matrix_rank(weighted) < 2 + k:
+        nan = math.nan
+        return Trend(nan, nan, nan, nan, n, max(dof, 0), nan, None, times, (nan,) * k)
+    beta = scipy.linalg.lstsq(weighted, root_w * y)[0]
+    resid = root_w * y - weighted @ beta
+    scale2 = float(resid @ resid) / dof
+    cov = scale2 * scipy.linalg.inv(weighted.T @ weighted)
+    slope, var_b = float(beta[1]), float(cov[1, 1])
+    now = np.ones(2 + k)
+    now[1] = 0.0                                        # the level after the last step
+    level_c = float(now @ beta)
+    var_c, cov_cb = float(now @ cov @ now), float(now @ cov[:, 1])
+    slope_se = math.sqrt(var_b)
+    p_value = (float(2.0 * scipy.stats.t.sf(abs(slope) / slope_se, dof)) if slope_se > 0
+               else (0.0 if slope != 0 else 1.0))
+    intercept = float(level_c - slope * centre / SECONDS_PER_DAY)
+    crossing = None
+    if limit is not None and slope != 0:
+        crossing = _crossing(limit, level_c, slope, var_c, var_b, dof, centre, cov_cb)
+    return Trend(slope, slope_se, p_value, intercept, n, dof, math.sqrt(scale2), crossing,
+                 times, tuple(float(c) for c in beta[2:]))
+
+
 def _crossing(limit: float, level_c: float, slope: float, var_c: float, var_b: float,
-              dof: int, centre: float) -> Crossing:
+              dof: int, centre: float, cov_cb: float = 0.0) -> Crossing:
     """Fieller interval of the time where ``level_c + slope u`` (u in days) equals ``limit``.
 
     The times ``u`` at which the limit lies inside the confidence band: ``(level_c + slope
-    u - limit)^2 <= q^2 (var_c + u^2 var_b)``, ``q`` the two-sided t quantile; a quadratic
-    ``A u^2 + B u + C <= 0``. ``A > 0`` (slope significant at that level): a finite
-    interval; otherwise the set is unbounded on the side(s) the slope cannot exclude.
+    u - limit)^2 <= q^2 (var_c + 2 u cov_cb + u^2 var_b)``, ``q`` the two-sided t
+    quantile; a quadratic ``A u^2 + B u + C <= 0``. ``A > 0`` (slope significant at that
+    level): a finite interval; otherwise the set is unbounded on the side(s) the slope
+    cannot exclude. ``cov_cb``: 0 for the line centred at its weighted mean time.
     """
     q = float(scipy.stats.t.ppf(0.5 + CROSSING_LEVEL / 2.0, dof))
     gap = level_c - limit
     u_hat = -gap / slope
     a = slope ** 2 - q ** 2 * var_b
-    b = 2.0 * slope * gap
+    b = 2.0 * slope * gap - 2.0 * q ** 2 * cov_cb
     c = gap ** 2 - q ** 2 * var_c
     disc = b * b - 4.0 * a * c
     if a > 0 and disc >= 0:

@@ -169,11 +169,12 @@ def needs_plot(entry: Mapping[str, Any], per_wheel: Mapping[tuple[str, str], lis
 
 
 def _passes(entry: Mapping[str, Any]) -> str:
-    """Return the passes the trend is fitted on, and since when after a confirmed step."""
-    since = number(entry.get('since_s'))
-    if not math.isfinite(since):
+    """Return the passes the trend is fitted on, and the days of the steps fitted in it."""
+    steps = [number(s) / SECONDS_PER_DAY for s in entry.get('steps_s') or ()]
+    if not steps:
         return str(entry['passes'])
-    return f'{entry["passes"]} since the step (day {since / SECONDS_PER_DAY:.2f})'
+    days = ', '.join(f'{d:.2f}' for d in steps)
+    return f'{entry["passes"]} (step{"s" if len(steps) > 1 else ""} at day {days})'
 
 
 def _block(summary: Mapping[str, Any], key: tuple[str, str]) -> Mapping[str, Any]:

@@ -204,7 +204,7 @@ class FleetResult:
 
     def _summary(self, blocks: Blocks, engine: dict[str, Any],
                  config: str) -> dict[str, Any]:
-        from rwa_monitor.fleet.trends import (add_trends, trend_limits, trend_starts,
+        from rwa_monitor.fleet.trends import (add_trends, trend_limits, trend_steps,
                                               wheel_trends)
         current = history.current(self.history)
         crafts = {}
@@ -222,7 +222,7 @@ class FleetResult:
                    'operating_point': {name: blocks['llr'][name] for name in OPERATING_POINT},
                    'state': None if self.state_dir is None else str(self.state_dir)}
         limits = trend_limits(blocks['fleet'])
-        starts = trend_starts((h.spacecraft, h.event) for h in current)
+        starts = trend_steps((h.spacecraft, h.event) for h in current)
         self.trends = wheel_trends(self.trend, limits, starts)
         add_trends(summary, self.trends, limits)
         return summary
