@@ -204,15 +204,27 @@ def wheel_trend(times: np.ndarray, levels: np.ndarray, standard_errors: np.ndarr
     # Centred at the weighted mean time the two estimates are uncorrelated.
     var_c = scale2 / float(np.sum(weight))
     var_b = scale2 / float(np.sum(weight * days ** 2))
+    return _trend(float(level_c), float(slope), var_c, var_b, 0.0, centre, scale2, n, dof,
+                  limit)
+
+
+def _trend(level_c: float, slope: float, var_c: float, var_b: float, cov_cb: float,
+           centre: float, scale2: float, n: int, dof: int, limit: float | None,
+           steps: tuple[float, ...] = (), sizes: tuple[float, ...] = ()) -> Trend:
+    """Return the Trend of a fitted line: its t test, intercept and crossing.
+
+    ``level_c``: the line's level at time ``centre`` (s), ``var_c``, ``var_b`` and
+    ``cov_cb`` the variances of it and of the slope and their covariance.
+    """
     slope_se = math.sqrt(var_b)
     p_value = (float(2.0 * scipy.stats.t.sf(abs(slope) / slope_se, dof)) if slope_se > 0
                else (0.0 if slope != 0 else 1.0))
     intercept = float(level_c - slope * centre / SECONDS_PER_DAY)
     crossing = None
     if limit is not None and slope != 0:
-        crossing = _crossing(limit, float(level_c), float(slope), var_c, var_b, dof, centre)
-    return Trend(float(slope), slope_se, p_value, intercept, n, dof, math.sqrt(scale2),
-                 crossing)
+        crossing = _crossing(limit, level_c, slope, var_c, var_b, dof, centre, cov_cb)
+    return Trend(slope, slope_se, p_value, intercept, n, dof, math.sqrt(scale2), crossing,
+                 steps, sizes)
 
 
 def _step_columns(t: np.ndarray, steps: Sequence[float]) -> dict[float, np.ndarray]:
@@ -266,15 +278,8 @@ def _stepped_trend(t: np.ndarray, y: np.ndarray, se: np.ndarray,
     now[1] = 0.0                                        # the level after the last step
     level_c = float(now @ beta)
     var_c, cov_cb = float(now @ cov @ now), float(now @ cov[:, 1])
-    slope_se = math.sqrt(var_b)
-    p_value = (float(2.0 * scipy.stats.t.sf(abs(slope) / slope_se, dof)) if slope_se > 0
-               else (0.0 if slope != 0 else 1.0))
-    intercept = float(level_c - slope * centre / SECONDS_PER_DAY)
-    crossing = None
-    if limit is not None and slope != 0:
-        crossing = _crossing(limit, level_c, slope, var_c, var_b, dof, centre, cov_cb)
-    return Trend(slope, slope_se, p_value, intercept, n, dof, math.sqrt(scale2), crossing,
-                 times, tuple(float(c) for c in beta[2:]))
+    return _trend(level_c, slope, var_c, var_b, cov_cb, centre, scale2, n, dof, limit,
+                  times, tuple(float(c) for c in beta[2:]))
 
 
 def _crossing(limit: float, level_c: float, slope: float, var_c: float, var_b: float,
