@@ -16,6 +16,7 @@ bench/results/fleet.json, fleet.png and the ``fleet`` section of docs/results.md
 from __future__ import annotations
 
 import json
+import math
 import os
 import pathlib
 import shutil
@@ -203,9 +204,15 @@ def plain_detect(files: list[pathlib.Path], repeats: int = 1) -> dict[str, Any]:
 
 
 def fleet_runs(archive: pathlib.Path, warm: pathlib.Path, workers: int,
-               repeats: int) -> list[dict[str, Any]]:
-    """Run the engine ``repeats`` times on one warm local cluster of ``workers``."""
+               repeats: int, floor: bool = False) -> list[dict[str, Any]]:
+    """Run the engine ``repeats`` times on one warm local cluster of ``workers``.
+
+    ``floor``: after each run, its idle twin on the same cluster (bench/fleet_parts.py
+    ``dask_floor``: as many tasks, the same wall time, nothing computed).
+    """
     from rwa_monitor.fleet.engine import dask_client, run_archive
+    from rwa_monitor.fleet.plan import SCAN_TASK_PASSES
+    passes = sum(1 for p in archive.glob('*/*') if p.name.startswith('pass-'))
     start = time.perf_counter()
     runs = []
     with dask_client(workers) as client:
@@ -220,6 +227,11 @@ def fleet_runs(archive: pathlib.Path, warm: pathlib.Path, workers: int,
             runs.append({**result.timings, 'events': len(result.current_events()),
                          'workers': workers, 'cluster_start_s': startup,
                          'worker_process_cpu_s': whole})
+            if floor:
+                tasks = (sum(w['tasks'] for w in result.timings['per_worker'].values())
+                         + math.ceil(passes / SCAN_TASK_PASSES))
+                runs[-1]['floor'] = fleet_parts.dask_floor(client, tasks,
+                                                           result.timings['wall_s'])
     return runs
 
 
@@ -280,7 +292,7 @@ def run(out_dir: pathlib.Path, quick: bool) -> dict[str, Any]:
         runs: dict[int, list] = {1: [], 2: []}
         for _ in range(settings['fleet_repeats']):
             for workers in (1, 2):
-                runs[workers] += fleet_runs(archive, warm, workers, 1)
+                runs[workers] += fleet_runs(archive, warm, workers, 1, workers == 1)
                 print(f'  fleet {workers} worker(s): wall {runs[workers][-1]["wall_s"]:.1f} s',
                       flush=True)
         results['fleet'] = {str(k): v for k, v in runs.items()}
@@ -465,6 +477,7 @@ def markdown(results: dict[str, Any]) -> str:
               'messages) is not in it, and shows in the wall time.',
               *_median_lines(results),
               *_parts_lines(results, best['1']),
+              *_floor_lines(results),
               f'- Scaling 1 -> 2 workers: x{s["scaling"]:.2f} (goal >= '
               f'{GOALS["scaling_2_workers"]}): **{word[met["scaling"]]}**.',
               '- Peak RSS of one worker: ' + ', '.join(
@@ -579,6 +592,27 @@ def _parts_lines(results: dict[str, Any], one: dict[str, Any]) -> list[str]:
             f'not in the CPU above). The cluster adds {engine - p["step"]:.2f} s to the '
             'steps (the CPU of the 1-worker run less the steps in one process). Where it '
             'goes and what bounds it: docs/fleet.md "CPU against detect".']
+
+
+def _floor_lines(results: dict[str, Any]) -> list[str]:
+    """Return the bullet of Dask's own CPU at the run's size and the bound it sets."""
+    floors = [r['floor'] for r in results['fleet']['1'] if 'floor' in r]
+    p = results.get('parts')
+    if not floors or not p:
+        return []
+    client = float(np.median([f['client_cpu_s'] for f in floors]))
+    workers = float(np.median([f['worker_process_cpu_s'] for f in floors]))
+    bound = p['step'] + client + workers
+    detect = results['detect']['cpu_s']
+    tasks = floors[0]['tasks']
+    return ['- What Dask costs at this size with nothing computed (bench/fleet_parts.py '
+            f'`dask_floor`: after each 1-worker run, {tasks} tasks that sleep '
+            f'through its wall time on the same cluster; median of {len(floors)}): the '
+            f'client process {client:.2f} s, the worker process {workers:.2f} s: '
+            f'{100 * (client + workers) / detect:.0f} % of `detect` ({detect:.2f} s) for '
+            f'the cluster alone. With the steps in one process ({p["step"]:.2f} s) the '
+            f'fleet on Dask costs no less than {bound:.2f} s, '
+            f'{100 * (bound / detect - 1):+.0f} % over `detect`.']
 
 
 def _plot(out_dir: pathlib.Path, results: dict[str, Any]) -> None:

@@ -113,3 +113,31 @@ def split(archive: pathlib.Path, joined: list[pathlib.Path], repeats: int = 5
         run['events_fleet'], run['events_detect'] = fleet_events, detect_events
         runs.append(run)
     return {k: statistics.median(r[k] for r in runs) for k in runs[0]}
+
+
+def _idle(seconds: float) -> None:
+    """Wait without computing (a task of the idle twin)."""
+    time.sleep(seconds)
+
+
+def dask_floor(client: Any, tasks: int, wall_s: float) -> dict[str, float]:
+    """Return the CPU Dask spends on a run with nothing to compute (the idle twin).
+
+    ``tasks`` tasks that each sleep ``wall_s / tasks``, submitted and collected as the
+    engine does (fleet/engine.py ``_gather``: ``as_completed``, then each result), on the
+    warm cluster of ``client``: about the fleet run's task count and wall time, so that
+    what the client process (its scheduler, client and nanny threads) and the worker
+    processes spend is the cluster's own cost at that size, with no pass read or fed.
+    """
+    from distributed import as_completed
+    before = client.run(time.process_time)
+    start_cpu, start_wall = time.process_time(), time.perf_counter()
+    futures = [client.submit(_idle, wall_s / tasks, pure=False) for _ in range(tasks)]
+    for future in as_completed(futures):
+        future.result()
+    client_cpu = time.process_time() - start_cpu
+    wall = time.perf_counter() - start_wall
+    after = client.run(time.process_time)
+    workers = sum(after[w] - before[w] for w in after if w in before)
+    return {'tasks': tasks, 'wall_s': wall, 'client_cpu_s': client_cpu,
+            'worker_process_cpu_s': workers}

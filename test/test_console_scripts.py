@@ -60,6 +60,36 @@ def test_every_subcommand_help_exits_0(command, capsys):
     assert capsys.readouterr().out.startswith('usage: rwa-monitor ' + command)
 
 
+def test_a_command_starts_with_its_own_module_only():
+    # `rwa-monitor COMMAND ...` registers cmd_COMMAND alone (its start, docs/results.md).
+    code = ('import sys\n'
+            'from rwa_monitor.cli.main import main\n'
+            'try:\n'
+            '    main(["params", "--help"])\n'
+            'except SystemExit as stop:\n'
+            '    assert stop.code == 0, stop.code\n'
+            'print(sorted(m for m in sys.modules if m.startswith("rwa_monitor.cli.cmd_")))\n')
+    done = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True,
+                          timeout=60)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip().splitlines()[-1] == "['rwa_monitor.cli.cmd_params']"
+
+
+def test_top_level_help_and_an_unknown_command_name_every_command(capsys):
+    from rwa_monitor.cli.main import main, submodules
+    commands = [name.removeprefix('cmd_') for name in submodules('cmd_')]
+    with pytest.raises(SystemExit) as stop:
+        main(['--debug', '--help'])
+    assert stop.value.code == 0
+    out = capsys.readouterr().out
+    assert all(f'    {c} ' in out or f'    {c}\n' in out for c in commands), out
+    with pytest.raises(SystemExit) as stop:
+        main(['--debug', 'detec', 'x.csv'])
+    assert stop.value.code == 2
+    err = capsys.readouterr().err
+    assert "invalid choice: 'detec'" in err and all(repr(c) in err for c in commands), err
+
+
 @pytest.mark.ros
 @pytest.mark.parametrize('sig', [signal.SIGINT, signal.SIGTERM])
 def test_dashboard_stops_cleanly_on_signals(sig):

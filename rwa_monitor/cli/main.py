@@ -27,8 +27,13 @@ def submodules(prefix: str) -> list[str]:
     return sorted(names)
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """Return the parser with every sub-command module registered."""
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """Return the parser with every sub-command module registered, or only ``command``'s.
+
+    ``command``: the sub-command the arguments name (:func:`named_command`); only its
+    module ``cmd_<command>`` is imported, so that a command starts without the imports of
+    the others (a name that is no command registers them all, for argparse's error).
+    """
     parser = argparse.ArgumentParser(
         prog='rwa-monitor',
         description='Reaction-wheel and gyro anomaly detection on telemetry files.')
@@ -37,15 +42,26 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--debug', action='store_true',
                         help='on an unexpected error print its traceback (default: one line)')
     commands = parser.add_subparsers(dest='command', metavar='COMMAND', required=True)
-    for name in submodules('cmd_'):
+    names = submodules('cmd_')
+    if f'cmd_{command}' in names:
+        names = [f'cmd_{command}']
+    for name in names:
         importlib.import_module(f'rwa_monitor.cli.{name}').register(commands)
     return parser
 
 
+def named_command(argv: Sequence[str]) -> str | None:
+    """Return the first argument that is not an option: the sub-command, if any.
+
+    The options before it (``--debug``, ``--version``, ``-h``) take no value.
+    """
+    return next((a for a in argv if not a.startswith('-')), None)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; return the process exit code."""
-    parser = build_parser()
-    args = parser.parse_args(argv)
+    argv = sys.argv[1:] if argv is None else list(argv)
+    args = build_parser(named_command(argv)).parse_args(argv)
     from rwa_monitor.progress import KernelNotice
     from rwa_monitor.core import jit
     jit.set_reporter(KernelNotice())     # a first run says it compiles, and how far
