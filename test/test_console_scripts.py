@@ -75,6 +75,27 @@ def test_a_command_starts_with_its_own_module_only():
     assert done.stdout.strip().splitlines()[-1] == "['rwa_monitor.cli.cmd_params']"
 
 
+def test_the_list_of_commands_read_from_sources_is_the_imported_one():
+    # rwa-monitor --help lists the commands without importing them (cli/main.py
+    # listed_help): the same text as the parser with every module registered.
+    from rwa_monitor.cli.main import build_parser, listed_help, submodules
+    assert all(listed_help(name) is not None for name in submodules('cmd_'))
+    assert (build_parser(listing=True).format_help()
+            == build_parser().format_help())
+    code = ('import sys\n'
+            'from rwa_monitor.cli.main import main\n'
+            'try:\n'
+            '    main(["--help"])\n'
+            'except SystemExit as stop:\n'
+            '    assert stop.code == 0, stop.code\n'
+            'print(sorted(m for m in sys.modules if m.startswith("rwa_monitor.cli.cmd_")),\n'
+            '      "numpy" in sys.modules)\n')
+    done = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True,
+                          timeout=60)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip().splitlines()[-1] == '[] False'
+
+
 def test_top_level_help_and_an_unknown_command_name_every_command(capsys):
     from rwa_monitor.cli.main import main, submodules
     commands = [name.removeprefix('cmd_') for name in submodules('cmd_')]

@@ -8,7 +8,7 @@ import pathlib
 import sys
 
 from rwa_monitor.telemetry import read_with_notes, Telemetry, write_telemetry
-from rwa_monitor.telemetry.rosbag_io import DEFAULT_TOPICS
+from rwa_monitor.telemetry.topics import DEFAULT_TOPICS
 
 INPUT_HELP = ('telemetry: CSV or Parquet file, rosbag2 folder (metadata.yaml with .mcap or '
               '.db3), a bare .mcap or .db3 file, or CCSDS space packets (.bin, with --xtce '

@@ -33,12 +33,10 @@ from rwa_monitor.telemetry import codecs
 from rwa_monitor.telemetry.atomic import install_file, work_folder
 from rwa_monitor.telemetry.recording_folder import recording_output
 from rwa_monitor.telemetry.schema import name_problem, Telemetry, TRUTH_PREFIX, Wheel
+from rwa_monitor.telemetry.topics import DEFAULT_TOPICS
 from rwa_monitor.telemetry.yaml_file import read_yaml
 
 # Stream -> default topic (DESIGN.md topic names, absolute as a recorder stores them).
-DEFAULT_TOPICS = {'wheels': '/telemetry/wheels', 'gyro': '/telemetry/gyro',
-                  'star_tracker': '/telemetry/star_tracker',
-                  'reference_rate': '/telemetry/reference_rate'}
 COLUMNS_TOPIC = '/rwa_monitor/columns'
 MSG_TYPES = {'wheels': 'sensor_msgs/msg/JointState', 'gyro': 'sensor_msgs/msg/Imu',
              'star_tracker': 'geometry_msgs/msg/QuaternionStamped',
