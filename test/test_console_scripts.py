@@ -60,19 +60,26 @@ def test_every_subcommand_help_exits_0(command, capsys):
     assert capsys.readouterr().out.startswith('usage: rwa-monitor ' + command)
 
 
-def test_a_command_starts_with_its_own_module_only():
-    # `rwa-monitor COMMAND ...` registers cmd_COMMAND alone (its start, docs/results.md).
+def _imported_after_help(argv):
+    """Return (cmd_ modules imported, numpy imported) after ``main(argv)`` in a new process."""
     code = ('import sys\n'
             'from rwa_monitor.cli.main import main\n'
             'try:\n'
-            '    main(["params", "--help"])\n'
+            f'    main({list(argv)!r})\n'
             'except SystemExit as stop:\n'
             '    assert stop.code == 0, stop.code\n'
-            'print(sorted(m for m in sys.modules if m.startswith("rwa_monitor.cli.cmd_")))\n')
+            'print(sorted(m for m in sys.modules if m.startswith("rwa_monitor.cli.cmd_")))\n'
+            'print("numpy" in sys.modules)\n')
     done = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True,
                           timeout=60)
     assert done.returncode == 0, done.stderr
-    assert done.stdout.strip().splitlines()[-1] == "['rwa_monitor.cli.cmd_params']"
+    modules, numpy = done.stdout.strip().splitlines()[-2:]
+    return modules, numpy == 'True'
+
+
+def test_a_command_starts_with_its_own_module_only():
+    # `rwa-monitor COMMAND ...` registers cmd_COMMAND alone (its start, docs/results.md).
+    assert _imported_after_help(['params', '--help'])[0] == "['rwa_monitor.cli.cmd_params']"
 
 
 def test_the_list_of_commands_read_from_sources_is_the_imported_one():
@@ -82,18 +89,7 @@ def test_the_list_of_commands_read_from_sources_is_the_imported_one():
     assert all(listed_help(name) is not None for name in submodules('cmd_'))
     assert (build_parser(listing=True).format_help()
             == build_parser().format_help())
-    code = ('import sys\n'
-            'from rwa_monitor.cli.main import main\n'
-            'try:\n'
-            '    main(["--help"])\n'
-            'except SystemExit as stop:\n'
-            '    assert stop.code == 0, stop.code\n'
-            'print(sorted(m for m in sys.modules if m.startswith("rwa_monitor.cli.cmd_")),\n'
-            '      "numpy" in sys.modules)\n')
-    done = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True,
-                          timeout=60)
-    assert done.returncode == 0, done.stderr
-    assert done.stdout.strip().splitlines()[-1] == '[] False'
+    assert _imported_after_help(['--help']) == ('[]', False)
 
 
 def test_top_level_help_and_an_unknown_command_name_every_command(capsys):
