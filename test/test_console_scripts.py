@@ -90,6 +90,7 @@ def test_the_list_of_commands_read_from_sources_is_the_imported_one():
     assert (build_parser(listing=True).format_help()
             == build_parser().format_help())
     assert _imported_after_help(['--help']) == ('[]', False)
+    assert _imported_after_help(['-h', 'detect']) == ('[]', False)
 
 
 def test_top_level_help_and_an_unknown_command_name_every_command(capsys):

@@ -83,9 +83,15 @@ def listed_help(module: str) -> str | None:
 def named_command(argv: Sequence[str]) -> str | None:
     """Return the first argument that is not an option: the sub-command, if any.
 
-    The options before it (``--debug``, ``--version``, ``-h``) take no value.
+    The options before it (``--debug``, ``--version``, ``-h``) take no value; after
+    ``-h`` or ``--help`` there is none (``rwa-monitor -h detect`` lists every command).
     """
-    return next((a for a in argv if not a.startswith('-')), None)
+    for arg in argv:
+        if arg in ('-h', '--help'):
+            return None
+        if not arg.startswith('-'):
+            return arg
+    return None
 
 
 def main(argv: Sequence[str] | None = None) -> int:
