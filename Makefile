@@ -97,7 +97,8 @@ $(BSK_STAMP): requirements.txt requirements-bsk.txt setup.py setup.cfg rwa_monit
 	$(BSK_PY) -m pip install --quiet --no-deps -e .
 	touch $(BSK_VENV)/COLCON_IGNORE $(BSK_STAMP)
 
-test-bsk: $(BSK_STAMP)
+# The same readers, Open MCT bundle and browser as `make test`: the suite is the same.
+test-bsk: $(BSK_STAMP) interop openmct browser
 	$(BSK_PY) -m pytest test -n $(TEST_WORKERS) --dist loadfile
 
 # The realistic profile (default guidance and null speed: the wheels cross zero speed):
