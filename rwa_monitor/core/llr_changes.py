@@ -24,6 +24,7 @@ from rwa_monitor.core.llr_common import (candidate_log_p2, checkpoints, declarat
                                          make_event, ramp_points, reference_base,
                                          revision_due)
 from rwa_monitor.core.llr_config import LLRConfig
+from rwa_monitor.core.llr_ramp_kernel import BLOCK_WIDTH, ring_ramp_block
 from rwa_monitor.core.llr_state import DeclaredChange, Live
 
 # A change whose position's interval to the sample before it exceeds this many times the
@@ -77,9 +78,11 @@ def _declare(live: Live, config: LLRConfig, n: int) -> list[AnomalyEvent]:
     if base != c:
         prefix = prefix - ring.pref[base % length]
     ramps: dict[int, np.ndarray] = {}
+    speeds: dict[int, np.ndarray] = {}
 
     def ramp_of(tau: int) -> np.ndarray:
-        ramps[tau] = _ramp_block(live, config, tau, n, float(ring.time[tau % length]))
+        ramps[tau], speeds[tau] = _ramp_block(live, config, tau, n,
+                                              float(ring.time[tau % length]))
         return ramps[tau]
 
     def log_prior(taus: np.ndarray) -> np.ndarray:
@@ -105,7 +108,7 @@ def _declare(live: Live, config: LLRConfig, n: int) -> list[AnomalyEvent]:
         points=tuple(points[1:]), ramp_end=n, tau=tau, closed=not checks, tail=False,
         finished=False, after_gap_s=gap, shape=cat.shape, before=prefix[tau - first].copy(),
         gap=prefix[start - first] - prefix[tau - first], ramp=ramps[tau][None, :],
-        speeds=_speed_range(live, tau, n)[None, :])
+        speeds=speeds[tau][None, :])
     return [event] + _restart_and_test(live, config, start, n)
 
 
@@ -187,9 +190,9 @@ def _continues(live: Live, config: LLRConfig, tau: int, n: int) -> bool:
         return False
     blocks, speeds = prev.ramp, prev.speeds
     if prev.ramp_end < n:
-        blocks = _with_block(blocks, _ramp_block(live, config, prev.ramp_end + 1, n,
-                                                 prev.time), prev.tail)
-        speeds = _with_range(speeds, _speed_range(live, prev.ramp_end + 1, n), prev.tail)
+        block, block_speeds = _ramp_block(live, config, prev.ramp_end + 1, n, prev.time)
+        blocks = _with_block(blocks, block, prev.tail)
+        speeds = _with_range(speeds, block_speeds, prev.tail)
     after_sums = prev.gap + live.prefix_now()
     times = live.ring.time[np.arange(tau, n + 1) % len(live.ring.row)]
     if not llr_growth.continues(prev.before, prev.n_before, after_sums, blocks,
@@ -202,16 +205,21 @@ def _continues(live: Live, config: LLRConfig, tau: int, n: int) -> bool:
 
 
 def _ramp_block(live: Live, config: LLRConfig, first: int, last: int, t0: float
-                ) -> np.ndarray:
-    """Return :func:`llr_growth.ramp_sums` of positions ``first..last`` (in the ring)."""
-    times = live.ring.time[np.arange(first, last + 1) % len(live.ring.row)]
-    return llr_growth.ramp_sums(_terms(live, config, first, last), times - t0)
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """Return the ramp sums and the ``|w|`` range of positions ``first..last`` (the ring).
 
-
-def _speed_range(live: Live, first: int, last: int) -> np.ndarray:
-    """Return the lowest and highest ``|w|`` of positions ``first..last`` (in the ring)."""
-    speeds = live.ring.speed[np.arange(first, last + 1) % len(live.ring.row)]
-    return np.array([speeds.min(), speeds.max()])
+    :func:`llr_growth.ramp_sums` of their terms with ``u = time - t0``, and their lowest
+    and highest speed. For p = 2 in one compiled walk of the rings
+    (core/llr_ramp_kernel.py, the same floats); for larger models with numpy.
+    """
+    ring = live.ring
+    if config.p == 2:
+        out = ring_ramp_block(ring.term, ring.time, ring.speed, first, last, t0)
+        return out[:BLOCK_WIDTH], out[BLOCK_WIDTH:]
+    positions = np.arange(first, last + 1) % len(ring.row)
+    speeds = ring.speed[positions]
+    return (llr_growth.ramp_sums(_terms(live, config, first, last), ring.time[positions] - t0),
+            np.array([speeds.min(), speeds.max()]))
 
 
 def _with_range(speeds: np.ndarray, new: np.ndarray, tail: bool) -> np.ndarray:
@@ -246,23 +254,35 @@ def _revise(live: Live, config: LLRConfig, j: int) -> list[AnomalyEvent]:
     """
     cat = live.change
     live.ints[layout.I_CHECKPOINT] = cat.points[0] if cat.points else j + config.window
-    live.change = replace(cat, points=cat.points[1:])
-    _take_ramp(live, config, j)
+    fields = _ramp_taken(live, config, cat, j)
+    if j in cat.checks:
+        fields['closed'] = cat.closed or j == cat.checks[-1]
+    live.change = replace(cat, points=cat.points[1:], **fields)
     if j not in cat.checks:
         return []
-    live.change = replace(live.change, closed=cat.closed or j == cat.checks[-1])
     return _recheck(live, config, j, live.change.gap + live.prefix_now())
 
 
 def _take_ramp(live: Live, config: LLRConfig, j: int) -> None:
     """Add the samples ``(ramp_end, j]`` to the ramp sums of the last change."""
-    cat = live.change
+    fields = _ramp_taken(live, config, live.change, j)
+    if fields:
+        live.change = replace(live.change, **fields)
+
+
+def _ramp_taken(live: Live, config: LLRConfig, cat: DeclaredChange, j: int
+                ) -> dict[str, object]:
+    """Return the fields of ``cat`` with the samples ``(ramp_end, j]`` in its ramp sums.
+
+    Empty when ``j`` is not past ``ramp_end``. One ``replace`` of the record per
+    revision point with its other fields (a record's copy costs more than its sums).
+    """
     if j <= cat.ramp_end:
-        return
-    ramp = _with_block(cat.ramp, _ramp_block(live, config, cat.ramp_end + 1, j, cat.time),
-                       cat.tail)
-    speeds = _with_range(cat.speeds, _speed_range(live, cat.ramp_end + 1, j), cat.tail)
-    live.change = replace(cat, ramp=ramp, speeds=speeds, tail=cat.closed, ramp_end=j)
+        return {}
+    block, block_speeds = _ramp_block(live, config, cat.ramp_end + 1, j, cat.time)
+    return {'ramp': _with_block(cat.ramp, block, cat.tail),
+            'speeds': _with_range(cat.speeds, block_speeds, cat.tail),
+            'tail': cat.closed, 'ramp_end': j}
 
 
 def _with_block(ramp: np.ndarray, block: np.ndarray, tail: bool) -> np.ndarray:
