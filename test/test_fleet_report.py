@@ -185,3 +185,20 @@ def test_summary_trends_are_the_report_numbers(tmp_path):
     assert f'{days[0]:.1f} ({days[1]:.1f} .. {days[2]:.1f})' in text
     assert f'{wear["dry_slope_per_day"]:.3g} &plusmn; {wear["dry_slope_se"]:.3g}' in text
     assert f'{wear["dry_p_value"]:.3g}' in text
+
+
+def test_a_wheel_drawn_after_another_is_drawn_as_on_a_new_canvas():
+    from rwa_monitor.fleet.report import _Canvas
+    from rwa_monitor.fleet.trend_table import TrendTable
+    events, _, rows = fleet_inputs()
+    entries = {(e['spacecraft'], e['wheel']): e for e in wheel_trends(rows, {})}
+    groups = TrendTable.of(rows).by_wheel()
+    changes = {('sc<2>', 'rw1'): [events[0], events[0] | {'time': 7 * SECONDS_PER_DAY}]}
+    wearing, stepped = ('sc1', 'rw2'), ('sc<2>', 'rw1')
+
+    def pngs(order):
+        with _Canvas() as canvas:
+            return [canvas.plot(key, groups[key], entries[key], changes.get(key, []), None)
+                    for key in order]
+    assert pngs([wearing, stepped])[1] == pngs([stepped])[0]
+    assert pngs([stepped, wearing])[1] == pngs([wearing])[0]
