@@ -128,6 +128,7 @@ def compile_declared(dispatcher: Any, name: str, signatures: list) -> None:
 def warm(modules: tuple[str, ...] = ('rwa_monitor.core.gchi2', 'rwa_monitor.core.llr_kernel',
                                      'rwa_monitor.core.llr_calibrated_step',
                                      'rwa_monitor.core.llr_ramp_kernel',
+                                     'rwa_monitor.core.scaled_solve',
                                      'rwa_monitor.core.trend_sums')) -> int:
     """Compile every kernel of ``modules`` now (or load it from the cache); return how many.
 

@@ -25,6 +25,9 @@ from typing import Callable
 
 import numpy as np
 
+from rwa_monitor.core.jit import kernel_array
+from rwa_monitor.core.scaled_solve import solve_scaled_stack
+
 # Relative floor of the estimated noise variance (std >= 1e-10 x rms friction): a
 # noise-free reference gives a huge but finite statistic instead of a division by zero.
 NOISE_FLOOR_REL = 1e-20
@@ -105,13 +108,15 @@ def solve_scaled(m: np.ndarray, r: np.ndarray) -> np.ndarray:
     Scaling by the diagonal first makes the cut-off relative to the correlation matrix;
     an exactly collinear segment (constant speed, wheel at rest) gets the minimum-norm
     solution, whose fitted values (and so residual) are still the least-squares ones.
+    Compiled, for any leading axes (core/scaled_solve.py); NaN where ``m`` or ``r`` is
+    not finite.
     """
-    diag = np.diagonal(m, axis1=-2, axis2=-1)
-    d = np.sqrt(np.where(diag > 0.0, diag, 1.0))
-    ms = m / (d[..., :, None] * d[..., None, :])
-    with np.errstate(all='ignore'):
-        inv = np.linalg.pinv(ms, rcond=1e-13, hermitian=True)
-    return np.einsum('...ij,...j->...i', inv, r / d) / d
+    m, r = np.asarray(m, dtype=float), np.asarray(r, dtype=float)
+    n = m.shape[-1]
+    lead = np.broadcast_shapes(m.shape[:-2], r.shape[:-1])
+    x = solve_scaled_stack(kernel_array(np.broadcast_to(m, lead + (n, n)).reshape(-1, n, n)),
+                           kernel_array(np.broadcast_to(r, lead + (n,)).reshape(-1, n)))
+    return x.reshape(lead + (n,))
 
 
 def explained_sum(m: np.ndarray, v: np.ndarray) -> np.ndarray:
