@@ -1,10 +1,10 @@
-"""The compiled ramp block equals numpy's terms and ramp sums, float for float."""
+"""The compiled ramp block equals numpy's terms, ramp sums and block merging, float for float."""
 
 import numpy as np
 import pytest
 
-from rwa_monitor.core import llr_growth
-from rwa_monitor.core.llr_ramp_kernel import BLOCK_WIDTH, ring_ramp_block
+from rwa_monitor.core import llr_changes, llr_growth
+from rwa_monitor.core.llr_ramp_kernel import BLOCK_WIDTH, ring_ramp_block, ring_ramp_taken
 
 
 def _numpy_block(term, time, speed, first, last, t0):
@@ -39,3 +39,39 @@ def test_a_nan_speed_gives_nan_range_as_numpy():
     got = ring_ramp_block(term, time, speed, 1, 4, 0.0)
     assert np.isnan(got[BLOCK_WIDTH]) and np.isnan(got[BLOCK_WIDTH + 1])
     assert np.array_equal(got[:BLOCK_WIDTH], _numpy_block(term, time, speed, 1, 4, 0.0)[0])
+
+
+@pytest.mark.parametrize('seed', range(100))
+def test_taken_block_is_numpy_appended_or_merged_float_for_float(seed):
+    rng = np.random.default_rng(1000 + seed)
+    length = int(rng.integers(20, 500))
+    term = rng.standard_normal((length, 3)) * 10.0 ** rng.uniform(-6, 2, 3)
+    time = np.cumsum(rng.uniform(0.05, 0.2, length))
+    speed = np.abs(rng.standard_normal(length)) * 100.0
+    if seed % 4 == 0:
+        speed[int(rng.integers(0, length))] = np.nan
+    rows = int(rng.integers(1, 5))
+    ramp = rng.standard_normal((rows, BLOCK_WIDTH))
+    speeds = np.sort(np.abs(rng.standard_normal((rows, 2))) * 100.0, axis=1)
+    if seed % 5 == 0:
+        speeds[-1, 0] = np.nan
+    first = int(rng.integers(0, 3 * length))
+    last = first + int(rng.integers(0, length))
+    tail = bool(seed % 2)
+    block = ring_ramp_block(term, time, speed, first, last, 0.0)
+    got_ramp, got_speeds = ring_ramp_taken(term, time, speed, first, last, 0.0,
+                                           ramp, speeds, tail)
+    assert np.array_equal(got_ramp, llr_changes._with_block(ramp, block[:BLOCK_WIDTH], tail))
+    assert np.array_equal(got_speeds, llr_changes._with_range(speeds, block[BLOCK_WIDTH:], tail),
+                          equal_nan=True)
+
+
+def test_taken_block_leaves_its_inputs_and_refuses_a_tail_without_a_block():
+    term, time, speed = np.ones((8, 3)), np.arange(8.0), np.arange(8.0)
+    ramp, speeds = np.ones((1, BLOCK_WIDTH)), np.array([[1.0, 2.0]])
+    ring_ramp_taken(term, time, speed, 1, 4, 0.0, ramp, speeds, True)
+    assert np.array_equal(ramp, np.ones((1, BLOCK_WIDTH)))
+    assert np.array_equal(speeds, [[1.0, 2.0]])
+    with pytest.raises(ValueError):
+        ring_ramp_taken(term, time, speed, 1, 4, 0.0, np.empty((0, BLOCK_WIDTH)),
+                        np.empty((0, 2)), True)

@@ -117,3 +117,29 @@ def test_any_edit_of_the_tree_is_decoded_exactly_or_refused(path, value):
         return
     again, _ = records.encode(back)
     assert json.loads(json.dumps(again)) == json.loads(json.dumps(tree))
+
+
+def test_evolve_gives_what_replace_gives_and_leaves_the_record():
+    record = _sample()
+    for changes in ({}, {'name': 'rw3'}, {'flag': False, 'inner': None},
+                    {'values': np.zeros(2), 'by_name': {}}):
+        evolved = records.evolve(record, **changes)
+        assert type(evolved) is Outer and _same(evolved, dataclasses.replace(record, **changes))
+    assert _same(record, _sample())
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        records.evolve(record, name='rw3').name = 'rw4'
+
+
+def test_evolve_refuses_unknown_fields_and_records_that_check_themselves():
+    with pytest.raises(TypeError, match='no field'):
+        records.evolve(_sample(), nme='rw3')
+
+    @dataclasses.dataclass(frozen=True)
+    class Checked:
+        level: float
+
+        def __post_init__(self) -> None:
+            assert self.level >= 0
+
+    with pytest.raises(TypeError, match='__post_init__'):
+        records.evolve(Checked(1.0), level=-1.0)

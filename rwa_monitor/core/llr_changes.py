@@ -20,12 +20,14 @@ import numpy as np
 from rwa_monitor.core import llr_general, llr_growth, llr_kernel as kern, llr_kinds
 from rwa_monitor.core import llr_layout as layout
 from rwa_monitor.core.events import AnomalyEvent
+from rwa_monitor.core.jit import kernel_array
 from rwa_monitor.core.llr_common import (candidate_log_p2, checkpoints, declaration,
                                          make_event, ramp_points, reference_base,
                                          revision_due)
 from rwa_monitor.core.llr_config import LLRConfig
-from rwa_monitor.core.llr_ramp_kernel import BLOCK_WIDTH, ring_ramp_block
+from rwa_monitor.core.llr_ramp_kernel import BLOCK_WIDTH, ring_ramp_block, ring_ramp_taken
 from rwa_monitor.core.llr_state import DeclaredChange, Live
+from rwa_monitor.core.records import evolve
 
 # A change whose position's interval to the sample before it exceeds this many times the
 # median interval fell in a gap of the stream (docs/llr.md "Changes in a gap").
@@ -190,9 +192,7 @@ def _continues(live: Live, config: LLRConfig, tau: int, n: int) -> bool:
         return False
     blocks, speeds = prev.ramp, prev.speeds
     if prev.ramp_end < n:
-        block, block_speeds = _ramp_block(live, config, prev.ramp_end + 1, n, prev.time)
-        blocks = _with_block(blocks, block, prev.tail)
-        speeds = _with_range(speeds, block_speeds, prev.tail)
+        blocks, speeds = _ramp_with(live, config, prev, n)
     after_sums = prev.gap + live.prefix_now()
     times = live.ring.time[np.arange(tau, n + 1) % len(live.ring.row)]
     if not llr_growth.continues(prev.before, prev.n_before, after_sums, blocks,
@@ -257,7 +257,7 @@ def _revise(live: Live, config: LLRConfig, j: int) -> list[AnomalyEvent]:
     fields = _ramp_taken(live, config, cat, j)
     if j in cat.checks:
         fields['closed'] = cat.closed or j == cat.checks[-1]
-    live.change = replace(cat, points=cat.points[1:], **fields)
+    live.change = evolve(cat, points=cat.points[1:], **fields)
     if j not in cat.checks:
         return []
     return _recheck(live, config, j, live.change.gap + live.prefix_now())
@@ -267,7 +267,7 @@ def _take_ramp(live: Live, config: LLRConfig, j: int) -> None:
     """Add the samples ``(ramp_end, j]`` to the ramp sums of the last change."""
     fields = _ramp_taken(live, config, live.change, j)
     if fields:
-        live.change = replace(live.change, **fields)
+        live.change = evolve(live.change, **fields)
 
 
 def _ramp_taken(live: Live, config: LLRConfig, cat: DeclaredChange, j: int
@@ -279,10 +279,25 @@ def _ramp_taken(live: Live, config: LLRConfig, cat: DeclaredChange, j: int
     """
     if j <= cat.ramp_end:
         return {}
+    ramp, speeds = _ramp_with(live, config, cat, j)
+    return {'ramp': ramp, 'speeds': speeds, 'tail': cat.closed, 'ramp_end': j}
+
+
+def _ramp_with(live: Live, config: LLRConfig, cat: DeclaredChange, j: int
+               ) -> tuple[np.ndarray, np.ndarray]:
+    """Return ``cat``'s ramp blocks and speed ranges with the samples ``(ramp_end, j]``.
+
+    For p = 2 in one compiled call (core/llr_ramp_kernel.py ``ring_ramp_taken``, the
+    floats of :func:`_ramp_block`, :func:`_with_block` and :func:`_with_range`).
+    """
+    if config.p == 2:
+        ring = live.ring
+        return ring_ramp_taken(ring.term, ring.time, ring.speed, cat.ramp_end + 1, j,
+                               cat.time, kernel_array(cat.ramp), kernel_array(cat.speeds),
+                               cat.tail)
     block, block_speeds = _ramp_block(live, config, cat.ramp_end + 1, j, cat.time)
-    return {'ramp': _with_block(cat.ramp, block, cat.tail),
-            'speeds': _with_range(cat.speeds, block_speeds, cat.tail),
-            'tail': cat.closed, 'ramp_end': j}
+    return (_with_block(cat.ramp, block, cat.tail),
+            _with_range(cat.speeds, block_speeds, cat.tail))
 
 
 def _with_block(ramp: np.ndarray, block: np.ndarray, tail: bool) -> np.ndarray:

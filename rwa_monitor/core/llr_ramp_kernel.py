@@ -8,6 +8,9 @@ along axis 0 of a C-contiguous array adds its rows. A closed change takes in its
 every ``window`` samples for as long as the record lasts (llr_changes ``_take_ramp``), so
 on a wheel with an old declaration this block was most of the Python after the kernel:
 about 120 us a call in numpy, a few us here (docs/llr.md "Kinds on ramps").
+:func:`ring_ramp_taken` also appends the block to the change's blocks, or merges it into
+the last one, as llr_changes ``_with_block`` and ``_with_range`` do with numpy: one call
+where those took a dozen (a closed change takes a block every ``window`` samples).
 """
 
 from __future__ import annotations
@@ -16,7 +19,7 @@ import numpy as np
 
 from rwa_monitor.core.jit import njit
 
-__all__ = ['BLOCK_WIDTH', 'ring_ramp_block']
+__all__ = ['BLOCK_WIDTH', 'ring_ramp_block', 'ring_ramp_taken']
 
 # The ramp-sum row of p = 2 (u_last, then three sums of 6 terms), then |w| min and max.
 BLOCK_WIDTH = 1 + 3 * 6
@@ -33,6 +36,51 @@ def ring_ramp_block(term, time, speed, first, last, t0):  # pragma: no cover - c
     row of :func:`llr_growth.ramp_sums`, then the lowest and highest speed (NaN if any
     speed is NaN, as numpy's min and max).
     """
+    return _block(term, time, speed, first, last, t0)
+
+
+@njit('Tuple((float64[:, ::1], float64[:, ::1]))(float64[:, ::1], float64[::1], float64[::1], '
+      'int64, int64, float64, float64[:, ::1], float64[:, ::1], boolean)', cache=True)
+def ring_ramp_taken(term, time, speed, first, last, t0, ramp, speeds,
+                    tail):  # pragma: no cover - compiled
+    """Return a change's ramp blocks and speed ranges with positions ``first..last`` taken.
+
+    The block of :func:`ring_ramp_block` appended to ``ramp`` (``(k, BLOCK_WIDTH)``) and its
+    speed range to ``speeds`` (``(k, 2)``), or, with ``tail``, merged into their last rows:
+    the sums added, the knot ``u`` the new block's, the range widened (``min`` and ``max``
+    taken as Python's builtins take them, so a NaN on either side stays as it did). New
+    arrays; the inputs are not changed.
+    """
+    block = _block(term, time, speed, first, last, t0)
+    rows = ramp.shape[0]
+    if tail and rows == 0:
+        raise ValueError('a tail block needs a block to merge into')
+    keep = rows - 1 if tail else rows
+    new_ramp = np.empty((keep + 1, BLOCK_WIDTH))
+    new_speeds = np.empty((keep + 1, 2))
+    new_ramp[:keep] = ramp[:keep]
+    new_speeds[:keep] = speeds[:keep]
+    new_ramp[keep, 0] = block[0]
+    low = block[BLOCK_WIDTH]
+    high = block[BLOCK_WIDTH + 1]
+    if tail:
+        for c in range(1, BLOCK_WIDTH):
+            new_ramp[keep, c] = ramp[keep, c] + block[c]
+        old_low = speeds[keep, 0]
+        old_high = speeds[keep, 1]
+        low = low if low < old_low else old_low
+        high = high if high > old_high else old_high
+    else:
+        for c in range(1, BLOCK_WIDTH):
+            new_ramp[keep, c] = block[c]
+    new_speeds[keep, 0] = low
+    new_speeds[keep, 1] = high
+    return new_ramp, new_speeds
+
+
+@njit(cache=True)
+def _block(term, time, speed, first, last, t0):  # pragma: no cover - compiled
+    """Return the floats of :func:`ring_ramp_block` (shared with :func:`ring_ramp_taken`)."""
     length = time.shape[0]
     out = np.zeros(BLOCK_WIDTH + 2)
     lo = np.inf
