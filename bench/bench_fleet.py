@@ -221,7 +221,8 @@ def fleet_runs(archive: pathlib.Path, warm: pathlib.Path, workers: int,
     ``floor``: after each run, its idle twin on the same cluster (bench/fleet_parts.py
     ``dask_floor``: as many tasks, the same wall time, nothing computed).
     """
-    from rwa_monitor.fleet.engine import dask_client, run_archive
+    from rwa_monitor.fleet.cluster import dask_client
+    from rwa_monitor.fleet.engine import run_archive
     from rwa_monitor.fleet.plan import SCAN_TASK_PASSES
     passes = sum(1 for p in archive.glob('*/*') if p.name.startswith('pass-'))
     start = time.perf_counter()

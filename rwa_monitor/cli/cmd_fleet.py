@@ -60,7 +60,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     """Run the fleet and write OUT; return the exit code."""
     from rwa_monitor.fleet import outputs, state
-    from rwa_monitor.fleet.engine import run_archive
+    from rwa_monitor.fleet.cluster import ClusterStart
     archive = args.archive.resolve()
     for name, path in (('output', args.output), ('state', args.state)):
         if path is not None and archive in (path.resolve(), *path.resolve().parents):
@@ -68,9 +68,13 @@ def run(args: argparse.Namespace) -> int:
                               f'{args.archive} (it would be read as a spacecraft)')
     state.check_folders(args.state, args.output)
     outputs.check_output(args.output)
-    with state.locked(args.state) if args.state else contextlib.nullcontext():
-        result = run_archive(args.archive, workers=args.workers, scheduler=args.scheduler,
-                             config=args.config, state_dir=args.state, log=sys.stderr)
+    # The cluster starts while the engine is imported and the state read, and closes
+    # while the outputs are written (fleet/cluster.py).
+    with state.locked(args.state) if args.state else contextlib.nullcontext(), \
+            ClusterStart(args.workers, args.scheduler) as cluster:
+        from rwa_monitor.fleet.engine import run_archive
+        result = run_archive(args.archive, client=cluster, config=args.config,
+                             state_dir=args.state, log=sys.stderr)
         outputs.write_outputs(args.output, result)
         result.commit()      # the state moves on only once this run's outputs are written
     return report(args.output, result)

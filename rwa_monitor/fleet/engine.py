@@ -16,18 +16,18 @@ from __future__ import annotations
 
 import contextlib
 import datetime as dt
-import logging
 import math
 import pathlib
 import sys
 import time as _time
-from typing import Iterator, Mapping, TextIO, TYPE_CHECKING
+from typing import Mapping, TextIO, TYPE_CHECKING
 
 from rwa_monitor import paths
 from rwa_monitor.core.schema import FLEET, LLR, VSADC
 from rwa_monitor.exceptions import ConfigError
 from rwa_monitor.fleet import archive as arc, state
 from rwa_monitor.fleet.chain import step
+from rwa_monitor.fleet.cluster import ClusterStart
 from rwa_monitor.fleet.plan import plan, SpacecraftPlan
 from rwa_monitor.fleet.records import Chain, PassRecord, SpacecraftRecord, WorkFacts
 from rwa_monitor.fleet.result import FleetResult, SpacecraftResult
@@ -41,39 +41,6 @@ if TYPE_CHECKING:
 # files (a task costs a few milliseconds of the engine's own).
 TASK_BYTES = 64 << 20
 FLEET_PARAMETERS = 'fleet.yaml'
-
-
-@contextlib.contextmanager
-def dask_client(workers: int = 2, scheduler: str | None = None) -> Iterator[Client]:
-    """Yield a distributed Client: to ``scheduler``, or to a local cluster of processes."""
-    from distributed import Client, LocalCluster
-    if scheduler:
-        try:
-            client = Client(scheduler, timeout=30)
-        except (OSError, TimeoutError) as err:
-            raise ConfigError(f'cannot reach the Dask scheduler {scheduler}: {err}') from None
-        with client:
-            yield client
-        return
-    if workers < 1:
-        raise ConfigError(f'--workers must be at least 1, got {workers}')
-    # No dashboard; the scheduler's small HTTP server on a free port of this machine only.
-    # No worker profiler: it samples the task thread every 10 ms for the dashboard, and
-    # took the run's wall time from 0.85 s to 1.30 s (mean of 6 runs each, 3 spacecraft x
-    # 2 days, 1 worker, load 5-7). The C library's own memory trimming, as in `detect`'s
-    # process: the nanny's MALLOC_TRIM_THRESHOLD_ (64 KiB) also fixes the size from which
-    # allocations are mapped and unmapped, and the same 5 spacecraft-weeks took 0.61 s of
-    # the task thread's CPU with it, 0.44 s without (median of 3; 0.42 s in-process).
-    import dask
-    environ = dict(dask.config.get('distributed.nanny.pre-spawn-environ', None) or {})
-    environ.pop('MALLOC_TRIM_THRESHOLD_', None)
-    with dask.config.set({'distributed.worker.profile.enabled': False,
-                          'distributed.nanny.pre-spawn-environ': environ}), \
-            LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                         dashboard_address=None, silence_logs=logging.ERROR,
-                         scheduler_kwargs={'dashboard_address': '127.0.0.1:0'}) as cluster, \
-            Client(cluster) as client:
-        yield client
 
 
 def fleet_parameters_file() -> pathlib.Path:
@@ -139,38 +106,50 @@ def _map_epoch(fleet: list[arc.Spacecraft]) -> dt.datetime | None:
     return next(iter(found.values()), None)
 
 
-def run_archive(archive: str | pathlib.Path, *, client: Client | None = None,
+def run_archive(archive: str | pathlib.Path, *, client: Client | ClusterStart | None = None,
                 workers: int = 2,
                 scheduler: str | None = None, config: pathlib.Path | None = None,
                 state_dir: pathlib.Path | None = None, log: TextIO | None = None,
                 task_bytes: int = TASK_BYTES) -> FleetResult:
     """Run the fleet over ``archive`` and return the result (not yet committed).
 
-    ``client``: an existing distributed Client (else one is made from ``workers`` or
-    ``scheduler``); ``task_bytes``: passes per ``step`` task, by their files' bytes (1:
-    one pass per task); ``log``: where a line per spacecraft finished goes. The caller
-    writes the outputs, then calls ``result.commit()`` to move the state on. Raise
-    ConfigError for bad parameters, StateError for a state that does not fit this run.
+    ``client``: an existing distributed Client, or a cluster being started
+    (fleet/cluster.py ``ClusterStart``: it is released, its closing begun, once the
+    tasks are done; its owner waits for the close); else one is started here from
+    ``workers`` or ``scheduler``, while the parameters and the state are read, and
+    closed while the result is assembled. ``task_bytes``: passes per ``step`` task, by
+    their files' bytes (1: one pass per task); ``log``: where a line per spacecraft
+    finished goes. The caller writes the outputs, then calls ``result.commit()`` to move
+    the state on. Raise ConfigError for bad parameters, StateError for a state that does
+    not fit this run.
     """
+    with contextlib.ExitStack() as stack:
+        if client is None:
+            client = stack.enter_context(ClusterStart(workers, scheduler))
+        return _run(pathlib.Path(archive), client, config, state_dir, log, task_bytes)
+
+
+def _run(root: pathlib.Path, cluster: Client | ClusterStart, config: pathlib.Path | None,
+         state_dir: pathlib.Path | None, log: TextIO | None, task_bytes: int
+         ) -> FleetResult:
     blocks = node_blocks(config)
-    root = pathlib.Path(archive)
     fleet = arc.list_archive(root)
     epoch = archive_epoch(root, str(blocks['fleet']['epoch_utc']), fleet)
     loaded = state.load(pathlib.Path(state_dir)) if state_dir is not None else None
     saved = loaded.records if loaded else {}
     start_wall, start_cpu = _time.perf_counter(), _time.process_time()
-    with contextlib.ExitStack() as stack:
-        if client is None:
-            client = stack.enter_context(dask_client(workers, scheduler))
-        try:
-            plans = plan(client, fleet, blocks, saved)
-        except state.StateError as err:     # name the file this run's parameters came from
-            raise state.StateError(f'{err}; this run read {config or fleet_parameters_file()}'
-                                   ) from None
-        finals = _submit(client, plans, task_bytes)
-        chains = _gather(client, finals, plans, log)
-        engine = {'name': 'dask.distributed', 'scheduler': client.scheduler.address,
-                  'workers': len(client.scheduler_info()['workers'])}
+    client = cluster.client() if isinstance(cluster, ClusterStart) else cluster
+    try:
+        plans = plan(client, fleet, blocks, saved)
+    except state.StateError as err:     # name the file this run's parameters came from
+        raise state.StateError(f'{err}; this run read {config or fleet_parameters_file()}'
+                               ) from None
+    finals = _submit(client, plans, task_bytes)
+    chains = _gather(client, finals, plans, log)
+    engine = {'name': 'dask.distributed', 'scheduler': client.scheduler.address,
+              'workers': len(client.scheduler_info()['workers'])}
+    if isinstance(cluster, ClusterStart):
+        cluster.release()
     wall = _time.perf_counter() - start_wall
     run = (loaded.generation + 1) if loaded else (1 if state_dir is not None else 0)
     crafts = [_result(p, chains.get(p.id), run) for p in plans]
