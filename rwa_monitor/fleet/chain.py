@@ -10,7 +10,8 @@ one file, because the runners' row counts go on from pass to pass.
 
 One task feeds every component of a spacecraft: each pass is read once, and the
 spacecraft's chain is the unit of order (passes in time order). Spacecraft run in
-parallel.
+parallel. Within a task, passes are read a block at a time (``BLOCK_BYTES``) and each
+runner takes the whole block before the next one does.
 """
 
 from __future__ import annotations
@@ -20,24 +21,31 @@ from dataclasses import dataclass, field
 import functools
 import gc
 import json
+import math
 import resource
 import time as _time
 from typing import Iterator, Mapping, Sequence, TYPE_CHECKING
 
 import numpy as np
 
+from rwa_monitor.core.events import AnomalyEvent
 from rwa_monitor.core.gyro_runner import GyroRunner
 from rwa_monitor.core.runner_facts import ComponentFacts
 from rwa_monitor.core.wheel_runner import WheelRunner
 from rwa_monitor.fleet.archive import after, PassFile, read_pass
 from rwa_monitor.fleet.records import (Chain, ComponentRecord, GYRO, PassFacts, TrendRow,
                                        WorkFacts)
+from rwa_monitor.telemetry.schema import Telemetry
 
 if TYPE_CHECKING:
     from rwa_monitor.pipelines.runners import WheelSetup
 
 # Checked parameter values (core/schema.py): what a YAML block holds once validated.
 Values = Mapping[str, object]
+# Passes read before the runners take them (about this many bytes of files): a step
+# reads a block, then feeds it to each runner in turn (:func:`_feed_block`). 0.75-0.85
+# of the CPU of a pass-by-pass step (docs/fleet.md "Engine"); it holds one block's rows.
+BLOCK_BYTES = 16 << 20
 
 
 @dataclass(frozen=True)
@@ -176,41 +184,21 @@ def _step(spec: SpacecraftSpec, chain: Chain, passes: Sequence[PassFile],
     start = _time.process_time()
     runners = make_runners(spec)
     runners.restore(chain.states)
-    setup = setup_of(spec)
     events = list(chain.events)
     facts = list(chain.passes)
     trend = list(chain.trend)
     last_time = chain.last_time
-    for found in passes:
-        tele = read_pass(found.path)
-        if isinstance(tele, str):
-            facts.append(PassFacts(found.name, error=tele))
-            continue
-        kept, dropped = after(tele, last_time)
-        last_time = max(last_time, float(tele.time[-1]))
-        errors: dict[str, str] = {}
-        fed = 0
-        wheels = kept.only('wheels')
-        for name in spec.wheels:
-            channel = wheels.wheels.get(name)
-            if channel is None or channel.friction is None:
-                errors[name] = f'no {name}_speed and {name}_friction columns'
-                continue
-            runner = runners.wheels[name]
-            fed += len(wheels.time)
-            events.extend(runner.feed(wheels.time, channel.speed, channel.friction,
-                                      wheels.aux if setup.reads_aux(name) else None))
-            if len(wheels.time):
-                trend.append(_trend_row(spec, name, found.name, wheels.time, channel.speed,
-                                        runner.last_input))
-        if runners.gyro is not None and len(kept):
-            if kept.gyro is None or kept.attitude is None:
-                errors[GYRO] = 'no gyro_x/y/z and q_x/y/z/w columns'
-            else:
-                from rwa_monitor.pipelines.runners import gyro_columns
-                events.extend(runners.gyro.feed(gyro_columns(kept)))
-        facts.append(PassFacts(found.name, len(kept), dropped, fed, float(tele.time[-1]),
-                               None, errors))
+    for block in _blocks(passes, BLOCK_BYTES):
+        read = []
+        for found in block:
+            got = _ReadPass.of(found, last_time)
+            last_time = max(last_time, got.last)
+            read.append(got)
+        _feed_block(spec, runners, read)
+        for got in read:
+            events.extend(got.events)
+            trend.extend(got.trend)
+            facts.append(got.facts())
     states = runners.records()
     component_facts: dict[str, ComponentFacts] = {n: r.facts()
                                                   for n, r in runners.all().items()}
@@ -218,6 +206,87 @@ def _step(spec: SpacecraftSpec, chain: Chain, passes: Sequence[PassFile],
     work = _account(chain.work, _time.process_time() - start)
     return Chain(last_time, states, tuple(events), tuple(end_of_run), tuple(facts),
                  tuple(trend), component_facts, work)
+
+
+def _blocks(passes: Sequence[PassFile], size: int) -> Iterator[Sequence[PassFile]]:
+    """Yield runs of consecutive passes of about ``size`` bytes of files (at least one)."""
+    first, total = 0, 0
+    for i, found in enumerate(passes):
+        total += found.size
+        if total >= size or i == len(passes) - 1:
+            yield passes[first:i + 1]
+            first, total = i + 1, 0
+
+
+@dataclass
+class _ReadPass:
+    """One pass of a block: its rows after the chain's last stamp, and what it gave."""
+
+    found: PassFile
+    kept: Telemetry | None
+    error: str | None = None
+    dropped: int = 0
+    last: float = -math.inf
+    events: list[AnomalyEvent] = field(default_factory=list)
+    trend: list[TrendRow] = field(default_factory=list)
+    errors: dict[str, str] = field(default_factory=dict)
+    fed: int = 0
+
+    @classmethod
+    def of(cls, found: PassFile, last_time: float) -> '_ReadPass':
+        """Read the pass; keep its rows stamped after ``last_time``."""
+        tele = read_pass(found.path)
+        if isinstance(tele, str):
+            return cls(found, None, error=tele)
+        kept, dropped = after(tele, last_time)
+        return cls(found, kept, dropped=dropped, last=float(tele.time[-1]))
+
+    def facts(self) -> PassFacts:
+        """Return what the pass gave, or why it could not be read."""
+        if self.kept is None:
+            return PassFacts(self.found.name, error=self.error)
+        return PassFacts(self.found.name, len(self.kept), self.dropped, self.fed,
+                         self.last, None, self.errors)
+
+
+def _feed_block(spec: SpacecraftSpec, runners: Runners, block: list[_ReadPass]) -> None:
+    """Feed a block of read passes to each runner in turn, keeping each pass's results.
+
+    A wheel's runner takes the block's passes one after the other, then the next wheel's
+    does, then the gyro's: each runner sees its passes in time order as before, and each
+    pass's events, trend rows and errors are kept in the order of a pass-by-pass feed
+    (wheels in order, then the gyro), so the chain is the same. Why blocks: the Parquet
+    reader, a wheel's detector and the trend kernels each run over many passes in a row
+    instead of evicting each other's code and data from the processor's caches at every
+    pass (docs/fleet.md "Engine").
+    """
+    setup = setup_of(spec)
+    wheels = [(got, got.kept.only('wheels')) for got in block if got.kept is not None]
+    for name in spec.wheels:
+        runner = runners.wheels[name]
+        aux = setup.reads_aux(name)
+        for got, rows in wheels:
+            channel = rows.wheels.get(name)
+            if channel is None or channel.friction is None:
+                got.errors[name] = f'no {name}_speed and {name}_friction columns'
+                continue
+            got.fed += len(rows.time)
+            got.events.extend(runner.feed(rows.time, channel.speed, channel.friction,
+                                          rows.aux if aux else None))
+            if len(rows.time):
+                got.trend.append(_trend_row(spec, name, got.found.name, rows.time,
+                                            channel.speed, runner.last_input))
+    if runners.gyro is None:
+        return
+    for got, _ in wheels:
+        kept = got.kept
+        if not len(kept):
+            continue
+        if kept.gyro is None or kept.attitude is None:
+            got.errors[GYRO] = 'no gyro_x/y/z and q_x/y/z/w columns'
+        else:
+            from rwa_monitor.pipelines.runners import gyro_columns
+            got.events.extend(runners.gyro.feed(gyro_columns(kept)))
 
 
 def _trend_row(spec: SpacecraftSpec, wheel: str, name: str, t: np.ndarray, w: np.ndarray,
