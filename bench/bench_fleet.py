@@ -386,22 +386,41 @@ def summarise(results: dict[str, Any]) -> dict[str, Any]:
         'projection': projection(rate_two)}
 
 
+def paired_difference(larger: list[dict[str, Any]], smaller: list[dict[str, Any]]) -> float:
+    """Return the median over rounds of the wall-time difference of two sizes' runs.
+
+    Round i's runs of the sizes ran one after the other, so a drift of the machine's
+    speed between rounds (a third on this shared machine) moves both and cancels in
+    their difference; the difference of the two medians does not cancel it (on
+    c9c8ce7 the medians of this bench's 5 rounds gave a fleet-year of 2.64 h, the median
+    of 10 paired differences of the same commands 4.9 h).
+    """
+    return float(np.median([b['wall_s'] - a['wall_s'] for a, b in zip(smaller, larger)]))
+
+
+def _differences(results: dict[str, Any], larger: str, smaller: str) -> str:
+    """Return the rounds' wall-time differences of two sizes, as text (s)."""
+    pairs = zip(results[smaller], results[larger])
+    return ', '.join(f'{b["wall_s"] - a["wall_s"]:.2f}' for a, b in pairs) + ' s'
+
+
 def marginal(results: dict[str, Any]) -> dict[str, Any]:
     """Whole-command time as c0 + c1 x spacecraft + samples / rate.
 
     From three archives: the short one, the same spacecraft over three times the days
     (the rate) and its first FEW_SPACECRAFT spacecraft (c1: what each spacecraft costs
-    whatever its days: its scan, task, state, outputs and plots). A fleet-year in one
+    whatever its days: its scan, task, state, outputs and plots); the rate and c1 from
+    the rounds' paired differences (:func:`paired_difference`). A fleet-year in one
     command pays c0 + c1 x 100 once; in daily ``--state`` runs, once a day.
     """
     if not results.get('command_long') or not results.get('command_few'):
         return {}
-    middle = {k: typical(results[k]) for k in ('command', 'command_long', 'command_few')}
-    short, long, few = middle['command'], middle['command_long'], middle['command_few']
+    short, long, few = (typical(results[k]) for k in ('command', 'command_long',
+                                                      'command_few'))
     crafts = results['simulate']['spacecraft']
     rate = ((long['wheel_samples'] - short['wheel_samples'])
-            / (long['wall_s'] - short['wall_s']))
-    per_craft = ((short['wall_s'] - few['wall_s']
+            / paired_difference(results['command_long'], results['command']))
+    per_craft = ((paired_difference(results['command'], results['command_few'])
                   - (short['wheel_samples'] - few['wheel_samples']) / rate)
                  / (crafts - FEW_SPACECRAFT))
     fixed = short['wall_s'] - per_craft * crafts - short['wheel_samples'] / rate
@@ -525,8 +544,12 @@ def markdown(results: dict[str, Any]) -> str:
                   f'{results["simulate_long"]["days"]:g} days (seed 29): '
                   f'{long["wall_s"]:.1f} s for {long["wheel_samples"]:.3g} wheel samples; '
                   f'the first {FEW_SPACECRAFT} spacecraft of the 7-day archive: '
-                  f'{few["wall_s"]:.1f} s for {few["wheel_samples"]:.3g}. Time = c0 + c1 x '
-                  f'spacecraft + samples / rate: rate = {s["marginal_rate"]:.3g} wheel '
+                  f'{few["wall_s"]:.1f} s for {few["wheel_samples"]:.3g} (medians). Time = '
+                  f'c0 + c1 x spacecraft + samples / rate, the rate and c1 from the median '
+                  f"of the rounds' differences (the sizes of a round ran one after the "
+                  f'other: long - short {_differences(results, "command_long", "command")}; '
+                  f'short - few {_differences(results, "command", "command_few")}): '
+                  f'rate = {s["marginal_rate"]:.3g} wheel '
                   f'samples/s, c1 = {s["per_spacecraft_s"]:.3f} s per spacecraft (its '
                   f'scan, task, state, outputs and plots, whatever its days), c0 = '
                   f'{s["fixed_s"]:.1f} s (process, cluster, imports). A fleet-year '
