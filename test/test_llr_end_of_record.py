@@ -270,3 +270,33 @@ def test_the_end_of_a_closed_change_never_adds_a_component(monkeypatch):
         'viscous', 'both')
     assert not any(llr_kinds.adds_component(a, b) for a, b in (
         ('both', 'dry'), ('dry', 'viscous'), ('undecided', 'both'), ('both', 'both')))
+
+
+def test_a_closed_change_takes_its_tail_once_per_ring_with_the_same_sums(monkeypatch):
+    # After its re-checks a change takes the samples since its last take once per ring
+    # length (LLRConfig.tail_stride), not once per window: the ring still holds all of
+    # them at the take, so the tail's sums are those of takes every window samples, up to
+    # the order of the additions. A stride past the ring would sum overwritten samples.
+    from rwa_monitor.core.llr_config import LLRConfig
+    t, w, f = paper_file(3640, n=30_000)
+
+    def tail(stride_of):
+        monkeypatch.setattr(LLRConfig, 'tail_stride', property(stride_of))
+        det = LLRDetector('rw1', **PAPER)
+        events = det.process_arrays(t, w, f)
+        closed = det.state().change
+        events += det.finish()
+        return events, closed, det.state().change, det.config.ring_length
+
+    events, closed, final, ring = tail(lambda c: c.ring_length)
+    by_window, closed_w, final_w, _ = tail(lambda c: c.window)
+    assert closed.closed and closed.tail and closed_w.tail
+    assert t.size - closed.checks[-1] > 4 * ring     # several takes of the ring's stride
+    assert (closed.ramp_end - closed.checks[-1]) % ring == 0
+    assert (closed_w.ramp_end - closed.checks[-1]) % PAPER['window'] == 0
+    assert closed.ramp_end != closed_w.ramp_end
+    assert final.ramp_end == final_w.ramp_end == t.size - 1
+    np.testing.assert_allclose(final.ramp, final_w.ramp, rtol=1e-12, atol=0)
+    np.testing.assert_array_equal(final.speeds, final_w.speeds)
+    assert [(e.kind, e.index, e.revision) for e in events] == \
+        [(e.kind, e.index, e.revision) for e in by_window]

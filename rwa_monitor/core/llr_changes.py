@@ -248,12 +248,12 @@ def _revise(live: Live, config: LLRConfig, j: int) -> list[AnomalyEvent]:
 
     ``j`` is a point of :func:`llr_common.ramp_points`; the kind is re-checked only at
     the points of :func:`llr_common.checkpoints`. After the last re-check the change is
-    closed and its sums keep taking in samples every ``window`` samples, merged into
-    one block (so the time shapes stay those of the re-checks plus the straight ramp
-    to the end), for :func:`finish`.
+    closed and its sums keep taking in samples every ``tail_stride`` samples (the rings'
+    length, core/llr_config.py), merged into one block (so the time shapes stay those of
+    the re-checks plus the straight ramp to the end), for :func:`finish`.
     """
     cat = live.change
-    live.ints[layout.I_CHECKPOINT] = cat.points[0] if cat.points else j + config.window
+    live.ints[layout.I_CHECKPOINT] = cat.points[0] if cat.points else j + config.tail_stride
     fields = _ramp_taken(live, config, cat, j)
     if j in cat.checks:
         fields['closed'] = cat.closed or j == cat.checks[-1]

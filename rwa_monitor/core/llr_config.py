@@ -166,6 +166,18 @@ class LLRConfig:
         """
         return 1 << (2 * self.window + self.k_verif + 1 + (self.reference_max or 0)).bit_length()
 
+    @cached_property
+    def tail_stride(self) -> int:
+        """Samples between two takes of a closed change's ramp sums: the rings' length.
+
+        A closed change (its re-checks done) takes the samples since its last take into
+        its tail block when the ring is full of them: at the next take the ring still
+        holds every one, and the detector leaves its compiled loop once per
+        ``ring_length`` samples instead of once per ``window`` (docs/llr.md "Kinds on
+        ramps").
+        """
+        return self.ring_length
+
     @property
     def fits_noise(self) -> bool:
         """True if a noise model is fitted on the first samples (AR order or speed model)."""

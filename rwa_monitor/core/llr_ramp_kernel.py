@@ -5,12 +5,13 @@ with numpy and :func:`llr_growth.ramp_sums` summing them (p = 2, the paper's mod
 the products in the same order (``h1 h1, h1 h2, h2 h2, h1 f, h2 f, f f``; ``t u``, then
 ``(t u) u``) and each column summed in sample order from the first sample, as numpy's sum
 along axis 0 of a C-contiguous array adds its rows. A closed change takes in its samples
-every ``window`` samples for as long as the record lasts (llr_changes ``_take_ramp``), so
+every ``window`` samples until its last re-check, then every ``tail_stride`` (the rings'
+length) for as long as the record lasts (llr_changes ``_take_ramp``), so
 on a wheel with an old declaration this block was most of the Python after the kernel:
 about 120 us a call in numpy, a few us here (docs/llr.md "Kinds on ramps").
 :func:`ring_ramp_taken` also appends the block to the change's blocks, or merges it into
 the last one, as llr_changes ``_with_block`` and ``_with_range`` do with numpy: one call
-where those took a dozen (a closed change takes a block every ``window`` samples).
+where those took a dozen (a closed change takes a block every ``tail_stride`` samples).
 """
 
 from __future__ import annotations

@@ -235,9 +235,11 @@ def _change(live: Live, config: LLRConfig) -> None:
     checkpoint = int(live.ints[layout.I_CHECKPOINT])
     open_ramp = change is not None and not change.finished and bool(change.checks)
     if open_ramp:
-        if not pos <= checkpoint <= change.ramp_end + config.window:
-            _fail('ints[I_CHECKPOINT]', f'{checkpoint}: not a position within a window '
-                  f'after the ramp sums (at {change.ramp_end}) and the last sample ({pos})')
+        stride = config.tail_stride if change.closed else config.window
+        if not pos <= checkpoint <= change.ramp_end + stride:
+            _fail('ints[I_CHECKPOINT]', f'{checkpoint}: not a position within {stride} '
+                  f'samples after the ramp sums (at {change.ramp_end}) and the last sample '
+                  f'({pos})')
     elif checkpoint != -1:
         _fail('ints[I_CHECKPOINT]', f'{checkpoint} without a change under revision')
     if change is None:

@@ -49,7 +49,7 @@ class DeclaredChange:
     sums take in samples (:func:`llr_common.ramp_points`); ``ramp``: one
     :func:`llr_growth.ramp_sums` block per row, of ``[tau, ramp_end]`` (times since
     ``time``). ``closed``: the re-checks are over; the ramp sums still take in samples
-    every ``window`` samples, into one last block (``tail``), for the continuation test
+    every ``tail_stride`` samples (the rings' length), into one last block (``tail``), for the continuation test
     of a later declaration and the end of record. ``finished``: ``finish`` has run.
     ``after_gap_s``: the change fell in a gap of the samples; the time from the last
     sample before it (NaN: not in a gap). ``shape``: the shape of the kind given
