@@ -48,15 +48,15 @@ class DeclaredChange:
     (:func:`llr_common.checkpoints`); ``points``: the remaining positions where the ramp
     sums take in samples (:func:`llr_common.ramp_points`); ``ramp``: one
     :func:`llr_growth.ramp_sums` block per row, of ``[tau, ramp_end]`` (times since
-    ``time``). ``closed``: the re-checks are over; the ramp sums still take in samples
-    every ``tail_stride`` samples (the rings' length), into one last block (``tail``), for the continuation test
-    of a later declaration and the end of record. ``finished``: ``finish`` has run.
-    ``after_gap_s``: the change fell in a gap of the samples; the time from the last
-    sample before it (NaN: not in a gap). ``shape``: the shape of the kind given
-    (``step``, or ``ramp`` when it was named for a growing change; the continuation test
-    of a later declaration lets only a kind named so fix the direction of the growth).
-    ``speeds``: per ``ramp`` block the lowest and highest ``|w|`` of its samples (NaN for
-    p > 2), for the kind rules' speed order (core/llr_kinds.py ``speed_ordered``).
+    ``time``). ``closed``: the re-checks are over; the ramp sums still take in samples every
+    ``tail_stride`` samples (the rings' length), into one last block (``tail``), for the
+    continuation test of a later declaration and the end of record. ``finished``: ``finish``
+    has run. ``after_gap_s``: the change fell in a gap of the samples; the time from the last
+    sample before it (NaN: not in a gap). ``shape``: the shape of the kind given (``step``, or
+    ``ramp`` when it was named for a growing change; the continuation test of a later
+    declaration lets only a kind named so fix the direction of the growth). ``speeds``: per
+    ``ramp`` block the lowest and highest ``|w|`` of its samples (NaN for p > 2), for the kind
+    rules' speed order (core/llr_kinds.py ``speed_ordered``).
     """
 
     n_before: int
