@@ -30,6 +30,7 @@ import numpy as np
 
 from rwa_monitor.core.events import AnomalyEvent
 from rwa_monitor.core.gyro_runner import GyroRunner
+from rwa_monitor.core.jit import kernel_array
 from rwa_monitor.core.runner_facts import ComponentFacts
 from rwa_monitor.core.wheel_runner import WheelRunner
 from rwa_monitor.fleet.archive import after, PassFile, read_pass
@@ -262,24 +263,27 @@ def _feed_block(spec: SpacecraftSpec, runners: Runners, block: list[_ReadPass]) 
     pass (docs/fleet.md "Engine").
     """
     setup = setup_of(spec)
-    wheels = [(got, got.kept.only('wheels')) for got in block if got.kept is not None]
+    # The kernels' writable copies of the read-only columns, made once a pass for the
+    # detector and the trend levels alike (kernel_array returns them as they are).
+    wheels = [(got, rows, kernel_array(rows.time)) for got in block if got.kept is not None
+              for rows in (got.kept.only('wheels'),)]
     for name in spec.wheels:
         runner = runners.wheels[name]
         aux = setup.reads_aux(name)
-        for got, rows in wheels:
+        for got, rows, t in wheels:
             channel = rows.wheels.get(name)
             if channel is None or channel.friction is None:
                 got.errors[name] = f'no {name}_speed and {name}_friction columns'
                 continue
-            got.fed += len(rows.time)
-            got.events.extend(runner.feed(rows.time, channel.speed, channel.friction,
-                                          rows.aux if aux else None))
-            if len(rows.time):
-                got.trend.append(_trend_row(spec, name, got.found.name, rows.time,
-                                            channel.speed, runner.last_input))
+            got.fed += len(t)
+            w = kernel_array(channel.speed)
+            got.events.extend(runner.feed(t, w, channel.friction, rows.aux if aux else None))
+            if len(t):
+                got.trend.append(_trend_row(spec, name, got.found.name, t, w,
+                                            runner.last_input))
     if runners.gyro is None:
         return
-    for got, _ in wheels:
+    for got, _, _ in wheels:
         kept = got.kept
         if not len(kept):
             continue
