@@ -147,5 +147,9 @@ class KernelNotice:
             self._arm(kernel, start, self.interval, compiling)
 
     def _print(self, text: str) -> None:
-        self.out.write(text + '\n')
-        self.out.flush()
+        """Write a notice; a closed or broken stream drops it (a notice never fails a run)."""
+        try:
+            self.out.write(text + '\n')
+            self.out.flush()
+        except (OSError, ValueError):
+            pass

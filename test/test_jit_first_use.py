@@ -78,3 +78,33 @@ def test_progress_in_a_log_prints_a_line_every_interval_and_at_the_end():
     assert lines[-1].startswith('writing passes: 100/100 (100 %)')
     assert any(line.startswith('writing passes: 30/100') for line in lines)   # the beat
     assert '\r' not in out.getvalue()
+
+
+def test_a_notice_on_a_closed_stream_is_dropped_not_raised(monkeypatch):
+    # A command run in-process (a test's captured stderr, a closed log) may leave its
+    # stream closed while a later kernel compiles: the notice must not fail the compile.
+    import threading
+    raised = []
+    monkeypatch.setattr(threading, 'excepthook', raised.append)
+    out = io.StringIO()
+    notice = KernelNotice(out=out, after=0.0, interval=60.0)
+    out.close()
+    notice('start', 'trend_sums.residual_lag_gram', 0.0, lambda: True)
+    time.sleep(0.2)
+    notice('end', 'trend_sums.residual_lag_gram', 2.0, lambda: True)
+    assert raised == []
+    assert notice.noticed and notice.compiled == [('trend_sums.residual_lag_gram', 2.0)]
+
+
+def test_the_command_line_puts_back_the_reporter_it_found():
+    from rwa_monitor.cli.main import main
+
+    def mine(*args):
+        pass
+
+    before = jit.set_reporter(mine)
+    try:
+        assert main(['params']) == 0
+        assert jit.set_reporter(mine) is mine
+    finally:
+        jit.set_reporter(before)

@@ -101,7 +101,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     from rwa_monitor.cli.output import quiet_broken_pipe
     from rwa_monitor.progress import KernelNotice
     from rwa_monitor.core import jit
-    jit.set_reporter(KernelNotice())     # a first run says it compiles, and how far
+    # A first run says it compiles, and how far; the reporter before it is back once the
+    # command returns (a caller in the same process keeps its own stderr).
+    previous = jit.set_reporter(KernelNotice())
     try:
         with quiet_broken_pipe():        # every command: ``rwa-monitor ... | head`` is quiet
             return int(args.func(args) or 0)
@@ -124,6 +126,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f'rwa-monitor {args.command}: unexpected error: {kind}: {_first_line(err)}'
               + hint, file=sys.stderr)
         return EXIT_ERROR
+    finally:
+        jit.set_reporter(previous)
 
 
 def _first_line(err: BaseException, limit: int = 300) -> str:

@@ -40,10 +40,14 @@ except ImportError:   # pragma: no cover - numba is pinned in requirements.txt
 
 
 def set_reporter(reporter: Callable[[str, str, float, Callable[[], bool]], None] | None
-                 ) -> None:
-    """Have ``reporter(event, kernel, seconds, compiling)`` called around each first use."""
+                 ) -> Callable[[str, str, float, Callable[[], bool]], None] | None:
+    """Have ``reporter(event, kernel, seconds, compiling)`` called around each first use.
+
+    Returns the reporter it replaces, for a caller that puts it back when it is done.
+    """
     global _reporter
-    _reporter = reporter
+    previous, _reporter = _reporter, reporter
+    return previous
 
 
 def njit(*args: Any, **kwargs: Any) -> Any:
