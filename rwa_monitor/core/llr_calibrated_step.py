@@ -3,9 +3,9 @@
 :func:`pack_table` packs a wheel's ``NominalWheel`` (core/calibrate.py) into one float
 array; :func:`nominal_residual` returns ``f - nominal(w)`` from it, counting the samples
 not tested by reason; :func:`step_calibrated` is that residual and the kernel's
-:func:`rwa_monitor.core.llr_kernel.sample` in one call per sample (the calibrated
-streaming path of ``LLRDetector.update_nominal``). Compiled like the kernels
-(:mod:`rwa_monitor.core.jit`).
+:func:`rwa_monitor.core.llr_kernel.sample` (its test's exact tail included) in one call
+per sample (the calibrated streaming path of ``LLRDetector.update_nominal``). Compiled
+like the kernels (:mod:`rwa_monitor.core.jit`).
 """
 
 from __future__ import annotations

@@ -21,9 +21,8 @@ from rwa_monitor.core import llr_general, llr_growth, llr_kernel as kern, llr_ki
 from rwa_monitor.core import llr_layout as layout
 from rwa_monitor.core.events import AnomalyEvent
 from rwa_monitor.core.jit import kernel_array
-from rwa_monitor.core.llr_common import (candidate_log_p2, checkpoints, declaration,
-                                         make_event, ramp_points, reference_base,
-                                         revision_due)
+from rwa_monitor.core.llr_common import (checkpoints, declaration, make_event, ramp_points,
+                                         reference_base, revision_due)
 from rwa_monitor.core.llr_config import LLRConfig
 from rwa_monitor.core.llr_ramp_kernel import BLOCK_WIDTH, ring_ramp_block, ring_ramp_taken
 from rwa_monitor.core.llr_state import DeclaredChange, Live
@@ -40,22 +39,9 @@ def after(live: Live, config: LLRConfig, flags: int) -> list[AnomalyEvent]:
     """Act on the flags of a kernel call: revise, finish the test, declare."""
     j = live.position - 1
     events = _revise(live, config, j) if flags & kern.REVISE else []
-    if flags & kern.DECLARE or flags & kern.EXACT and _exact(live, config):
+    if flags & kern.DECLARE:
         events.extend(_declare(live, config, j))
     return events
-
-
-def _exact(live: Live, config: LLRConfig) -> bool:
-    """Finish the test the kernel left at EXACT: eq. (7) tail, new minimum, decision."""
-    fs, ints = live.floats, live.ints
-    k = int(ints[layout.I_K])
-    dof = int(ints[layout.I_DOF])
-    logpmin = float(fs[layout.F_LOGPMIN])
-    logp = candidate_log_p2(float(fs[layout.F_Y]), float(fs[layout.F_TR]),
-                            float(fs[layout.F_DM]), logpmin, None if dof < 0 else float(dof))
-    if logp is not None and logp < logpmin:
-        live.record_minimum(k, logp)
-    return live.declares(k, config.log_r, config.k_verif)
 
 
 def _declare(live: Live, config: LLRConfig, n: int) -> list[AnomalyEvent]:
@@ -144,8 +130,7 @@ def _restart_and_test(live: Live, config: LLRConfig, start: int, n: int
         row = pref[(k + w) % length].copy()
         if config.p == 2:
             flags = kern.test_row(live.floats, live.ints, k, row)
-            declare = bool(flags & kern.DECLARE) or bool(flags & kern.EXACT) and \
-                _exact(live, config)
+            declare = bool(flags & kern.DECLARE)
         else:
             declare = llr_general.test(live, config, k, row)
         if declare:

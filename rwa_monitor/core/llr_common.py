@@ -15,8 +15,8 @@ import numpy as np
 
 from rwa_monitor.core import keys, llr_kinds, llr_stats
 from rwa_monitor.core.events import AnomalyEvent
-from rwa_monitor.core.gchi2 import log_lower_bound, log_sf2, log_sf2_t
 from rwa_monitor.core.llr_config import LLRConfig
+from rwa_monitor.core.llr_skip import exact_log_p2
 
 _LN10 = math.log(10.0)
 
@@ -148,44 +148,13 @@ def candidate_log_p2(y: float, tr: float, dm: float, log_p_min: float,
                      dof: float | None = None) -> float | None:
     """Return log p_k (eq. (7), Algorithm 2) if it may be below ``log_p_min``, else None.
 
-    ``y = LLR_k / sigma^2``; ``tr`` and ``dm`` are the trace and determinant of ``Pi_T^-1
-    Pi_W`` (``Pi_W = Pi_T - Pi_P``), whose eigenvalues are those of Lemma 1's ``I -
-    Pi_P^1/2 Pi_T^-1 Pi_P^1/2`` (similar matrices). ``dof``: residual degrees of freedom
-    of the estimated noise variance (studentised tail, :func:`log_sf2_t`), None when the
-    noise level is given (Lemma 1's tail, :func:`log_sf2`). With ``b = y / (2 l1)``, ``rho =
-    l2 / l1`` and ``a = b (1 - rho)``, ``p_k >= exp(-b rho) erfc(sqrt(a))`` (drop ``rho
-    sin^2`` in the integral of :mod:`rwa_monitor.core.gchi2`), and the studentised
-    analogue below; when the bound already exceeds ``p_min`` the sample cannot be a new
-    minimum and the exact tail is not computed. Shared by the streaming and the batch path
-    (same floats, same decision).
+    ``dof`` None when the noise level is given. The compiled ``llr_skip.exact_log_p2``,
+    which the kernel calls at each candidate its skip bounds leave (the same floats, the
+    same decision), with None for its NaN.
     """
-    half = 0.5 * tr
-    disc = half * half - dm
-    lam1 = half + math.sqrt(disc) if disc > 0.0 else half
-    lam2 = dm / lam1
-    # Clamp to 0 <= l2 <= l1: with two nearly equal eigenvalues rounding gives disc < 0
-    # and l2 > l1 (a correlation rho above 1, hence a < 0 and a square root of a negative
-    # number in the tail bound); the exact eigenvalues satisfy it.
-    if lam2 < 0.0:
-        lam2 = 0.0
-    elif lam2 > lam1:
-        lam2 = lam1
-    b = y / (2.0 * lam1)
-    rho = lam2 / lam1
-    a = b * (1.0 - rho)
-    if dof is None:
-        lower = -b * rho + log_lower_bound(a)
-    else:
-        # Studentised: h <= tan^2 and (1 + u)^-m >= exp(-m u) give p_k >= (1 + 2 b /
-        # dof)^(-dof/2) exp(A) erfc(sqrt(A)), A = dof a / (dof + 2 b) (tighter than the
-        # Gaussian bound, which also holds).
-        big_a = dof * a / (dof + 2.0 * b)
-        lower = -0.5 * dof * math.log1p(2.0 * b / dof) + big_a + log_lower_bound(big_a)
-    if lower > log_p_min + 1e-9 * (1.0 - log_p_min):
-        return None
-    if dof is None:
-        return log_sf2(y, lam1, lam2)
-    return log_sf2_t(y, lam1, lam2, dof)
+    value = exact_log_p2(float(y), float(tr), float(dm), float(log_p_min),
+                         -1.0 if dof is None else float(dof))
+    return None if math.isnan(value) else value
 
 
 def window_statistics(pp: np.ndarray, pt: np.ndarray, n_p: np.ndarray, min_excitation: float,

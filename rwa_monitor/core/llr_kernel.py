@@ -8,10 +8,10 @@ loop compiled, the batch path), :func:`accept_run` (the samples waiting for the 
 fit), :func:`ingest_run` (their replay once it is fitted), :func:`ingest` and
 :func:`test_row` (one replayed sample, one test of a restart's catch-up). The values only
 Python changes are read once per call (``llr_layout.Setup``). They return flags at the
-rare samples that need Python: the exact tail of eq. (7) (a sample whose skip bound does
-not rule it out; ``y``, ``tr``, ``dm`` left in ``fs``), a declaration, a revision point;
-categorisation and declarations are core/llr_changes.py. The calibrated path (nominal
-lookup, then :func:`sample`) is core/llr_calibrated_step.py.
+rare samples that need Python: a declaration, a revision point; categorisation and
+declarations are core/llr_changes.py. The exact tail of eq. (7), where the skip bounds do
+not rule a candidate out, is computed here (core/llr_skip.py ``exact_log_p2``). The
+calibrated path (nominal lookup, then :func:`sample`) is core/llr_calibrated_step.py.
 
 Compiled by :mod:`rwa_monitor.core.jit` (numba, no fast-math: the same IEEE operations in
 the same order whatever the caller; docs/architecture.md "Compiled kernels"), the
@@ -27,14 +27,15 @@ from __future__ import annotations
 
 import math
 
+from rwa_monitor.core.gchi2 import skip_threshold
 from rwa_monitor.core.jit import njit
 from rwa_monitor.core.llr_layout import (
-    DECLARE, EXACT, F_DM, F_LAST_T, F_LOGPMIN, F_LOGR, F_MAX_F, F_MAX_W, F_PREF, F_SPEED_A,
-    F_SPEED_B, F_SPEED_FLOOR, F_TR, F_Y, I_C_ROW, I_DOF, I_FLAGS, I_ILL, I_K,
+    DECLARE, F_DM, F_LAST_T, F_LOGPMIN, F_LOGR, F_MAX_F, F_MAX_W, F_PREF, F_SPEED_A,
+    F_SPEED_B, F_SPEED_FLOOR, F_TR, F_Y, F_YSTAR, I_C_ROW, I_DOF, I_FLAGS, I_ILL, I_K,
     I_KMIN, I_KVERIF, I_L, I_NLAGS, I_NON_FINITE, I_NON_INCREASING, I_O_AR, I_O_LAGS,
     I_O_RTIME, I_OUT_OF_RANGE, I_POS, I_ROWS, I_SCALARS, NON_NEGATIVE, REVISE, ring_row,
     setup)
-from rwa_monitor.core.llr_skip import below_skip, lower_bound, SKIP_REL
+from rwa_monitor.core.llr_skip import below_skip, exact_log_p2, lower_bound, SKIP_REL
 
 # The AR filter runs over consecutive samples (docs/llr.md "Noise beyond white", *Breaks*):
 # its memory is cleared when an accepted sample does not follow the previous one, that is
@@ -45,16 +46,17 @@ GAP_FACTOR = 4.0
 
 @njit(cache=True, error_model='numpy', inline='always')
 def test(fs, ints, cfg, k, at, bt, ct, ut, vt):
-    """Algorithm 1 lines 9-18 at candidate ``k`` (p = 2); return EXACT, DECLARE or 0.
+    """Algorithm 1 lines 9-18 at candidate ``k`` (p = 2); return DECLARE or 0.
 
     ``(at, bt, ct, ut, vt)`` is the prefix row at ``k + w`` (T_k), the one at ``k`` (P_k)
     is in the ring. Statistic: eq. (5) as ``d^T Pi_P d / sigma^2`` with ``d = x_T - x_P =
     Pi_T^-1 (q_W - Pi_W x_P)`` (the window's residual against the reference fit: no
     difference of two nearly equal estimates). Skips (counted) when ``Pi_P`` is
-    ill-conditioned. When the skip bound ``y / tr < y*`` (Algorithm 2) does not rule the
-    candidate out, returns EXACT with ``y``, ``tr = trace(Pi_T^-1 Pi_W)``, ``dm = det(Pi_T^-1
-    Pi_W)`` and the degrees of freedom stored: the caller computes the tail
-    (``llr_common.candidate_log_p2``), records a new minimum and decides.
+    ill-conditioned. When the skip bounds (Algorithm 2) do not rule the candidate out, the
+    exact tail of eq. (7) from ``y``, ``tr = trace(Pi_T^-1 Pi_W)`` and ``dm = det(Pi_T^-1
+    Pi_W)`` (``llr_skip.exact_log_p2``); a smaller one is the new minimum (lines 13-15,
+    with its skip threshold). ``y``, ``tr``, ``dm``, ``k`` and the degrees of freedom of
+    the last candidate tested exactly stay in the state.
     """
     o = cfg.o_rpref + 6 * (k & cfg.mask)
     a, b, c, u, v, e = ring_row(fs, o)
@@ -108,7 +110,11 @@ def test(fs, ints, cfg, k, at, bt, ct, ut, vt):
                 fs[F_DM] = dm
                 ints[I_K] = k
                 ints[I_DOF] = dof
-                return EXACT
+                logp = exact_log_p2(y, tr, dm, logpmin, float(dof))
+                if logp < logpmin:
+                    fs[F_LOGPMIN] = logp
+                    ints[I_KMIN] = k
+                    fs[F_YSTAR] = skip_threshold(logp)
     else:
         ints[I_ILL] += 1
     return declare_flag(fs, ints, k)
