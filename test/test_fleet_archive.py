@@ -44,6 +44,32 @@ def test_read_pass_reads_each_format_as_detect_does_and_never_raises(record, tmp
     assert archive.read_pass(str(tmp_path / 'gone.parquet')).startswith('unreadable:')
 
 
+def test_parquet_columns_come_as_float_arrays_the_kernels_take_without_a_copy(tmp_path):
+    """Plain float64 columns are the reader's buffers, writable; others converted, nulls NaN."""
+    from rwa_monitor.core.jit import kernel_array
+    from rwa_monitor.telemetry.parquet_io import read_parquet
+    path = tmp_path / 'mixed.parquet'
+    table = pa.table({'time': [0.0, 0.5, 1.0, 1.5],
+                      'rw1_speed': pa.array([1.0, None, 3.0, 4.0], pa.float64()),
+                      'rw1_friction': pa.array([2, -3, 2**53, 0], pa.int64()),
+                      'rw2_speed': pa.chunked_array([[5.0, 6.0], [7.0, 8.0]]),
+                      'rw2_friction': pa.array([0.5, 0.25, 0.125, 1.0], pa.float32())})
+    pq.write_table(table, path)
+    tele = read_parquet(path)
+    assert tele.time.dtype == np.float64 and tele.time.flags.writeable
+    assert kernel_array(tele.time) is tele.time
+    assert np.array_equal(tele.wheels['rw1'].speed, [1.0, np.nan, 3.0, 4.0], equal_nan=True)
+    assert tele.wheels['rw1'].friction.tolist() == [2.0, -3.0, 2.0**53, 0.0]
+    assert tele.wheels['rw2'].friction.tolist() == [0.5, 0.25, 0.125, 1.0]
+    for wheel in tele.wheels.values():
+        assert wheel.speed.dtype == wheel.friction.dtype == np.float64
+    pq.write_table(pa.table({'time': [0.0, 1.0], 'rw1_speed': [1.0, 2.0],
+                             'rw1_friction': [0.1, 0.2]}), tmp_path / 'plain.parquet',
+                   row_group_size=1)         # two row groups: two chunks, converted
+    two = read_parquet(tmp_path / 'plain.parquet')
+    assert two.time.tolist() == [0.0, 1.0] and two.wheels['rw1'].speed.tolist() == [1.0, 2.0]
+
+
 @pytest.mark.parametrize('table, message', [
     ({'t': [0.0, 1.0]}, "column 'time'"),
     ({'time': [0.0, 0.0], 'rw1_speed': [1.0, 2.0]}, 'strictly increasing'),
