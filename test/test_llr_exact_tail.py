@@ -1,10 +1,11 @@
-"""The exact tail of eq. (7) inside the compiled test (core/llr_kernel.py ``test``).
+"""The exact tail of eq. (7), settled compiled (core/llr_kernel.py ``settle``).
 
 Where the skip bounds leave a candidate, the kernel computes its tail
 (core/llr_skip.py ``exact_log_p2``) and records a new minimum itself (Algorithm 1 lines
-13-15). Checked sample by sample against ``llr_common.candidate_log_p2`` and the
-rule as written: a tail below the running p_min becomes p_min at that candidate, with its
-skip threshold; any other leaves them as they were.
+13-15), in the streaming step as in the loop over arrays. Checked sample by sample
+against ``llr_common.candidate_log_p2`` and the rule as written: a tail below the running
+p_min becomes p_min at that candidate, with its skip threshold; any other leaves them as
+they were.
 """
 
 import math

@@ -3,9 +3,9 @@
 :func:`pack_table` packs a wheel's ``NominalWheel`` (core/calibrate.py) into one float
 array; :func:`nominal_residual` returns ``f - nominal(w)`` from it, counting the samples
 not tested by reason; :func:`step_calibrated` is that residual and the kernel's
-:func:`rwa_monitor.core.llr_kernel.sample` (its test's exact tail included) in one call
-per sample (the calibrated streaming path of ``LLRDetector.update_nominal``). Compiled
-like the kernels (:mod:`rwa_monitor.core.jit`).
+:func:`rwa_monitor.core.llr_kernel.sample` (its exact tail settled,
+``llr_kernel.settle``) in one call per sample (the calibrated streaming path of
+``LLRDetector.update_nominal``). Compiled like the kernels (:mod:`rwa_monitor.core.jit`).
 """
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ import math
 import numpy as np
 
 from rwa_monitor.core.jit import njit
-from rwa_monitor.core.llr_kernel import sample
+from rwa_monitor.core.llr_kernel import sample, settle
 from rwa_monitor.core.llr_layout import setup
 
 # Calibrated nominal lookup (core/calibrate.py NominalWheel): one table array per wheel.
@@ -99,4 +99,5 @@ def nominal_residual(table, t, w, f):
 @njit('int64(float64[::1], int64[::1], float64[::1], float64, float64, float64)', cache=True)
 def step_calibrated(fs, ints, table, t, w, f):
     """``llr_kernel.step`` of ``(t, w, nominal_residual(table, t, w, f))``: one call per sample."""
-    return sample(fs, ints, setup(fs, ints), t, w, nominal_residual(table, t, w, f))
+    return settle(fs, ints, sample(fs, ints, setup(fs, ints), t, w,
+                                   nominal_residual(table, t, w, f)))

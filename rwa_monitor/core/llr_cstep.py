@@ -2,13 +2,13 @@
 
 :func:`step_address` compiles (numba ``cfunc``, cached like the kernels) the function
 ``int64 step(double *fs, int64 n_fs, int64 *ints, int64 n_ints, double t, double w,
-double f)``: the kernel's :func:`rwa_monitor.core.llr_kernel.sample` (its test's exact tail
-included) on the detector's two state arrays seen through their pointers, the same
-compiled code as ``llr_kernel.step`` (no other implementation). The optional C module
-``rwa_monitor.core._stepcall`` (rwa_monitor/core/_stepcall.c, built by setup.py) calls it:
-:class:`StepOwner`, a base of the detector, holds the armed step and the arrays;
-:func:`compiled_update` makes the detector's ``update`` a method implemented in C that
-calls the armed step for three floats and the Python ``update`` otherwise.
+double f)``: the kernel's :func:`rwa_monitor.core.llr_kernel.sample` (its exact tail
+settled, ``llr_kernel.settle``) on the detector's two state arrays seen through their
+pointers, the same compiled code as ``llr_kernel.step`` (no other implementation). The
+optional C module ``rwa_monitor.core._stepcall`` (rwa_monitor/core/_stepcall.c, built by
+setup.py) calls it: :class:`StepOwner`, a base of the detector, holds the armed step and
+the arrays; :func:`compiled_update` makes the detector's ``update`` a method implemented
+in C that calls the armed step for three floats and the Python ``update`` otherwise.
 
 Without the C module, without numba or with ``NUMBA_DISABLE_JIT=1`` nothing is armed:
 :class:`StepOwner` is a stand-in, ``update`` the Python method, which calls

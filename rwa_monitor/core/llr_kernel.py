@@ -10,8 +10,9 @@ fit), :func:`ingest_run` (their replay once it is fitted), :func:`ingest` and
 Python changes are read once per call (``llr_layout.Setup``). They return flags at the
 rare samples that need Python: a declaration, a revision point; categorisation and
 declarations are core/llr_changes.py. The exact tail of eq. (7), where the skip bounds do
-not rule a candidate out, is computed here (core/llr_skip.py ``exact_log_p2``). The
-calibrated path (nominal lookup, then :func:`sample`) is core/llr_calibrated_step.py.
+not rule a candidate out, is computed compiled too (:func:`settle`), outside the
+per-sample loop. The calibrated path (nominal lookup, then :func:`sample`) is
+core/llr_calibrated_step.py.
 
 Compiled by :mod:`rwa_monitor.core.jit` (numba, no fast-math: the same IEEE operations in
 the same order whatever the caller; docs/architecture.md "Compiled kernels"), the
@@ -30,7 +31,7 @@ import math
 from rwa_monitor.core.gchi2 import skip_threshold
 from rwa_monitor.core.jit import njit
 from rwa_monitor.core.llr_layout import (
-    DECLARE, F_DM, F_LAST_T, F_LOGPMIN, F_LOGR, F_MAX_F, F_MAX_W, F_PREF, F_SPEED_A,
+    DECLARE, EXACT, F_DM, F_LAST_T, F_LOGPMIN, F_LOGR, F_MAX_F, F_MAX_W, F_PREF, F_SPEED_A,
     F_SPEED_B, F_SPEED_FLOOR, F_TR, F_Y, F_YSTAR, I_C_ROW, I_DOF, I_FLAGS, I_ILL, I_K,
     I_KMIN, I_KVERIF, I_L, I_NLAGS, I_NON_FINITE, I_NON_INCREASING, I_O_AR, I_O_LAGS,
     I_O_RTIME, I_OUT_OF_RANGE, I_POS, I_ROWS, I_SCALARS, NON_NEGATIVE, REVISE, ring_row,
@@ -46,17 +47,16 @@ GAP_FACTOR = 4.0
 
 @njit(cache=True, error_model='numpy', inline='always')
 def test(fs, ints, cfg, k, at, bt, ct, ut, vt):
-    """Algorithm 1 lines 9-18 at candidate ``k`` (p = 2); return DECLARE or 0.
+    """Algorithm 1 lines 9-18 at candidate ``k`` (p = 2); return EXACT, DECLARE or 0.
 
     ``(at, bt, ct, ut, vt)`` is the prefix row at ``k + w`` (T_k), the one at ``k`` (P_k)
     is in the ring. Statistic: eq. (5) as ``d^T Pi_P d / sigma^2`` with ``d = x_T - x_P =
     Pi_T^-1 (q_W - Pi_W x_P)`` (the window's residual against the reference fit: no
     difference of two nearly equal estimates). Skips (counted) when ``Pi_P`` is
-    ill-conditioned. When the skip bounds (Algorithm 2) do not rule the candidate out, the
-    exact tail of eq. (7) from ``y``, ``tr = trace(Pi_T^-1 Pi_W)`` and ``dm = det(Pi_T^-1
-    Pi_W)`` (``llr_skip.exact_log_p2``); a smaller one is the new minimum (lines 13-15,
-    with its skip threshold). ``y``, ``tr``, ``dm``, ``k`` and the degrees of freedom of
-    the last candidate tested exactly stay in the state.
+    ill-conditioned. When the skip bound ``y / tr < y*`` (Algorithm 2) does not rule the
+    candidate out, returns EXACT with ``y``, ``tr = trace(Pi_T^-1 Pi_W)``, ``dm = det(Pi_T^-1
+    Pi_W)`` and the degrees of freedom stored: :func:`settle` computes the tail, records a
+    new minimum and decides.
     """
     o = cfg.o_rpref + 6 * (k & cfg.mask)
     a, b, c, u, v, e = ring_row(fs, o)
@@ -110,14 +110,34 @@ def test(fs, ints, cfg, k, at, bt, ct, ut, vt):
                 fs[F_DM] = dm
                 ints[I_K] = k
                 ints[I_DOF] = dof
-                logp = exact_log_p2(y, tr, dm, logpmin, float(dof))
-                if logp < logpmin:
-                    fs[F_LOGPMIN] = logp
-                    ints[I_KMIN] = k
-                    fs[F_YSTAR] = skip_threshold(logp)
+                return EXACT
     else:
         ints[I_ILL] += 1
     return declare_flag(fs, ints, k)
+
+
+@njit(cache=True, inline='always')
+def settle(fs, ints, flags):
+    """Return ``flags`` with EXACT resolved: Algorithm 1 lines 12-18 at candidate ``ints[I_K]``.
+
+    The exact tail of eq. (7) from the ``y``, ``tr``, ``dm`` and degrees of freedom
+    :func:`test` stored (core/llr_skip.py ``exact_log_p2``, which Python's
+    ``llr_common.candidate_log_p2`` calls too); a tail below p_min is the new minimum,
+    with its skip threshold (lines 13-15); then DECLARE if line 18 holds. Called where the
+    flags leave a sample, not inside :func:`test`: the per-sample loops stay without a
+    call (a call in them made ``detect`` 1.5x slower), and they stop at an EXACT so
+    that they go on with the new skip threshold (``Setup.ystar`` is read once per call).
+    """
+    if not flags & EXACT:
+        return flags
+    k = ints[I_K]
+    logpmin = fs[F_LOGPMIN]
+    logp = exact_log_p2(fs[F_Y], fs[F_TR], fs[F_DM], logpmin, float(ints[I_DOF]))
+    if logp < logpmin:
+        fs[F_LOGPMIN] = logp
+        ints[I_KMIN] = k
+        fs[F_YSTAR] = skip_threshold(logp)
+    return (flags & ~EXACT) | declare_flag(fs, ints, k)
 
 
 @njit(cache=True, inline='always')
@@ -131,13 +151,14 @@ def declare_flag(fs, ints, k):
 @njit('int64(float64[::1], int64[::1], int64, float64[::1])', cache=True)
 def test_row(fs, ints, k, row):
     """:func:`test` with T_k's prefix row given as an array (a restart's catch-up)."""
-    return test(fs, ints, setup(fs, ints), k, row[0], row[1], row[2], row[3], row[4])
+    return settle(fs, ints, test(fs, ints, setup(fs, ints), k, row[0], row[1], row[2], row[3],
+                                 row[4]))
 
 
 @njit(cache=True, error_model='numpy', inline='always')
 def ingest(fs, ints, row, t, f, h1, h2):
     """:func:`ingest_sample` called from Python (the samples replayed after the noise fit)."""
-    return ingest_sample(fs, ints, setup(fs, ints), row, t, f, h1, h2)
+    return settle(fs, ints, ingest_sample(fs, ints, setup(fs, ints), row, t, f, h1, h2))
 
 
 @njit(cache=True, error_model='numpy', inline='always')
@@ -297,7 +318,7 @@ def sample(fs, ints, cfg, t, w, f):
 @njit('int64(float64[::1], int64[::1], float64, float64, float64)', cache=True)
 def step(fs, ints, t, w, f):
     """:func:`sample` called from Python: the streaming path, one call per sample."""
-    return sample(fs, ints, setup(fs, ints), t, w, f)
+    return settle(fs, ints, sample(fs, ints, setup(fs, ints), t, w, f))
 
 
 @njit('int64(float64[::1], int64[::1], float64[::1], float64[::1], float64[::1], int64)',
@@ -308,10 +329,25 @@ def run(fs, ints, t, w, f, start):
     Returns the index of the first sample whose flags are not 0 (the flags in
     ``ints[I_FLAGS]``: the caller acts on them, then resumes at the next index), or the
     array length when all were processed. The batch path: the per-sample loop of the
-    streaming detector, compiled, with Python only at those rare samples.
+    streaming detector, compiled, with Python only at those rare samples; an exact tail
+    is settled here (:func:`settle`) and the loop goes on.
     """
-    cfg = setup(fs, ints)
-    for i in range(start & NON_NEGATIVE, t.size):
+    i = start & NON_NEGATIVE
+    while i < t.size:
+        i = _samples(fs, ints, setup(fs, ints), t, w, f, i)
+        if i < t.size:
+            flags = settle(fs, ints, ints[I_FLAGS])
+            ints[I_FLAGS] = flags
+            if flags:
+                return i
+            i += 1
+    return t.size
+
+
+@njit(cache=True, inline='always')
+def _samples(fs, ints, cfg, t, w, f, start):
+    """:func:`sample` from ``start`` on: the first index with flags (in ``ints[I_FLAGS]``)."""
+    for i in range(start, t.size):
         flags = sample(fs, ints, cfg, t[i], w[i], f[i])
         if flags:
             ints[I_FLAGS] = flags
@@ -348,8 +384,22 @@ def ingest_run(fs, ints, rows, t, f, h1, h2, start):
     The replay of the samples that waited for the noise fit (already divided by the noise
     level); returns as :func:`run` does (flags in ``ints[I_FLAGS]``).
     """
-    cfg = setup(fs, ints)
-    for i in range(start & NON_NEGATIVE, t.size):
+    i = start & NON_NEGATIVE
+    while i < t.size:
+        i = _ingested(fs, ints, setup(fs, ints), rows, t, f, h1, h2, i)
+        if i < t.size:
+            flags = settle(fs, ints, ints[I_FLAGS])
+            ints[I_FLAGS] = flags
+            if flags:
+                return i
+            i += 1
+    return t.size
+
+
+@njit(cache=True, inline='always')
+def _ingested(fs, ints, cfg, rows, t, f, h1, h2, start):
+    """:func:`ingest_sample` from ``start`` on: as :func:`_samples`."""
+    for i in range(start, t.size):
         flags = ingest_sample(fs, ints, cfg, rows[i], t[i], f[i], h1[i], h2[i])
         if flags:
             ints[I_FLAGS] = flags

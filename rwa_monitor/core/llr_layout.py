@@ -5,8 +5,9 @@ The detector's per-sample state lives in two preallocated arrays (:func:`allocat
 speeds, the AR coefficients and lags) and ``ints`` (the named scalars ``I_*``: counters,
 positions, offsets of the rings, then the ring of row indices). Python code reads and
 writes them by these names; the kernels read the values only Python changes once per call
-(:class:`Setup`, :func:`setup`). Also the flags the kernels return (``REVISE``,
-``DECLARE``; the last ones in ``ints[I_FLAGS]``) and the ring accessors shared by them.
+(:class:`Setup`, :func:`setup`). Also the flags of the kernels (``REVISE``, ``EXACT``,
+``DECLARE``; the last ones in ``ints[I_FLAGS]``; ``EXACT`` is settled compiled and never
+reaches Python) and the ring accessors shared by them.
 
 The kernels are compiled with ``cache=True`` and numba takes these constants and the
 inlined :func:`setup` / :func:`ring_row` into their machine code, but its cache only sees
@@ -57,7 +58,7 @@ I_ESTIMATED = 10  # 1: noise variance estimated on the reference
 I_AR_ORDER = 11
 I_NLAGS = 12
 I_ILL = 13        # tests skipped for an ill-conditioned Pi_P
-I_K = 14          # the last candidate whose exact tail was computed
+I_K = 14          # candidate of the last EXACT flag
 I_DOF = 15        # its degrees of freedom (-1: known noise)
 I_O_RPREF = 16
 I_O_RTERM = 17
@@ -74,6 +75,7 @@ I_SCALARS = 27
 
 # Flags returned by llr_kernel's step / ingest / test (0: nothing to do, the usual case).
 REVISE = 2    # the position is a revision point of the last declared change
+EXACT = 4     # the exact tail is needed at candidate ints[I_K] (y, tr, dm in fs)
 DECLARE = 8   # Algorithm 1 line 18: declare
 
 
