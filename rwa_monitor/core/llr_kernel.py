@@ -335,13 +335,23 @@ def run(fs, ints, t, w, f, start):
     i = start & NON_NEGATIVE
     while i < t.size:
         i = _samples(fs, ints, setup(fs, ints), t, w, f, i)
-        if i < t.size:
-            flags = settle(fs, ints, ints[I_FLAGS])
-            ints[I_FLAGS] = flags
-            if flags:
-                return i
-            i += 1
+        if _stops(fs, ints, i, t.size):
+            return i
+        i += 1
     return t.size
+
+
+@njit(cache=True, inline='always')
+def _stops(fs, ints, i, size):
+    """Return True where a loop over arrays returns at ``i``: the end, or flags to act on.
+
+    Flags are in ``ints[I_FLAGS]``; an EXACT among them is settled first (:func:`settle`).
+    """
+    if i >= size:
+        return True
+    flags = settle(fs, ints, ints[I_FLAGS])
+    ints[I_FLAGS] = flags
+    return flags != 0
 
 
 @njit(cache=True, inline='always')
@@ -387,12 +397,9 @@ def ingest_run(fs, ints, rows, t, f, h1, h2, start):
     i = start & NON_NEGATIVE
     while i < t.size:
         i = _ingested(fs, ints, setup(fs, ints), rows, t, f, h1, h2, i)
-        if i < t.size:
-            flags = settle(fs, ints, ints[I_FLAGS])
-            ints[I_FLAGS] = flags
-            if flags:
-                return i
-            i += 1
+        if _stops(fs, ints, i, t.size):
+            return i
+        i += 1
     return t.size
 
 
