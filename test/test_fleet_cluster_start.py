@@ -65,3 +65,19 @@ def test_a_run_that_fails_before_the_plan_closes_its_cluster(tmp_path):
     with pytest.raises(ConfigError, match='dry_limit'):
         run_archive(tmp_path / 'archive', workers=1, config=bad)
     assert _workers_alive() == before
+
+
+def _loaded() -> tuple[bool, bool]:
+    """Return whether this process has the engine imported and every kernel compiled."""
+    import sys
+    from rwa_monitor.core import jit
+    return ('rwa_monitor.fleet.chain' in sys.modules,
+            bool(jit._lazy) and all('_compile_for_args' not in vars(d) for d in jit._lazy))
+
+
+def test_local_workers_start_with_the_engine_imported_and_the_kernels_loaded():
+    # They are forks of the server that loaded them once (fleet/worker_start.py); a
+    # worker spawned instead would have neither before its first task.
+    with ClusterStart(workers=2) as cluster:
+        found = cluster.client().run(_loaded)
+    assert list(found.values()) == [(True, True), (True, True)]

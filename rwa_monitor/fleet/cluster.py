@@ -8,6 +8,12 @@ only when the plan needs it. At the other end :meth:`ClusterStart.release` close
 cluster in the same thread while the run assembles and writes its outputs. The run's
 results do not depend on it: the same tasks reach the same workers either way.
 Measured in docs/fleet.md "Fixed costs of a command".
+
+Its workers are forks of one server process (multiprocessing's fork server) that imported
+the engine and loaded the compiled kernels once (fleet/worker_start.py); the server is
+started first of all, so that it loads them while the client imports and reads the
+state. A worker that is spawned instead starts a new Python and imports and loads all of
+it again, each worker for itself.
 """
 
 from __future__ import annotations
@@ -15,12 +21,27 @@ from __future__ import annotations
 import concurrent.futures
 import contextlib
 import logging
+import multiprocessing
+from multiprocessing import forkserver
 from typing import Any, Iterator, TYPE_CHECKING
 
 from rwa_monitor.exceptions import ConfigError
 
 if TYPE_CHECKING:
     from distributed import Client
+
+
+WORKER_START = 'rwa_monitor.fleet.worker_start'
+
+
+def start_fork_server() -> None:
+    """Start the server local workers fork from, loading what they need (once a process).
+
+    The server stays for the life of this process, and every local cluster it makes forks
+    its workers from it; a server already running is left as it is.
+    """
+    multiprocessing.get_context('forkserver').set_forkserver_preload([WORKER_START])
+    forkserver.ensure_running()
 
 
 @contextlib.contextmanager
@@ -37,6 +58,7 @@ def dask_client(workers: int = 2, scheduler: str | None = None) -> Iterator[Clie
         return
     if workers < 1:
         raise ConfigError(f'--workers must be at least 1, got {workers}')
+    start_fork_server()
     # No dashboard; the scheduler's small HTTP server on a free port of this machine only.
     # No worker profiler: it samples the task thread every 10 ms for the dashboard, and
     # took the run's wall time from 0.85 s to 1.30 s (mean of 6 runs each, 3 spacecraft x
@@ -48,6 +70,7 @@ def dask_client(workers: int = 2, scheduler: str | None = None) -> Iterator[Clie
     environ = dict(dask.config.get('distributed.nanny.pre-spawn-environ', None) or {})
     environ.pop('MALLOC_TRIM_THRESHOLD_', None)
     with dask.config.set({'distributed.worker.profile.enabled': False,
+                          'distributed.worker.multiprocessing-method': 'forkserver',
                           'distributed.nanny.pre-spawn-environ': environ}), \
             LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
                          dashboard_address=None, silence_logs=logging.ERROR,
@@ -65,6 +88,8 @@ class ClusterStart:
     """
 
     def __init__(self, workers: int = 2, scheduler: str | None = None) -> None:
+        if not scheduler and workers >= 1:
+            start_fork_server()
         self._context = dask_client(workers, scheduler)
         self._thread = concurrent.futures.ThreadPoolExecutor(
             1, thread_name_prefix='fleet-cluster')
