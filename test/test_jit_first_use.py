@@ -30,6 +30,18 @@ def test_importing_the_kernels_compiles_none(tmp_path):
     assert out.stdout.strip() == '0'
 
 
+def test_setting_a_reporter_imports_no_compiler():
+    # The command line sets its reporter before any command runs; numba is imported by
+    # the first kernel module, so that `fleet` starts its workers' server before it.
+    code = ('import sys\nfrom rwa_monitor.core import jit\njit.set_reporter(None)\n'
+            'print("numba" in sys.modules)\n'
+            'from rwa_monitor.core import llr_kernel\nprint("numba" in sys.modules)')
+    out = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True,
+                         timeout=300)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split() == ['False', 'True']
+
+
 def test_a_declared_signature_is_compiled_at_the_first_call_and_converts_as_before():
     @jit.njit('float64(float64, float64)', cache=False)
     def twice_plus(x, y):

@@ -59,8 +59,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Run the fleet and write OUT; return the exit code."""
+    from rwa_monitor.fleet.cluster import ClusterStart, start_fork_server
+    if not args.scheduler and args.workers >= 1:
+        start_fork_server()    # first: it loads the workers' modules while this one loads
     from rwa_monitor.fleet import outputs, state
-    from rwa_monitor.fleet.cluster import ClusterStart
     archive = args.archive.resolve()
     for name, path in (('output', args.output), ('state', args.state)):
         if path is not None and archive in (path.resolve(), *path.resolve().parents):

@@ -19,6 +19,7 @@ prints a notice and progress; the core itself prints nothing).
 from __future__ import annotations
 
 import contextlib
+import functools
 import threading
 import time
 from typing import Any, Callable, Iterator
@@ -33,10 +34,19 @@ _reporter: Callable[[str, str, float, Callable[[], bool]], None] | None = None
 _lazy: list[Any] = []           # every kernel compiled at first use, for warm()
 _lock = threading.Lock()
 
-try:
-    import numba
-except ImportError:   # pragma: no cover - numba is pinned in requirements.txt
-    numba = None
+
+@functools.cache
+def _numba() -> Any:
+    """Return numba, imported at the first kernel's decoration, or None without it.
+
+    Not at this module's import: a command sets its reporter (:func:`set_reporter`) before
+    it imports any kernel, and ``rwa-monitor fleet`` starts its workers' server first.
+    """
+    try:
+        import numba
+    except ImportError:   # pragma: no cover - numba is pinned in requirements.txt
+        return None
+    return numba
 
 
 def set_reporter(reporter: Callable[[str, str, float, Callable[[], bool]], None] | None
@@ -52,6 +62,7 @@ def set_reporter(reporter: Callable[[str, str, float, Callable[[], bool]], None]
 
 def njit(*args: Any, **kwargs: Any) -> Any:
     """Return numba's ``njit`` decorator; with a signature, compiled at the first call."""
+    numba = _numba()
     if numba is None or numba.config.DISABLE_JIT:
         if args and callable(args[0]):
             return args[0]
