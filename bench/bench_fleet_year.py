@@ -1,16 +1,20 @@
-"""A daily ``--state`` run late in a fleet's year: what the growing tables cost.
+"""A daily ``--state`` run late in a fleet's year: what the growing archive and state cost.
 
-A daily run reads the state's trend table (one row per spacecraft, wheel and pass so far)
-and event history, adds its own, fits each wheel's trend, draws the report and writes
-both tables twice (outputs and state). Their size grows with the days, the day's
-telemetry does not. Measured: 100 spacecraft (seed 31, 6 passes of 10 min a day each),
-a day-1 run with a state, then the day-2 run from that state as it is ("age 0") and from
-copies of it aged to older fleets: the day-1 trend rows and events repeated once per
-earlier day (shifted back by whole days), written through the state's own commit, so the
-run reads, checks and rewrites them as a real one would. The day-2 run's whole command
+A daily run lists the archive (every pass so far) and finds the processed ones by name
+and size in the state's pass records, reads the state's trend table (one row per
+spacecraft, wheel and pass so far) and event history, adds its own, fits each wheel's
+trend, draws the report and writes both tables twice (outputs and state). Their size
+grows with the days, the day's telemetry does not. Measured: 100 spacecraft (seed 31, 6
+passes of 10 min a day each), a day-1 run with a state, then the day-2 run from that
+state as it is ("age 0") and from copies of it aged to older fleets: the day-1 trend
+rows, events and pass records repeated once per earlier day (shifted back by whole days,
+the passes renamed ``day-N-<name>``), written through the state's own commit, so the run
+reads, checks and rewrites them as a real one would, and the archive given those passes
+as files (hard links to day 1's). The day-2 run's whole command
 (new process, cluster, outputs, state) is timed, median of ``repeats``, each from a
 fresh copy of the state. The extra time over age 0, integrated over the year, is what
-the tables add to a fleet-year of daily runs (bench fleet's 2.06 h leaves it out).
+the growing archive and state add to a fleet-year of daily runs (bench fleet's
+figure leaves it out).
 """
 
 from __future__ import annotations
@@ -37,9 +41,9 @@ def _settings(quick: bool) -> dict[str, Any]:
 
 
 def age_state(fresh: pathlib.Path, aged: pathlib.Path, days: int) -> dict[str, int]:
-    """Copy the state ``fresh`` to ``aged`` with its tables repeated for ``days`` earlier days.
+    """Copy the state ``fresh`` to ``aged`` with its tables and passes repeated for ``days``.
 
-    Returns the rows of the aged trend table and event history.
+    Returns the rows of the aged trend table and event history, and the pass records.
     """
     from rwa_monitor.fleet import state
     from rwa_monitor.fleet.history import Entry, to_parquet
@@ -57,8 +61,28 @@ def age_state(fresh: pathlib.Path, aged: pathlib.Path, days: int) -> dict[str, i
         declared_time=h.event.declared_time - d * SECONDS_PER_DAY),
         h.run, h.end_of_run, h.superseded)
         for d in range(days, 0, -1) for h in loaded.history] + list(loaded.history)
-    state.commit(aged, loaded, loaded.records, trend.to_parquet(), to_parquet(history))
-    return {'trend_rows': len(trend), 'history_rows': len(history)}
+    records = {craft: dataclasses.replace(record, passes=tuple(
+        dataclasses.replace(p, name=f'day-{d}-{p.name}', first=p.first - d * SECONDS_PER_DAY,
+                            last=p.last - d * SECONDS_PER_DAY)
+        for d in range(days, 0, -1) for p in record.passes) + record.passes)
+        for craft, record in loaded.records.items()}
+    state.commit(aged, loaded, records, trend.to_parquet(), to_parquet(history))
+    return {'trend_rows': len(trend), 'history_rows': len(history),
+            'pass_records': sum(len(r.passes) for r in records.values())}
+
+
+def age_archive(day1: pathlib.Path, archive: pathlib.Path, days: int) -> None:
+    """Give ``archive`` day 1's passes of ``days`` earlier days, as ``age_state`` names them.
+
+    Adds the links an earlier call did not (the ages are run in increasing order).
+    """
+    for folder in sorted(p for p in day1.iterdir() if p.is_dir()):
+        passes = [p for p in sorted(folder.iterdir()) if p.suffix == '.parquet']
+        for d in range(1, days + 1):
+            for path in passes:
+                link = archive / folder.name / f'day-{d}-{path.name}'
+                if not link.exists():
+                    os.link(path, link)
 
 
 def run(out_dir: pathlib.Path, quick: bool) -> dict[str, Any]:
@@ -76,6 +100,7 @@ def run(out_dir: pathlib.Path, quick: bool) -> dict[str, Any]:
         for age in settings['ages']:
             aged = scratch / f'state-{age}'
             size = age_state(fresh, aged, age)
+            age_archive(days[1], days[2], age)
             walls = []
             for repeat in range(settings['repeats']):
                 work = scratch / f'state-{age}-{repeat}'
@@ -108,19 +133,21 @@ def _year(ages: list[dict[str, Any]]) -> dict[str, Any]:
 def markdown(results: dict[str, Any]) -> str:
     """Return docs/results.md's section."""
     s = results['settings']
-    rows = [[a['age_days'], a['trend_rows'], a['history_rows'], f'{a["median_wall_s"]:.1f}',
-             ', '.join(f'{w:.1f}' for w in a['wall_s'])] for a in results['ages']]
+    rows = [[a['age_days'], a['trend_rows'], a['history_rows'], a.get('pass_records', ''),
+             f'{a["median_wall_s"]:.1f}', ', '.join(f'{w:.1f}' for w in a['wall_s'])]
+            for a in results['ages']]
     return '\n'.join([
         '## A daily fleet run late in the year (`python -m bench fleet_year`, issue 31 '
         'item 5)', '',
         f'{s["spacecraft"]} spacecraft, day 2 of a 2-day archive (seed 31, '
         f'{results["archive"]["passes"]} passes) run with `--state` after day 1, the '
-        'state aged by repeating its trend rows and events once per earlier day '
-        '(bench/bench_fleet_year.py); whole command, 2 workers, median of '
+        'state aged by repeating its trend rows, events and pass records once per earlier '
+        "day, and the archive given those passes' files (bench/bench_fleet_year.py); "
+        'whole command, 2 workers, median of '
         f'{s["repeats"]}; load average of the 2-core machine (1 min) '
         f'{results["load_before"]:.1f} before, {results["load_after"]:.1f} after.', '',
-        table(['state age (days)', 'trend rows', 'history events', 'median wall (s)',
-               'runs (s)'], rows), '',
+        table(['state age (days)', 'trend rows', 'history events', 'passes (files and '
+               'records)', 'median wall (s)', 'runs (s)'], rows), '',
         f'- Extra time of a run at the last age: '
         f'{results["extra_s_per_run_at_end"]:.1f} s; over a year of daily runs '
         f'(trapezoids through the ages): **{results["extra_year_h"]:.2f} h**, to add to '
