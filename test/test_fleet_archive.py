@@ -159,3 +159,25 @@ def test_events_parquet_takes_fields_of_mixed_types_and_of_every_row():
     assert table.column('x').to_pylist() == ['1.5', '"text"']
     assert table.column('y').to_pylist() == [None, '[1, 2]']
     assert table.column('final').to_pylist() == [None, True]   # a field the first row lacks
+
+
+def test_listing_takes_each_kind_of_pass_with_its_size_and_names_the_rest(tmp_path):
+    craft = tmp_path / 'archive' / 'sc1'
+    bag = craft / 'bag1'
+    bag.mkdir(parents=True)
+    meta = b'rosbag2_bagfile_information: {}\n'
+    (bag / 'metadata.yaml').write_bytes(meta)
+    (bag / 'bag1_0.mcap').write_bytes(b'x' * 7)
+    files = {'a.csv': 3, 'b.PARQUET': 5, 'c.mcap': 2, 'd.db3': 4, 'e.bin': 6, 'notes.txt': 1,
+             '.hidden.csv': 1, 'calibration.yaml': 1, 'e.xml': 1, 'e_map.yaml': 1}
+    for name, size in files.items():
+        (craft / name).write_bytes(b'x' * size)
+    (craft / 'folder.csv').mkdir()           # a folder is no CSV file, whatever its name
+    (craft / 'gone.csv').symlink_to(craft / 'missing.csv')
+    [found] = archive.list_archive(tmp_path / 'archive')
+    names = {c.rsplit('/', 1)[1]: found.sizes[c] for c in found.candidates}
+    assert names == {'a.csv': 3, 'b.PARQUET': 5, 'bag1': 7 + len(meta), 'c.mcap': 2,
+                     'd.db3': 4, 'e.bin': 6}     # a folder: the size of its files
+    assert found.candidates == sorted(found.candidates)
+    assert set(found.ignored) == {'notes.txt', 'folder.csv', 'gone.csv'}
+    assert found.calibration == str(craft / 'calibration.yaml')

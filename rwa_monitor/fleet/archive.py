@@ -44,17 +44,26 @@ class PassFile:
 
 @dataclass
 class Spacecraft:
-    """One spacecraft's folder: candidate passes, calibration and the entries ignored."""
+    """One spacecraft's folder: candidate passes, calibration and the entries ignored.
+
+    ``sizes``: each candidate's size in bytes when the folder was listed (a rosbag2
+    folder's: its files').
+    """
 
     id: str
     folder: str
     calibration: str | None
     candidates: list[str] = field(default_factory=list)
     ignored: dict[str, str] = field(default_factory=dict)
+    sizes: dict[str, int] = field(default_factory=dict)
 
 
 def list_archive(archive: str | os.PathLike) -> list[Spacecraft]:
-    """Return the spacecraft of an archive (sorted by id); ConfigError if there are none."""
+    """Return the spacecraft of an archive (sorted by id); ConfigError if there are none.
+
+    Each folder is listed once (``os.scandir``: names, types and sizes without a path
+    object or a call per name): a daily run lists every pass of the archive's life.
+    """
     root = pathlib.Path(archive)
     if not root.is_dir():
         raise ConfigError(f'{root}: not a folder (expected ARCHIVE/<spacecraft>/<passes>)')
@@ -63,13 +72,16 @@ def list_archive(archive: str | os.PathLike) -> list[Spacecraft]:
                          and not p.name.startswith('.')):
         cal = folder / CALIBRATION
         craft = Spacecraft(folder.name, str(folder), str(cal) if cal.is_file() else None)
-        definitions = _packet_definitions(folder)
-        for entry in sorted(folder.iterdir()):
+        with os.scandir(folder) as listing:
+            entries = sorted(listing, key=lambda e: e.name)
+        definitions = _packet_definitions(entries)
+        for entry in entries:
             if entry.name.startswith('.') or entry.name == CALIBRATION \
                     or entry.name in definitions:
                 continue
             if is_pass(entry):
-                craft.candidates.append(str(entry))
+                craft.candidates.append(entry.path)
+                craft.sizes[entry.path] = _size(entry)
             else:
                 craft.ignored[entry.name] = ('not a recording (expected .csv, .parquet, '
                                              '.mcap, .db3, .bin or a rosbag2 folder)')
@@ -92,20 +104,34 @@ def metadata(archive: str | os.PathLike) -> dict:
     return found
 
 
-def is_pass(path: pathlib.Path) -> bool:
-    """Return True for a path the readers take as a pass."""
-    if rosbag_io.is_recording(path):
-        return True
-    return path.is_file() and (path.suffix.lower() == '.csv' or parquet_io.is_parquet(path)
-                               or is_packets(path))
+def is_pass(entry: os.DirEntry) -> bool:
+    """Return True for a folder entry the readers take as a pass.
+
+    A rosbag2 folder (``rosbag_io.is_recording``), or a file that is a bare recording
+    (.mcap, .db3), CSV, Parquet or packets (.bin), by its name.
+    """
+    if entry.is_dir():
+        return rosbag_io.is_recording(entry.path)
+    suffix = os.path.splitext(entry.name)[1].lower()
+    return entry.is_file() and (suffix in rosbag_io.BAG_SUFFIXES or suffix == '.csv'
+                                or parquet_io.is_parquet(entry.name)
+                                or is_packets(entry.name))
 
 
-def _packet_definitions(folder: pathlib.Path) -> set[str]:
+def _size(entry: os.DirEntry) -> int:
+    """Return an entry's size as :func:`size_of` gives it; -1 if it cannot be read."""
+    try:
+        return size_of(entry.path) if entry.is_dir() else entry.stat().st_size
+    except OSError:
+        return -1
+
+
+def _packet_definitions(entries: list[os.DirEntry]) -> set[str]:
     """Return the names of the XTCE and map files of the folder's packet passes."""
     names = {ARCHIVE_XTCE, ARCHIVE_MAP}
-    for packets in folder.glob('*'):
-        if is_packets(packets) and packets.is_file():
-            names.update(p.name for p in sibling_paths(packets))
+    for entry in entries:
+        if is_packets(entry.name) and entry.is_file():
+            names.update(p.name for p in sibling_paths(pathlib.Path(entry.path)))
     return names
 
 

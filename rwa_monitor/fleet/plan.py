@@ -14,6 +14,7 @@ feed it (its rows at or before the last stamp fed are dropped and counted).
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
+import os
 import pathlib
 from typing import Mapping, Sequence, TYPE_CHECKING
 
@@ -90,8 +91,9 @@ def _prior(craft: arc.Spacecraft, blocks: Blocks,
 
 def _to_scan(p: SpacecraftPlan) -> list[str]:
     done = {(r.name, r.size) for r in p.prior.passes} if p.prior else set()
+    sizes = p.craft.sizes
     return [path for path in p.craft.candidates
-            if (pathlib.Path(path).name, _size(path)) not in done]
+            if (os.path.basename(path), sizes.get(path, -1)) not in done]
 
 
 def _complete(p: SpacecraftPlan, scans: Mapping[str, arc.PassFile | str], blocks: Blocks
@@ -107,7 +109,7 @@ def _complete(p: SpacecraftPlan, scans: Mapping[str, arc.PassFile | str], blocks
         else:
             readable.append(found)
     readable.sort(key=lambda f: (f.first, f.name))
-    already = tuple(pathlib.Path(c).name for c in p.craft.candidates if c not in scans)
+    already = tuple(os.path.basename(c) for c in p.craft.candidates if c not in scans)
     late: dict[str, str] = {}
     if p.prior is not None and p.prior.passes:
         last = p.prior.passes[-1]
@@ -165,10 +167,3 @@ def _text(path: str | None) -> str | None:
         return pathlib.Path(path).read_text()
     except (OSError, UnicodeDecodeError) as err:
         raise ConfigError(f'{path}: cannot read: {err}') from None
-
-
-def _size(path: str) -> int:
-    try:
-        return arc.size_of(path)
-    except OSError:
-        return -1

@@ -28,7 +28,13 @@ ATTRIBUTES = {'pass': 'pass_name'}     # the column whose TrendRow field is name
 
 
 class TrendTable:
-    """Trend rows as one numpy array per column of :data:`COLUMNS`."""
+    """Trend rows as one numpy array per column of :data:`COLUMNS`.
+
+    A table is not changed once made (``plus``, ``sorted`` and ``take`` make new ones):
+    its Parquet bytes and its groups by wheel are made once, at the first call (a
+    daily run late in the year writes 876,000 rows to its outputs and to its state,
+    and groups them for the trends and for the report).
+    """
 
     def __init__(self, columns: Mapping[str, np.ndarray]) -> None:
         missing = [k for k in COLUMNS if k not in columns]
@@ -38,6 +44,8 @@ class TrendTable:
         if len(sizes) > 1:
             raise ValueError('the columns of a trend table differ in length')
         self.columns = {k: _typed(k, columns[k]) for k in COLUMNS}
+        self._parquet: bytes | None = None
+        self._groups: dict[tuple[str, str], dict[str, np.ndarray]] | None = None
 
     @classmethod
     def empty(cls) -> 'TrendTable':
@@ -87,6 +95,11 @@ class TrendTable:
 
     def to_parquet(self) -> bytes:
         """Return the table as trend.parquet's bytes (the columns and types of COLUMNS)."""
+        if self._parquet is None:
+            self._parquet = self._write_parquet()
+        return self._parquet
+
+    def _write_parquet(self) -> bytes:
         import pyarrow as pa
         import pyarrow.parquet as pq
         arrow = pa.table({k: pa.array(self.columns[k], type=getattr(pa, COLUMNS[k])())
@@ -121,8 +134,14 @@ class TrendTable:
         """Return each (spacecraft, wheel)'s columns, its rows in start-time order.
 
         The groups come in (spacecraft, wheel) order; rows of equal start time keep
-        their order in the table.
+        their order in the table. The same groups at every call: read them, do not change
+        them.
         """
+        if self._groups is None:
+            self._groups = self._by_wheel()
+        return self._groups
+
+    def _by_wheel(self) -> dict[tuple[str, str], dict[str, np.ndarray]]:
         c = self.columns
         if not len(self):
             return {}

@@ -34,7 +34,8 @@ _LOG = logging.getLogger(__name__)
 
 def is_packets(path: str | os.PathLike) -> bool:
     """Return True for a path read as CCSDS space packets without being told (``.bin``)."""
-    return pathlib.Path(path).suffix.lower() == PACKET_SUFFIX
+    name = os.path.basename(os.fspath(path))       # a string: called for every archive file
+    return os.path.splitext(name)[1].lower() == PACKET_SUFFIX
 
 
 def packet_definitions(path: str | os.PathLike, xtce: str | os.PathLike | None = None,
