@@ -574,13 +574,16 @@ def markdown(results: dict[str, Any]) -> str:
                       f'passes, at the rate above: {s["daily_day_s"]:.1f} s a day; x '
                       f'{FLEET_YEAR["days"]} days = **{s["daily_runs_year_hours"]:.3g} h** '
                       f'(goal <= {GOALS["fleet_year_hours"]:g} h: '
-                      f'**{word[s["daily_runs_year_hours"] <= GOALS["fleet_year_hours"]]}**). '
+                      f'**{word[s["daily_runs_year_hours"] <= GOALS["fleet_year_hours"]]}** '
+                      'before the growth below). '
                       f'The c0 + c1 model above would say '
                       f'{s["daily_model_year_hours"]:.3g} h: its c1 holds the plots of wheels '
                       'with events, which grow with the days, not the spacecraft. Not '
-                      "counted here: the history and trend tables a day's run rewrites, "
-                      'which grow through the year; `python -m bench fleet_year` measures '
-                      'what they add (section "A daily fleet run late in the year").']
+                      "counted here: what a day's run reads and rewrites that grows through "
+                      "the year (the archive's passes and the state's pass records, the "
+                      'history and trend tables); `python -m bench fleet_year` measures what '
+                      'they add (section "A daily fleet run late in the year"), and the two '
+                      'together are the daily-run figure.']
     lines += ['',
               f'Start-up, median of 5 (goal <= {GOALS["start_s"]} s each): ' + ', '.join(
                   f'`{k}` {v:.2f} s' for k, v in results['start'].items())
