@@ -47,6 +47,7 @@ def age_state(fresh: pathlib.Path, aged: pathlib.Path, days: int) -> dict[str, i
     """
     from rwa_monitor.fleet import state
     from rwa_monitor.fleet.history import Entry, to_parquet
+    from rwa_monitor.fleet.records import PassLog
     from rwa_monitor.fleet.trend_table import TrendTable
     shutil.copytree(fresh, aged)
     loaded = state.load(aged)
@@ -61,10 +62,10 @@ def age_state(fresh: pathlib.Path, aged: pathlib.Path, days: int) -> dict[str, i
         declared_time=h.event.declared_time - d * SECONDS_PER_DAY),
         h.run, h.end_of_run, h.superseded)
         for d in range(days, 0, -1) for h in loaded.history] + list(loaded.history)
-    records = {craft: dataclasses.replace(record, passes=tuple(
+    records = {craft: dataclasses.replace(record, passes=PassLog.of([
         dataclasses.replace(p, name=f'day-{d}-{p.name}', first=p.first - d * SECONDS_PER_DAY,
                             last=p.last - d * SECONDS_PER_DAY)
-        for d in range(days, 0, -1) for p in record.passes) + record.passes)
+        for d in range(days, 0, -1) for p in record.passes]).plus(list(record.passes)))
         for craft, record in loaded.records.items()}
     state.commit(aged, loaded, records, trend.to_parquet(), to_parquet(history))
     return {'trend_rows': len(trend), 'history_rows': len(history),

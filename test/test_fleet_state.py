@@ -133,6 +133,10 @@ CASES = {
         f, lambda d: d['spacecraft']['sat'].__setitem__('extra', 1)),
     'wrong type': lambda f, t: _edit_manifest(
         f, lambda d: d['spacecraft']['sat'].__setitem__('last_time', 'soon')),
+    'pass log one name short': lambda f, t: _edit_manifest(
+        f, lambda d: d['spacecraft']['sat']['passes']['names'].pop()),
+    'pass name not a string': lambda f, t: _edit_manifest(
+        f, lambda d: d['spacecraft']['sat']['passes']['names'].__setitem__(0, 7)),
     'spacecraft renamed': lambda f, t: _edit_manifest(
         f, lambda d: d['spacecraft'].__setitem__('other', d['spacecraft'].pop('sat'))),
 }
@@ -275,3 +279,17 @@ def test_a_commit_after_another_run_moved_the_state_on_is_refused(saved, client,
         second.commit()
     assert (folder / state.POINTER).read_bytes() == moved
     assert events_of(run_archive(archive, client=client, state_dir=folder), 'sat') == full
+
+
+def test_the_pass_log_keeps_passes_in_order_as_columns():
+    from rwa_monitor.core.records import decode, encode, RecordError
+    from rwa_monitor.fleet.records import PassLog, PassRecord
+    passes = [PassRecord('b.parquet', 10, 5.0, 6.5), PassRecord('a.parquet', 12, 7.0, 8.0)]
+    log = PassLog().plus(passes[:1]).plus(passes[1:]).plus([])
+    assert list(log) == passes and log[-1] == passes[1] and len(log) == 2
+    assert log.keys() == {('b.parquet', 10), ('a.parquet', 12)}
+    tree, arrays = encode(log)
+    assert tree['names'] == ['b.parquet', 'a.parquet'] and arrays['PassLog.sizes'].dtype == 'int64'
+    assert decode(PassLog, json.loads(json.dumps(tree)), arrays) == log
+    with pytest.raises(RecordError, match='lengths 1, 2, 2, 2'):
+        decode(PassLog, {**tree, 'names': ['b.parquet']}, arrays)

@@ -179,6 +179,8 @@ def _encode(value: Any, hint: Any, field: Any, arrays: dict[str, np.ndarray],
         _check_scalar(value, hint, path)
         return value
     if origin is tuple:
+        if _exact_items(value, args):
+            return list(value)
         items = _tuple_hints(args, len(value), path)
         if value and args[-1] is Ellipsis and dataclasses.is_dataclass(args[0]):
             return [_encode_record(v, args[0], arrays, f'{path}[{i}]')
@@ -254,6 +256,8 @@ def _decode(tree: Any, hint: Any, field: Any, arrays: typing.Mapping[str, np.nda
     if origin is tuple:
         if not isinstance(tree, list):
             raise RecordError(f'{path}: expected a list, got {type(tree).__name__}')
+        if _exact_items(tree, args):
+            return tuple(tree)
         items = _tuple_hints(args, len(tree), path)
         if tree and args[-1] is Ellipsis and dataclasses.is_dataclass(args[0]):
             return tuple(_decode_record(args[0], v, arrays, f'{path}[{i}]', used)
@@ -295,6 +299,18 @@ def _check_scalar(value: Any, hint: type, path: str) -> None:
     # bool is an int in Python: a declared int takes no bool, a declared bool only bools.
     if type(value) is not hint:
         raise RecordError(f'{path}: expected {hint.__name__}, got {value!r:.40}')
+
+
+def _exact_items(values: Any, args: tuple) -> bool:
+    """Return True for a ``tuple[X, ...]`` of bool, int or str whose items are all exactly X.
+
+    Such a tuple is its own tree, item for item (the checks of :func:`_check_scalar`, in
+    one pass): a fleet state's pass log holds a name for each of a year's passes.
+    """
+    if len(args) != 2 or args[1] is not Ellipsis or args[0] not in _EXACT:
+        return False
+    kind = args[0]
+    return all(type(v) is kind for v in values)
 
 
 def _tuple_hints(args: tuple, size: int, path: str) -> tuple:

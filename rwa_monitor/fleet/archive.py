@@ -21,7 +21,8 @@ import pathlib
 import numpy as np
 
 from rwa_monitor.exceptions import ConfigError
-from rwa_monitor.telemetry import ARCHIVE_MAP, ARCHIVE_XTCE, is_packets, parquet_io
+from rwa_monitor.telemetry import ARCHIVE_MAP, ARCHIVE_XTCE, is_packets, PACKET_SUFFIX
+from rwa_monitor.telemetry import parquet_io
 from rwa_monitor.telemetry import read_telemetry, rosbag_io, Telemetry, Wheel
 from rwa_monitor.telemetry.ccsds_write import sibling_paths
 from rwa_monitor.telemetry.schema import ATTITUDE, FRICTION_SUFFIX, GYRO, SPEED_SUFFIX, TIME
@@ -29,6 +30,9 @@ from rwa_monitor.telemetry.schema import ATTITUDE, FRICTION_SUFFIX, GYRO, SPEED_
 CALIBRATION = 'calibration.yaml'
 METADATA = 'archive.yaml'
 GYRO_COMPONENT = 'gyro'
+# Files read as a pass, by the suffix of their name in any case (a rosbag2 folder is one
+# by its content).
+PASS_SUFFIXES = frozenset({*rosbag_io.BAG_SUFFIXES, '.csv', parquet_io.SUFFIX, PACKET_SUFFIX})
 
 
 @dataclass(frozen=True)
@@ -61,8 +65,10 @@ class Spacecraft:
 def list_archive(archive: str | os.PathLike) -> list[Spacecraft]:
     """Return the spacecraft of an archive (sorted by id); ConfigError if there are none.
 
-    Each folder is listed once (``os.scandir``: names, types and sizes without a path
-    object or a call per name): a daily run lists every pass of the archive's life.
+    A pass is a file with a suffix of :data:`PASS_SUFFIXES` or a rosbag2 folder
+    (``rosbag_io.is_recording``). Each folder is listed once (``os.scandir``: names, types
+    and sizes without a path object, a suffix found in one string search): a daily run
+    lists every pass of the archive's life.
     """
     root = pathlib.Path(archive)
     if not root.is_dir():
@@ -79,12 +85,15 @@ def list_archive(archive: str | os.PathLike) -> list[Spacecraft]:
             if entry.name.startswith('.') or entry.name == CALIBRATION \
                     or entry.name in definitions:
                 continue
-            if is_pass(entry):
-                craft.candidates.append(entry.path)
-                craft.sizes[entry.path] = _size(entry)
+            if _suffix(entry.name) in PASS_SUFFIXES and entry.is_file():
+                craft.sizes[entry.path] = _size(entry, folder=False)
+            elif entry.is_dir() and rosbag_io.is_recording(entry.path):
+                craft.sizes[entry.path] = _size(entry, folder=True)
             else:
                 craft.ignored[entry.name] = ('not a recording (expected .csv, .parquet, '
                                              '.mcap, .db3, .bin or a rosbag2 folder)')
+                continue
+            craft.candidates.append(entry.path)
         fleet.append(craft)
     if not fleet:
         raise ConfigError(f'{root}: no spacecraft folder')
@@ -104,24 +113,16 @@ def metadata(archive: str | os.PathLike) -> dict:
     return found
 
 
-def is_pass(entry: os.DirEntry) -> bool:
-    """Return True for a folder entry the readers take as a pass.
-
-    A rosbag2 folder (``rosbag_io.is_recording``), or a file that is a bare recording
-    (.mcap, .db3), CSV, Parquet or packets (.bin), by its name.
-    """
-    if entry.is_dir():
-        return rosbag_io.is_recording(entry.path)
-    suffix = os.path.splitext(entry.name)[1].lower()
-    return entry.is_file() and (suffix in rosbag_io.BAG_SUFFIXES or suffix == '.csv'
-                                or parquet_io.is_parquet(entry.name)
-                                or is_packets(entry.name))
+def _suffix(name: str) -> str:
+    """Return ``os.path.splitext(name)[1].lower()`` of a bare name, in one string search."""
+    dot = name.rfind('.')
+    return name[dot:].lower() if dot > 0 and name[:dot].strip('.') else ''
 
 
-def _size(entry: os.DirEntry) -> int:
+def _size(entry: os.DirEntry, folder: bool) -> int:
     """Return an entry's size as :func:`size_of` gives it; -1 if it cannot be read."""
     try:
-        return size_of(entry.path) if entry.is_dir() else entry.stat().st_size
+        return size_of(entry.path) if folder else entry.stat().st_size
     except OSError:
         return -1
 
@@ -130,7 +131,7 @@ def _packet_definitions(entries: list[os.DirEntry]) -> set[str]:
     """Return the names of the XTCE and map files of the folder's packet passes."""
     names = {ARCHIVE_XTCE, ARCHIVE_MAP}
     for entry in entries:
-        if is_packets(entry.name) and entry.is_file():
+        if _suffix(entry.name) == PACKET_SUFFIX and entry.is_file():
             names.update(p.name for p in sibling_paths(pathlib.Path(entry.path)))
     return names
 

@@ -29,7 +29,7 @@ from rwa_monitor.fleet import archive as arc, state
 from rwa_monitor.fleet.chain import step
 from rwa_monitor.fleet.cluster import ClusterStart
 from rwa_monitor.fleet.plan import plan, SpacecraftPlan
-from rwa_monitor.fleet.records import Chain, PassRecord, SpacecraftRecord, WorkFacts
+from rwa_monitor.fleet.records import Chain, PassLog, PassRecord, SpacecraftRecord, WorkFacts
 from rwa_monitor.fleet.result import FleetResult, SpacecraftResult
 from rwa_monitor.fleet.trend_table import TrendTable
 from rwa_monitor.telemetry.parameters_file import block_values, read_parameters_file
@@ -218,7 +218,7 @@ def _result(p: SpacecraftPlan, chain: Chain | None, run: int) -> SpacecraftResul
         done = tuple(PassRecord(f.name, f.size, f.first, fed[f.name].last)
                      for f in p.passes if f.name in fed)
         record = SpacecraftRecord(p.id, p.fingerprint, chain.last_time,
-                                  (p.prior.passes if p.prior else ()) + done,
+                                  (p.prior.passes if p.prior else PassLog()).plus(done),
                                   dict(chain.states))
     return SpacecraftResult(p, chain, record, run)
 

@@ -90,7 +90,7 @@ def _prior(craft: arc.Spacecraft, blocks: Blocks,
 
 
 def _to_scan(p: SpacecraftPlan) -> list[str]:
-    done = {(r.name, r.size) for r in p.prior.passes} if p.prior else set()
+    done = p.prior.passes.keys() if p.prior else set()
     sizes = p.craft.sizes
     return [path for path in p.craft.candidates
             if (os.path.basename(path), sizes.get(path, -1)) not in done]

@@ -11,10 +11,13 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 import math
-from typing import Any, ClassVar, Mapping
+from typing import Any, ClassVar, Iterator, Mapping, Sequence
+
+import numpy as np
 
 from rwa_monitor.core.events import AnomalyEvent
 from rwa_monitor.core.gyro_runner import GyroRunnerState
+from rwa_monitor.core.records import array_field, RecordError
 from rwa_monitor.core.runner_facts import ComponentFacts
 from rwa_monitor.core.wheel_runner import WheelRunnerState
 
@@ -31,6 +34,73 @@ class PassRecord:
     last: float
 
 
+@dataclass(frozen=True, eq=False)
+class PassLog:
+    """Every pass processed, in time order, one column per field of :class:`PassRecord`.
+
+    The longest part of a state: a daily run reads and writes it whole, and after a year
+    of 6 passes a day it holds 219,000 passes for 100 spacecraft. As columns (names in the
+    tree, the numbers as arrays) they cost one call per column to read and write, instead
+    of one record per pass.
+    """
+
+    VERSION: ClassVar[int] = 1
+    names: tuple[str, ...] = ()
+    sizes: np.ndarray = array_field('int64', 1, default_factory=lambda: np.zeros(0, np.int64))
+    first: np.ndarray = array_field('float64', 1, default_factory=lambda: np.zeros(0))
+    last: np.ndarray = array_field('float64', 1, default_factory=lambda: np.zeros(0))
+
+    def __post_init__(self) -> None:
+        """Refuse columns of different lengths (a log read back is checked here too)."""
+        if not len(self.names) == len(self.sizes) == len(self.first) == len(self.last):
+            raise RecordError(f'pass log columns of lengths {len(self.names)}, '
+                              f'{len(self.sizes)}, {len(self.first)}, {len(self.last)}')
+
+    @classmethod
+    def of(cls, passes: Sequence[PassRecord]) -> 'PassLog':
+        """Return the log of ``passes`` (in their order)."""
+        return cls(tuple(p.name for p in passes),
+                   np.array([p.size for p in passes], dtype=np.int64),
+                   np.array([p.first for p in passes], dtype=np.float64),
+                   np.array([p.last for p in passes], dtype=np.float64))
+
+    def __len__(self) -> int:
+        """Return the number of passes."""
+        return len(self.names)
+
+    def __getitem__(self, index: int) -> PassRecord:
+        """Return one pass as a record (``log[-1]``: the last one processed)."""
+        return PassRecord(self.names[index], int(self.sizes[index]),
+                          float(self.first[index]), float(self.last[index]))
+
+    def __iter__(self) -> Iterator[PassRecord]:
+        """Yield the passes as records, in order."""
+        return (self[i] for i in range(len(self)))
+
+    def __eq__(self, other: object) -> bool:
+        """Return True for a log of the same passes (columns equal, value for value)."""
+        if not isinstance(other, PassLog):
+            return NotImplemented
+        return (self.names == other.names and np.array_equal(self.sizes, other.sizes)
+                and np.array_equal(self.first, other.first)
+                and np.array_equal(self.last, other.last))
+
+    __hash__ = None  # type: ignore[assignment]
+
+    def keys(self) -> set[tuple[str, int]]:
+        """Return the ``(name, size)`` of every pass: what makes a pass the same pass."""
+        return set(zip(self.names, self.sizes.tolist()))
+
+    def plus(self, passes: Sequence[PassRecord]) -> 'PassLog':
+        """Return this log with ``passes`` after its own."""
+        if not passes:
+            return self
+        more = PassLog.of(passes)
+        return PassLog(self.names + more.names, np.concatenate([self.sizes, more.sizes]),
+                       np.concatenate([self.first, more.first]),
+                       np.concatenate([self.last, more.last]))
+
+
 @dataclass(frozen=True)
 class ComponentRecord:
     """One component's runner state: a wheel's or the gyro's (the other is None)."""
@@ -45,14 +115,15 @@ class SpacecraftRecord:
 
     ``fingerprint``: of the parameters, calibration and refined model the runners were
     made with (a run with others is refused); ``last_time``: the last stamp fed;
-    ``passes``: every pass processed so far, in time order.
+    ``passes``: every pass processed so far, in time order (version 2: as a
+    :class:`PassLog`, where version 1 held one record per pass).
     """
 
-    VERSION: ClassVar[int] = 1
+    VERSION: ClassVar[int] = 2
     spacecraft: str
     fingerprint: str
     last_time: float
-    passes: tuple[PassRecord, ...]
+    passes: PassLog
     components: dict[str, ComponentRecord]
 
 
