@@ -125,14 +125,15 @@ def test_report_is_self_contained_shows_every_wheel_and_plots_those_to_look_at(t
     text = path.read_text()
     assert not re.search(r'https?:', text) and '<script' not in text and '<link' not in text
     images = re.findall(r'src="([^"]*)"', text)
-    assert len(images) == 3 and all(i.startswith('data:image/png;base64,') for i in images)
+    assert len(images) == 3 and all(i.startswith('data:image/svg+xml;base64,') for i in images)
     # Drawn: the wearing wheel (trend), the one with a change, the one not examined; the
     # healthy wheel with no trend and only a superseded event is a table row only.
     drawn = re.findall(r'<h3 id="([^"]*)"', text)
     assert drawn == ['w-sc1_rw2', 'w-sc_2__rw1', 'w-sc_2__rw2'], drawn
     assert 'href="#w-sc1_rw1"' not in text and 'the other 1 are healthy' in text
-    assert all(base64.b64decode(i.split(',', 1)[1])[:8] == b'\x89PNG\r\n\x1a\n'
-               for i in images)
+    figures = [base64.b64decode(i.split(',', 1)[1]).decode() for i in images]
+    assert all(f.startswith('<svg xmlns="http://www.w3.org/2000/svg" width="1170"')
+               and f.endswith('</svg>') for f in figures)
     for craft, wheel in [('sc1', 'rw1'), ('sc1', 'rw2'), ('sc&lt;2&gt;', 'rw1')]:
         assert f'<td>{wheel}</td>' in text and craft in text
     assert 'sc<2>' not in text                       # names are escaped
@@ -187,18 +188,37 @@ def test_summary_trends_are_the_report_numbers(tmp_path):
     assert f'{wear["dry_p_value"]:.3g}' in text
 
 
-def test_a_wheel_drawn_after_another_is_drawn_as_on_a_new_canvas():
-    from rwa_monitor.fleet.report import _Canvas
+def test_a_wheel_plot_draws_every_level_its_errors_trend_and_changes():
+    from rwa_monitor.fleet.report import _plot
     from rwa_monitor.fleet.trend_table import TrendTable
     events, _, rows = fleet_inputs()
     entries = {(e['spacecraft'], e['wheel']): e for e in wheel_trends(rows, {})}
     groups = TrendTable.of(rows).by_wheel()
-    changes = {('sc<2>', 'rw1'): [events[0], events[0] | {'time': 7 * SECONDS_PER_DAY}]}
-    wearing, stepped = ('sc1', 'rw2'), ('sc<2>', 'rw1')
+    key = ('sc<2>', 'rw1')
+    changes = [events[0], events[0] | {'time': 7 * SECONDS_PER_DAY, 'kind': 'viscous'}]
+    svg = base64.b64decode(_plot(key, groups[key], entries[key], changes, None)).decode()
+    finite = int(np.isfinite(groups[key]['dry']).sum())
+    dots = re.findall(r'<path d="([^"]*)" stroke="#1f77b4"', svg)
+    assert [d.count('h0') for d in dots] == [finite, int(np.isfinite(
+        groups[key]['viscous']).sum())]
+    assert svg.count('stroke="#999999" stroke-width="1"') == 2       # error bars, per panel
+    kinds = re.findall(r'rotate\(-90\)" text-anchor="end" font-size="12" fill="#d62728">'
+                       r'([a-z]+)<', svg)
+    assert kinds == [events[0]['kind'], 'viscous'] * 2
+    assert 'sc&lt;2&gt; / rw1' in svg and svg.count('pass level ± 1 s.e.') == 2
+    assert _plot(key, groups[key], entries[key], changes, None) == base64.b64encode(
+        svg.encode()).decode()                                       # the same every time
 
-    def pngs(order):
-        with _Canvas() as canvas:
-            return [canvas.plot(key, groups[key], entries[key], changes.get(key, []), None)
-                    for key in order]
-    assert pngs([wearing, stepped])[1] == pngs([stepped])[0]
-    assert pngs([stepped, wearing])[1] == pngs([wearing])[0]
+
+@pytest.mark.parametrize('low, high, expected, power', [
+    (0.0, 10.0, [0, 2, 4, 6, 8, 10], 0),
+    (1.7e-4, 4.2e-4, [2.0, 2.5, 3.0, 3.5, 4.0], -4),
+    (-3.0, 7.5, [-2, 0, 2, 4, 6], 0),
+    (12000.0, 480000.0, [1, 2, 3, 4], 5),
+])
+def test_ticks_are_round_numbers_spanning_the_range(low, high, expected, power):
+    from rwa_monitor.fleet.svg_plot import nice_ticks, tick_texts
+    ticks = nice_ticks(low, high)
+    texts, found = tick_texts(ticks)
+    assert found == power and ticks.min() >= low and ticks.max() <= high
+    assert np.allclose([float(t) for t in texts], expected)

@@ -61,6 +61,10 @@ class Spacecraft:
     ignored: dict[str, str] = field(default_factory=dict)
     sizes: dict[str, int] = field(default_factory=dict)
 
+    def name(self, path: str) -> str:
+        """Return the name of a candidate (its path is the folder's, a separator, the name)."""
+        return path[len(self.folder) + 1:]
+
 
 def list_archive(archive: str | os.PathLike) -> list[Spacecraft]:
     """Return the spacecraft of an archive (sorted by id); ConfigError if there are none.

@@ -14,7 +14,6 @@ feed it (its rows at or before the last stamp fed are dropped and counted).
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
-import os
 import pathlib
 from typing import Mapping, Sequence, TYPE_CHECKING
 
@@ -46,7 +45,7 @@ class SpacecraftPlan:
     fingerprint: str = ''
     prior: SpacecraftRecord | None = None
     passes: tuple[arc.PassFile, ...] = ()
-    already: tuple[str, ...] = ()
+    already: int = 0
     unreadable: Mapping[str, str] = field(default_factory=dict)
     late: Mapping[str, str] = field(default_factory=dict)
     error: str | None = None
@@ -91,9 +90,8 @@ def _prior(craft: arc.Spacecraft, blocks: Blocks,
 
 def _to_scan(p: SpacecraftPlan) -> list[str]:
     done = p.prior.passes.keys() if p.prior else set()
-    sizes = p.craft.sizes
-    return [path for path in p.craft.candidates
-            if (os.path.basename(path), sizes.get(path, -1)) not in done]
+    sizes, name = p.craft.sizes, p.craft.name
+    return [path for path in p.craft.candidates if (name(path), sizes[path]) not in done]
 
 
 def _complete(p: SpacecraftPlan, scans: Mapping[str, arc.PassFile | str], blocks: Blocks
@@ -109,7 +107,7 @@ def _complete(p: SpacecraftPlan, scans: Mapping[str, arc.PassFile | str], blocks
         else:
             readable.append(found)
     readable.sort(key=lambda f: (f.first, f.name))
-    already = tuple(os.path.basename(c) for c in p.craft.candidates if c not in scans)
+    already = len(p.craft.candidates) - len(scans)
     late: dict[str, str] = {}
     if p.prior is not None and p.prior.passes:
         last = p.prior.passes[-1]

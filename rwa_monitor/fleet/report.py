@@ -9,8 +9,9 @@ pass levels over time with standard errors, the trend line and its changes drawn
 their kind, for the wheels that need a look (:func:`needs_plot`: a change, a trend flag, a
 projected limit crossing or no verdict; a fleet of hundreds of healthy wheels would
 otherwise be hundreds of flat plots, and their drawing the run's largest fixed cost).
-Plots are matplotlib PNGs embedded as base64 ``data:`` URIs: the page loads nothing from
-anywhere (no scripts, no style sheets, no links out).
+Plots are SVG figures (fleet/svg_plot.py: vector, drawn in milliseconds) embedded as
+base64 ``data:`` URIs: the page loads nothing from anywhere (no scripts, no style sheets,
+no links out).
 """
 
 from __future__ import annotations
@@ -19,13 +20,13 @@ import base64
 from collections import defaultdict
 import datetime as dt
 import html
-import io
 import math
 from typing import Any, Mapping, Sequence
 
 import numpy as np
 
 from rwa_monitor.core.trend import SECONDS_PER_DAY
+from rwa_monitor.fleet import svg_plot
 from rwa_monitor.fleet.trend_table import TrendTable
 from rwa_monitor.fleet.trends import LEVELS, number
 
@@ -72,13 +73,12 @@ def render(rows: Sequence[Mapping[str, Any]], summary: Mapping[str, Any],
              f'projected limit crossing or no verdict; the other '
              f'{len(trends) - len(plotted)} are healthy with no trend (their numbers are in '
              f'the fleet table).</p>']
-    with _Canvas() as canvas:
-        for entry in plotted:
-            key = (entry['spacecraft'], entry['wheel'])
-            png = canvas.plot(key, groups[key], entry, per_wheel.get(key, []), epoch)
-            parts += [f'<h3 id="{_anchor(key)}">{_e(key[0])} / {_e(key[1])}</h3>',
-                      f'<img alt="levels of {_e(key[0])} {_e(key[1])}" '
-                      f'src="data:image/png;base64,{png}">']
+    for entry in plotted:
+        key = (entry['spacecraft'], entry['wheel'])
+        svg = _plot(key, groups[key], entry, per_wheel.get(key, []), epoch)
+        parts += [f'<h3 id="{_anchor(key)}">{_e(key[0])} / {_e(key[1])}</h3>',
+                  f'<img alt="levels of {_e(key[0])} {_e(key[1])}" '
+                  f'src="data:image/svg+xml;base64,{svg}">']
     parts += ['</body></html>', '']
     return '\n'.join(parts)
 
@@ -265,81 +265,38 @@ def _crossing(entry: Mapping[str, Any], level: str) -> str:
     return f'{days[0]:.1f} ({ends[0]} .. {ends[1]})'
 
 
-class _Canvas:
-    """One figure of two axes, redrawn for each wheel.
+def _plot(key: tuple[str, str], columns: Mapping[str, np.ndarray], entry: Mapping[str, Any],
+          changes: list, epoch: dt.datetime | None) -> str:
+    """Return the base64 SVG of one wheel: levels with errors, trend, limit, changes.
 
-    Fixed margins instead of ``tight_layout`` and one figure for every wheel: 74 instead
-    of 110 ms of CPU a plot (matplotlib 3.10, this machine). Its axes are emptied, not
-    cleared, between wheels (:func:`_clear`): the same PNG bytes, 255 -> 180 ms a plot on
-    a slower machine (bench fleet's 23 plots, 2026-11-28). PNGs at zlib level 1, not
-    the default 6: about 40 ms less a plot for a file about 30 % larger (28 against 21 kB
-    for a plot of 60 levels), the same pixels.
+    ``columns``: the wheel's group of TrendTable.by_wheel.
     """
-
-    def __enter__(self) -> '_Canvas':
-        import matplotlib
-        matplotlib.use('Agg')
-        import matplotlib.pyplot as plt
-        self._plt = plt
-        self._style = plt.rc_context({'font.size': 11})
-        self._style.__enter__()
-        self.fig, self.axes = plt.subplots(1, 2, figsize=(13, 4.2))
-        self.fig.subplots_adjust(left=0.075, right=0.99, bottom=0.13, top=0.9, wspace=0.24)
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self._plt.close(self.fig)
-        self._style.__exit__(*exc)
-
-    def plot(self, key: tuple[str, str], columns: Mapping[str, np.ndarray],
-             entry: Mapping[str, Any], changes: list, epoch: dt.datetime | None) -> str:
-        """Return the base64 PNG of one wheel: levels with errors, trend, limit, changes.
-
-        ``columns``: the wheel's group of TrendTable.by_wheel.
-        """
-        days = 0.5 * (columns['t_start'] + columns['t_end']) / SECONDS_PER_DAY
-        for ax, level in zip(self.axes, LEVELS):
-            _clear(ax)
-            y, se = columns[level], columns[f'{level}_se']
-            ax.errorbar(days, y, yerr=se, fmt='o', ms=3, color='C0', ecolor='0.6',
-                        label='pass level ± 1 s.e.')
-            slope = number(entry[f'{level}_slope_per_day'])
-            intercept = number(entry[f'{level}_intercept'])
-            if math.isfinite(slope) and days.size:
-                since = number(entry.get('since_s')) / SECONDS_PER_DAY
-                grid = np.array([since if math.isfinite(since) else np.nanmin(days),
-                                 np.nanmax(days)])
-                after = ' since the step' if math.isfinite(since) else ''
-                ax.plot(grid, intercept + slope * grid, 'C1-',
-                        label=f'trend{after}, p = {number(entry[f"{level}_p_value"]):.2g}')
-            if entry.get(f'{level}_limit') is not None:
-                ax.axhline(entry[f'{level}_limit'], color='C3', ls=':', label='limit')
-            for i, change in enumerate(changes):
-                when = number(change.get('time')) / SECONDS_PER_DAY
-                ax.axvline(when, color='C3', lw=1.2, label='change' if i == 0 else None)
-                ax.annotate(str(change.get('kind')), (when, 1.0), xycoords=('data',
-                            'axes fraction'), rotation=90, va='top', ha='right',
-                            fontsize=10, color='C3')
-            origin = f' since {epoch:%Y-%m-%d %H:%M} UTC' if epoch else ''
-            ax.set_xlabel(f'time (days{origin})')
-            ax.set_ylabel(f'{level} ({UNITS[level]}), vs {entry["relative_to"] or "zero"}')
-            ax.legend(loc='lower left', fontsize=9)
-        self.fig.suptitle(f'{key[0]} / {key[1]}', fontsize=13)
-        buffer = io.BytesIO()
-        self.fig.savefig(buffer, format='png', dpi=90, pil_kwargs={'compress_level': 1})
-        return base64.b64encode(buffer.getvalue()).decode('ascii')
-
-
-def _clear(ax: Any) -> None:
-    """Remove the last wheel's artists from ``ax``, keeping its axis and tick objects.
-
-    What ``cla`` does for the data, without building the axes anew (its tick objects were
-    the largest part of a plot's CPU): every artist and container removed and the data
-    limits forgotten, so that the next wheel's artists set them.
-    """
-    for artist in [*ax.lines, *ax.collections, *ax.texts, *ax.patches]:
-        artist.remove()
-    ax.containers.clear()
-    if ax.get_legend() is not None:
-        ax.get_legend().remove()
-    ax.ignore_existing_data_limits = True
+    days = 0.5 * (columns['t_start'] + columns['t_end']) / SECONDS_PER_DAY
+    origin = f' since {epoch:%Y-%m-%d %H:%M} UTC' if epoch else ''
+    panels = []
+    for level in LEVELS:
+        panel = svg_plot.Panel(
+            days, np.asarray(columns[level], dtype=float),
+            np.asarray(columns[f'{level}_se'], dtype=float), f'time (days{origin})',
+            f'{level} ({UNITS[level]}), vs {entry["relative_to"] or "zero"}',
+            point_label='pass level ± 1 s.e.', mark_label='change')
+        slope = number(entry[f'{level}_slope_per_day'])
+        intercept = number(entry[f'{level}_intercept'])
+        finite = days[np.isfinite(days)]
+        if math.isfinite(slope) and finite.size:
+            since = number(entry.get('since_s')) / SECONDS_PER_DAY
+            start = since if math.isfinite(since) else float(finite.min())
+            end = float(finite.max())
+            after = ' since the step' if math.isfinite(since) else ''
+            panel.lines.append(((start, end), (intercept + slope * start,
+                                               intercept + slope * end), svg_plot.ORANGE,
+                                f'trend{after}, p = '
+                                f'{number(entry[f"{level}_p_value"]):.2g}'))
+        if entry.get(f'{level}_limit') is not None:
+            panel.levels.append((number(entry[f'{level}_limit']), svg_plot.RED, 'limit'))
+        for change in changes:
+            panel.marks.append((number(change.get('time')) / SECONDS_PER_DAY, svg_plot.RED,
+                                str(change.get('kind'))))
+        panels.append(panel)
+    svg = svg_plot.figure(f'{key[0]} / {key[1]}', panels)
+    return base64.b64encode(svg.encode('utf-8')).decode('ascii')

@@ -78,7 +78,7 @@ class SpacecraftResult:
                 'events': len(mine), 'by_kind': dict(Counter(e.kind for e in mine)),
                 **_facts_fields(facts)}
         return {'calibration': p.craft.calibration,
-                'passes': [f.name for f in p.passes], 'already_processed': list(p.already),
+                'passes': [f.name for f in p.passes], 'already_processed': p.already,
                 'unreadable': dict(p.unreadable), 'late': dict(p.late),
                 'ignored': dict(p.craft.ignored),
                 'rows_dropped': sum(f.rows_dropped for f in passes),
@@ -185,7 +185,7 @@ class FleetResult:
     @property
     def already_processed(self) -> int:
         """Return the passes skipped as processed by earlier runs."""
-        return sum(len(c.plan.already) for c in self.crafts)
+        return sum(c.plan.already for c in self.crafts)
 
     @property
     def anomaly(self) -> bool:
