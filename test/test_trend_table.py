@@ -62,3 +62,24 @@ def test_a_table_that_is_not_a_trend_table_is_refused():
         TrendTable.from_parquet(b'not parquet')
     with pytest.raises(ValueError, match='differ in length'):
         TrendTable({**{k: [] for k in COLUMNS}, 'dry': [1.0]})
+
+
+def test_a_table_read_from_parquet_appends_orders_and_groups_as_one_made_from_rows():
+    parts = [TrendTable.from_parquet(TrendTable.from_rows(rows()[i:i + 2]).to_parquet())
+             for i in (0, 2)]
+    joined = parts[0].plus(parts[1]).plus([rows()[0]])           # three Arrow chunks
+    made = TrendTable.from_rows(rows() + [rows()[0]])
+    assert [r.fields() for r in joined.sorted()][1:] == [r.fields() for r in made.sorted()][1:]
+    assert joined.sorted().to_parquet() == made.sorted().to_parquet()
+    for key, group in made.by_wheel().items():
+        for name, values in group.items():
+            np.testing.assert_array_equal(joined.by_wheel()[key][name], values)
+    assert len(joined) == 5 and joined.columns['samples'].dtype == np.int64
+
+
+def test_nulls_in_a_parquet_table_read_as_nan_zero_and_empty_text():
+    buffer = io.BytesIO()
+    pq.write_table(pa.table({k: pa.array([None], type=getattr(pa, v)()) for k, v in
+                             COLUMNS.items()}), buffer)
+    row, = TrendTable.from_parquet(buffer.getvalue())
+    assert row.spacecraft == '' and row.samples == 0 and math.isnan(row.dry)
