@@ -83,13 +83,13 @@ def list_archive(archive: str | os.PathLike) -> list[Spacecraft]:
         cal = folder / CALIBRATION
         craft = Spacecraft(folder.name, str(folder), str(cal) if cal.is_file() else None)
         with os.scandir(folder) as listing:
-            entries = sorted(listing, key=lambda e: e.name)
+            entries = [(e, _suffix(e.name)) for e in sorted(listing, key=lambda e: e.name)]
         definitions = _packet_definitions(entries)
-        for entry in entries:
+        for entry, suffix in entries:
             if entry.name.startswith('.') or entry.name == CALIBRATION \
                     or entry.name in definitions:
                 continue
-            if _suffix(entry.name) in PASS_SUFFIXES and entry.is_file():
+            if suffix in PASS_SUFFIXES and entry.is_file():
                 craft.sizes[entry.path] = _size(entry, folder=False)
             elif entry.is_dir() and rosbag_io.is_recording(entry.path):
                 craft.sizes[entry.path] = _size(entry, folder=True)
@@ -131,11 +131,14 @@ def _size(entry: os.DirEntry, folder: bool) -> int:
         return -1
 
 
-def _packet_definitions(entries: list[os.DirEntry]) -> set[str]:
-    """Return the names of the XTCE and map files of the folder's packet passes."""
+def _packet_definitions(entries: list[tuple[os.DirEntry, str]]) -> set[str]:
+    """Return the names of the XTCE and map files of the folder's packet passes.
+
+    ``entries``: the folder's entries with their suffixes (:func:`_suffix`).
+    """
     names = {ARCHIVE_XTCE, ARCHIVE_MAP}
-    for entry in entries:
-        if _suffix(entry.name) == PACKET_SUFFIX and entry.is_file():
+    for entry, suffix in entries:
+        if suffix == PACKET_SUFFIX and entry.is_file():
             names.update(p.name for p in sibling_paths(pathlib.Path(entry.path)))
     return names
 

@@ -207,10 +207,10 @@ class FleetResult:
         from rwa_monitor.fleet.trends import (add_trends, trend_limits, trend_steps,
                                               wheel_trends)
         current = history.current(self.history)
-        crafts = {}
-        for c in self.crafts:
-            mine = [h.event for h in current if h.spacecraft == c.id]
-            crafts[c.id] = c.summary(mine)
+        events: dict[str, list[AnomalyEvent]] = {}
+        for h in current:
+            events.setdefault(h.spacecraft, []).append(h.event)
+        crafts = {c.id: c.summary(events.get(c.id, [])) for c in self.crafts}
         summary = {'spacecraft': crafts, 'run': self.run,
                    'events': len(current),
                    'new_events': sum(h.run == self.run for h in current),

@@ -47,6 +47,7 @@ class TrendTable:
         self._arrow = arrow
         self._parquet: bytes | None = None
         self._groups: dict[tuple[str, str], dict[str, np.ndarray]] | None = None
+        self._ordered = False       # made by sorted(): already in by_wheel's order
         if arrow is not None:
             return
         columns = columns or {}
@@ -64,6 +65,12 @@ class TrendTable:
         if self._columns is None:
             self._columns = {k: _numpy(self._arrow.column(k), COLUMNS[k]) for k in COLUMNS}
         return self._columns
+
+    def column(self, name: str) -> np.ndarray:
+        """Return one column as numpy (without making the others: see :attr:`columns`)."""
+        if self._columns is None:
+            return _numpy(self._arrow.column(name), COLUMNS[name])
+        return self._columns[name]
 
     def arrow(self) -> Any:
         """Return the table as a ``pyarrow.Table`` of :data:`COLUMNS` (no nulls)."""
@@ -140,7 +147,9 @@ class TrendTable:
 
     def sorted(self) -> 'TrendTable':
         """Return the rows ordered by spacecraft, wheel, start time and pass (stable)."""
-        return self.take(self._order(('spacecraft', 'wheel', 't_start', 'pass')))
+        ordered = self.take(self._order(('spacecraft', 'wheel', 't_start', 'pass')))
+        ordered._ordered = True
+        return ordered
 
     def take(self, index: np.ndarray) -> 'TrendTable':
         """Return the rows at ``index``."""
@@ -161,7 +170,8 @@ class TrendTable:
         import pyarrow.compute as pc
         if not len(self):
             return {}
-        ordered = self.take(self._order(('spacecraft', 'wheel', 't_start')))
+        ordered = self if self._ordered else self.take(
+            self._order(('spacecraft', 'wheel', 't_start')))
         table = ordered.arrow()
         key = pc.binary_join_element_wise(table.column('spacecraft'),
                                           table.column('wheel'), '\x00')
@@ -185,8 +195,8 @@ class TrendTable:
 
     def span(self) -> tuple[float, float] | None:
         """Return the earliest finite start and the latest finite end (None if none)."""
-        starts = self.columns['t_start'][np.isfinite(self.columns['t_start'])]
-        ends = self.columns['t_end'][np.isfinite(self.columns['t_end'])]
+        starts, ends = self.column('t_start'), self.column('t_end')
+        starts, ends = starts[np.isfinite(starts)], ends[np.isfinite(ends)]
         if not (starts.size and ends.size):
             return None
         return float(starts.min()), float(ends.max())
