@@ -158,3 +158,21 @@ def test_the_printed_line_counts_current_and_superseded_events():
     assert _history({'events': 2, 'superseded': 1}) == \
         '2 current events in the history, 1 superseded by later revisions'
     assert _history({'events': 3, 'superseded': 0}) == '3 current events in the history'
+
+
+def test_a_history_read_back_is_written_again_byte_for_byte():
+    from rwa_monitor.core.events import AnomalyEvent
+    events = [AnomalyEvent('llr', 'rw1', kind, 10.0 * i, i, 12.0 * i, i + 2, 1e-9, 0,
+                           {'final': i == 2, 'z_dry': float('inf')})
+              for i, kind in enumerate(('dry', 'undecided', 'both'), start=1)]
+    first = (history.entries('sc1', events[:2], 1)
+             + history.entries('sc1', events[2:], 1, end_of_run=True))
+    data = history.to_parquet(first)
+    back = history.from_parquet(data)
+    assert back == first and all(h.event_json for h in back)
+    assert history.to_parquet(back) == data
+    moved = history.supersede(back, ['sc1'])
+    assert [h.superseded for h in moved] == [False, False, True]
+    fresh = [history.Entry(h.spacecraft, h.event, h.run, h.end_of_run, h.superseded)
+             for h in moved]
+    assert history.to_parquet(moved) == history.to_parquet(fresh)

@@ -18,7 +18,7 @@ an archive epoch, ``time_utc`` and ``declared_time_utc`` (ISO 8601, UTC).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 import datetime as dt
 import io
 import json
@@ -33,13 +33,18 @@ FLAGS = ('spacecraft', 'run', 'end_of_run', 'superseded')
 
 @dataclass(frozen=True)
 class Entry:
-    """One event of the history with the flags that place it."""
+    """One event of the history with the flags that place it.
+
+    ``event_json``: the event's ``event_json`` text when it was read from a history
+    (:func:`from_parquet`), written again as it was instead of encoding the event anew.
+    """
 
     spacecraft: str
     event: AnomalyEvent
     run: int
     end_of_run: bool = False
     superseded: bool = False
+    event_json: str | None = field(default=None, compare=False, repr=False)
 
 
 def entries(spacecraft: str, events: Iterable[AnomalyEvent], run: int,
@@ -55,7 +60,7 @@ def supersede(history: Sequence[Entry], continued: Iterable[str]) -> list[Entry]
     the state before those events, and this run's own events replace them.
     """
     continued = set(continued)
-    return [Entry(h.spacecraft, h.event, h.run, h.end_of_run, True)
+    return [replace(h, superseded=True)
             if h.end_of_run and not h.superseded and h.spacecraft in continued else h
             for h in history]
 
@@ -100,8 +105,8 @@ def to_parquet(history: Sequence[Entry]) -> bytes:
     """Return the history as Parquet (flat columns plus ``event_json`` to read it back)."""
     table = rows(history)
     for row, h in zip(table, history):
-        tree, _ = encode(h.event)
-        row['event_json'] = json.dumps(tree, allow_nan=False, sort_keys=True)
+        row['event_json'] = h.event_json or json.dumps(encode(h.event)[0], allow_nan=False,
+                                                       sort_keys=True)
     return parquet(table, {'spacecraft': 'string', 'event_json': 'string', 'run': 'int64',
                            'end_of_run': 'bool_', 'superseded': 'bool_'})
 
@@ -123,7 +128,7 @@ def from_parquet(data: bytes) -> list[Entry]:
                                                     ('end_of_run', 'superseded'))):
             raise ValueError('an event history row has bad flags')
         out.append(Entry(str(row['spacecraft']), event, row['run'], row['end_of_run'],
-                         row['superseded']))
+                         row['superseded'], row['event_json']))
     return out
 
 
