@@ -81,3 +81,27 @@ def test_local_workers_start_with_the_engine_imported_and_the_kernels_loaded():
     with ClusterStart(workers=2) as cluster:
         found = cluster.client().run(_loaded)
     assert list(found.values()) == [(True, True), (True, True)]
+
+
+def test_the_folders_are_listed_by_the_workers_or_here_with_the_same_spacecraft(tmp_path):
+    from rwa_monitor.fleet import archive
+    from rwa_monitor.fleet.engine import _Listing
+    make_archive(tmp_path / 'archive', tmp_path / 'work')
+    folders = archive.spacecraft_folders(tmp_path / 'archive')
+    expected = archive.list_archive(tmp_path / 'archive')
+    with ClusterStart(workers=1) as cluster:
+        client = cluster.client()
+        submitted = []
+        cluster.when_started(submitted.append)             # started: called at once
+        remote = _Listing(cluster, folders)
+        assert submitted == [client] and remote._futures is not None
+        assert remote.result() == expected
+    with ClusterStart(workers=0) as failed:                 # never starts: listed here
+        here = _Listing(failed, folders)
+        assert here.result() == expected and here._futures is None
+    with ClusterStart(workers=1) as starting:               # asked for before the start
+        early = _Listing(starting, folders)
+        found = early.result()
+        assert found == expected
+        starting.client()
+    assert len(expected) == 2 and all(c.candidates for c in expected)

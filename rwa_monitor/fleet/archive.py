@@ -67,41 +67,55 @@ class Spacecraft:
 
 
 def list_archive(archive: str | os.PathLike) -> list[Spacecraft]:
-    """Return the spacecraft of an archive (sorted by id); ConfigError if there are none.
+    """Return the spacecraft of an archive (sorted by id); ConfigError if there are none."""
+    return [list_spacecraft(folder) for folder in spacecraft_folders(archive)]
 
-    A pass is a file with a suffix of :data:`PASS_SUFFIXES` or a rosbag2 folder
-    (``rosbag_io.is_recording``). Each folder is listed once (``os.scandir``: names, types
-    and sizes without a path object, a suffix found in one string search): a daily run
-    lists every pass of the archive's life.
-    """
+
+def spacecraft_folders(archive: str | os.PathLike) -> list[str]:
+    """Return the archive's spacecraft folders, sorted; ConfigError if there are none."""
     root = pathlib.Path(archive)
     if not root.is_dir():
         raise ConfigError(f'{root}: not a folder (expected ARCHIVE/<spacecraft>/<passes>)')
-    fleet = []
-    for folder in sorted(p for p in root.iterdir() if p.is_dir()
-                         and not p.name.startswith('.')):
-        cal = folder / CALIBRATION
-        craft = Spacecraft(folder.name, str(folder), str(cal) if cal.is_file() else None)
-        with os.scandir(folder) as listing:
-            entries = [(e, _suffix(e.name)) for e in sorted(listing, key=lambda e: e.name)]
-        definitions = _packet_definitions(entries)
-        for entry, suffix in entries:
-            if entry.name.startswith('.') or entry.name == CALIBRATION \
-                    or entry.name in definitions:
-                continue
-            if suffix in PASS_SUFFIXES and entry.is_file():
-                craft.sizes[entry.path] = _size(entry, folder=False)
-            elif entry.is_dir() and rosbag_io.is_recording(entry.path):
-                craft.sizes[entry.path] = _size(entry, folder=True)
-            else:
-                craft.ignored[entry.name] = ('not a recording (expected .csv, .parquet, '
-                                             '.mcap, .db3, .bin or a rosbag2 folder)')
-                continue
-            craft.candidates.append(entry.path)
-        fleet.append(craft)
-    if not fleet:
+    folders = sorted(str(p) for p in root.iterdir() if p.is_dir()
+                     and not p.name.startswith('.'))
+    if not folders:
         raise ConfigError(f'{root}: no spacecraft folder')
-    return fleet
+    return folders
+
+
+def list_folders(folders: list[str]) -> list[Spacecraft]:
+    """Return :func:`list_spacecraft` of each folder (one ``list`` task, fleet/engine.py)."""
+    return [list_spacecraft(folder) for folder in folders]
+
+
+def list_spacecraft(folder: str | os.PathLike) -> Spacecraft:
+    """Return one spacecraft folder's candidate passes with their sizes, and the rest.
+
+    A pass is a file with a suffix of :data:`PASS_SUFFIXES` or a rosbag2 folder
+    (``rosbag_io.is_recording``). The folder is listed once (``os.scandir``: names, types
+    and sizes without a path object, a suffix found in one string search): a daily run
+    lists every pass of the archive's life.
+    """
+    folder = pathlib.Path(folder)
+    cal = folder / CALIBRATION
+    craft = Spacecraft(folder.name, str(folder), str(cal) if cal.is_file() else None)
+    with os.scandir(folder) as listing:
+        entries = [(e, _suffix(e.name)) for e in sorted(listing, key=lambda e: e.name)]
+    definitions = _packet_definitions(entries)
+    for entry, suffix in entries:
+        if entry.name.startswith('.') or entry.name == CALIBRATION \
+                or entry.name in definitions:
+            continue
+        if suffix in PASS_SUFFIXES and entry.is_file():
+            craft.sizes[entry.path] = _size(entry, folder=False)
+        elif entry.is_dir() and rosbag_io.is_recording(entry.path):
+            craft.sizes[entry.path] = _size(entry, folder=True)
+        else:
+            craft.ignored[entry.name] = ('not a recording (expected .csv, .parquet, '
+                                         '.mcap, .db3, .bin or a rosbag2 folder)')
+            continue
+        craft.candidates.append(entry.path)
+    return craft
 
 
 def metadata(archive: str | os.PathLike) -> dict:

@@ -23,7 +23,7 @@ import contextlib
 import logging
 import multiprocessing
 from multiprocessing import forkserver
-from typing import Any, Iterator, TYPE_CHECKING
+from typing import Any, Callable, Iterator, TYPE_CHECKING
 
 from rwa_monitor.exceptions import ConfigError
 
@@ -101,6 +101,17 @@ class ClusterStart:
         if self._closed is not None:
             raise RuntimeError('the cluster was released')
         return self._started.result()
+
+    def when_started(self, call: Callable[[Client], None]) -> None:
+        """Have ``call(client)`` run in the cluster's thread once it has started.
+
+        At once in this thread if it has already; never if the start failed (then
+        :meth:`client` raises its error). What ``call`` raises is logged, not raised.
+        """
+        def started(future: concurrent.futures.Future) -> None:
+            if future.exception() is None:
+                call(future.result())
+        self._started.add_done_callback(started)
 
     def release(self) -> None:
         """Begin closing the cluster in its thread; return at once (no more tasks)."""

@@ -19,6 +19,7 @@ import datetime as dt
 import math
 import pathlib
 import sys
+import threading
 import time as _time
 from typing import Mapping, TextIO, TYPE_CHECKING
 
@@ -40,6 +41,8 @@ if TYPE_CHECKING:
 # Passes of a spacecraft fed by one task: consecutive ones up to about this many bytes of
 # files (a task costs a few milliseconds of the engine's own).
 TASK_BYTES = 64 << 20
+# Spacecraft folders listed by one task (_Listing): 100 spacecraft in 4 tasks.
+LIST_TASK_FOLDERS = 25
 FLEET_PARAMETERS = 'fleet.yaml'
 
 
@@ -133,9 +136,10 @@ def _run(root: pathlib.Path, cluster: Client | ClusterStart, config: pathlib.Pat
          state_dir: pathlib.Path | None, log: TextIO | None, task_bytes: int
          ) -> FleetResult:
     blocks = node_blocks(config)
-    fleet = arc.list_archive(root)
-    epoch = archive_epoch(root, str(blocks['fleet']['epoch_utc']), fleet)
+    listing = _Listing(cluster, arc.spacecraft_folders(root))
     loaded = state.load(pathlib.Path(state_dir)) if state_dir is not None else None
+    fleet = listing.result()
+    epoch = archive_epoch(root, str(blocks['fleet']['epoch_utc']), fleet)
     saved = loaded.records if loaded else {}
     start_wall, start_cpu = _time.perf_counter(), _time.process_time()
     client = cluster.client() if isinstance(cluster, ClusterStart) else cluster
@@ -160,6 +164,47 @@ def _run(root: pathlib.Path, cluster: Client | ClusterStart, config: pathlib.Pat
         saved=saved, prior_history=prior_history, prior_trend=prior_trend,
         timings=_timings(chains, wall, _time.process_time() - start_cpu),
         config=str(config or fleet_parameters_file()))
+
+
+class _Listing:
+    """The spacecraft folders listed by the workers while this process reads the state.
+
+    A daily run late in the year lists a year of passes (219,000 files for 100
+    spacecraft: about 2 s here) and reads a state that grew as much. The listing tasks
+    (LIST_TASK_FOLDERS folders each) are submitted as soon as the cluster has started,
+    from its thread, and gathered once the state is read; if the cluster has not started
+    by then (a small archive, read quickly), this process lists the folders itself.
+    Either way the same :class:`~rwa_monitor.fleet.archive.Spacecraft` come back.
+    """
+
+    def __init__(self, cluster: Client | ClusterStart, folders: list[str]) -> None:
+        self._folders = folders
+        self._lock = threading.Lock()
+        self._client: Client | None = None
+        self._futures: list[Future] | None = None
+        self._here = False
+        if isinstance(cluster, ClusterStart):
+            cluster.when_started(self._submit)
+        else:
+            self._submit(cluster)
+
+    def _submit(self, client: Client) -> None:
+        with self._lock:
+            if self._here:
+                return
+            parts = [self._folders[i:i + LIST_TASK_FOLDERS]
+                     for i in range(0, len(self._folders), LIST_TASK_FOLDERS)]
+            self._futures = client.map(arc.list_folders, parts, pure=False)
+            self._client = client
+
+    def result(self) -> list[arc.Spacecraft]:
+        """Return the spacecraft, in folder order (listed here if the tasks never left)."""
+        with self._lock:
+            self._here = self._futures is None
+        if self._here:
+            return arc.list_folders(self._folders)
+        assert self._client is not None and self._futures is not None
+        return [craft for part in self._client.gather(self._futures) for craft in part]
 
 
 def _submit(client: Client, plans: list[SpacecraftPlan], task_bytes: int
