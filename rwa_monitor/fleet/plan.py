@@ -28,9 +28,10 @@ if TYPE_CHECKING:
     from distributed import Client
 
 CALIBRATION_KEY = 'calibration_file'
-# Candidate passes scanned by one task, whatever their spacecraft: a pass's scan costs
-# about 0.05 ms and a task a few ms of the engine's own, so one task per spacecraft (bench
-# fleet: 20 tasks of 42 passes) cost the client more than the scans.
+# Candidate passes scanned by one task at most, whatever their spacecraft: a pass's scan
+# costs about 0.05 ms and a task a few ms of the engine's own, so one task per spacecraft
+# (bench fleet: 20 tasks of 42 passes) cost the client more than the scans. At least one
+# task per worker, so that a day's passes are not all scanned by one worker.
 SCAN_TASK_PASSES = 1000
 Blocks = Mapping[str, Mapping[str, object]]
 MODEL_KEY = 'friction_model_file'
@@ -62,11 +63,20 @@ def plan(client: Client, fleet: Sequence[arc.Spacecraft], blocks: Blocks,
     first = [_prior(craft, blocks, saved.get(craft.id)) for craft in fleet]
     batches = [(p, _to_scan(p)) for p in first if p.error is None]
     paths = [path for _, batch in batches for path in batch]
-    chunks = [paths[i:i + SCAN_TASK_PASSES] for i in range(0, len(paths), SCAN_TASK_PASSES)]
+    size = -(-len(paths) // max(_workers(client), -(-len(paths) // SCAN_TASK_PASSES), 1))
+    chunks = [paths[i:i + size] for i in range(0, len(paths), size)] if paths else []
     found = iter([f for chunk in client.gather(client.map(arc.scan_passes, chunks, pure=False))
                   for f in chunk] if chunks else [])
     scans = {p.id: {path: next(found) for path in batch} for p, batch in batches}
     return [_complete(p, scans.get(p.id, {}), blocks) for p in first]
+
+
+def _workers(client: Client) -> int:
+    """Return the workers the client knows of (its scheduler's last word; 1 if none)."""
+    try:
+        return max(1, len(client.scheduler_info().get('workers', {})))
+    except (AttributeError, OSError):
+        return 1
 
 
 def _prior(craft: arc.Spacecraft, blocks: Blocks,
