@@ -105,3 +105,11 @@ def test_the_folders_are_listed_by_the_workers_or_here_with_the_same_spacecraft(
         assert found == expected
         starting.client()
     assert len(expected) == 2 and all(c.candidates for c in expected)
+
+
+def test_a_folder_the_workers_cannot_list_is_a_clear_error(tmp_path):
+    from rwa_monitor.fleet.engine import _Listing
+    with ClusterStart(workers=1) as cluster:
+        listing = _Listing(cluster.client(), [str(tmp_path / 'elsewhere' / 'sc1')])
+        with pytest.raises(ConfigError, match='workers cannot list the archive: .*sc1'):
+            listing.result()

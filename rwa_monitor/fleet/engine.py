@@ -174,7 +174,8 @@ class _Listing:
     (LIST_TASK_FOLDERS folders each) are submitted as soon as the cluster has started,
     from its thread, and gathered once the state is read; if the cluster has not started
     by then (a small archive, read quickly), this process lists the folders itself.
-    Either way the same :class:`~rwa_monitor.fleet.archive.Spacecraft` come back.
+    Either way the same :class:`~rwa_monitor.fleet.archive.Spacecraft` come back; a
+    folder the workers cannot read is a ConfigError naming it.
     """
 
     def __init__(self, cluster: Client | ClusterStart, folders: list[str]) -> None:
@@ -204,7 +205,13 @@ class _Listing:
         if self._here:
             return arc.list_folders(self._folders)
         assert self._client is not None and self._futures is not None
-        return [craft for part in self._client.gather(self._futures) for craft in part]
+        try:
+            parts = self._client.gather(self._futures)
+        except OSError as err:
+            raise ConfigError(f'the workers cannot list the archive: {err} (with '
+                              '--scheduler, every worker needs the archive at the same '
+                              'path)') from None
+        return [craft for part in parts for craft in part]
 
 
 def _submit(client: Client, plans: list[SpacecraftPlan], task_bytes: int
