@@ -12,7 +12,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 import html
 import math
-from typing import Sequence
+from typing import Callable, Sequence
 
 import numpy as np
 
@@ -159,22 +159,18 @@ def _span(groups: Sequence[np.ndarray], pad: float) -> tuple[float, float]:
 
 
 def _axes(panel: Panel, box: tuple[float, float, float, float],
-          limits: tuple[float, float, float, float], sx: object, sy: object) -> list[str]:
+          limits: tuple[float, float, float, float], sx: Callable, sy: Callable) -> list[str]:
     x0, x1, y0, y1 = box
     xa, xb, ya, yb = limits
     out = [f'<rect x="{x0:.1f}" y="{y1:.1f}" width="{x1 - x0:.1f}" height="{y0 - y1:.1f}" '
            'fill="none" stroke="#444"/>']
-    x_ticks = nice_ticks(xa, xb)
-    x_texts, x_power = tick_texts(x_ticks)
-    for value, text in zip(x_ticks, x_texts):
-        at = sx(value)
+    x_at, x_power = _placed_ticks(xa, xb, sx)
+    for at, text in x_at:
         out.append(f'<line x1="{at:.1f}" x2="{at:.1f}" y1="{y0:.1f}" y2="{y0 + 5:.1f}" '
                    'stroke="#444"/>')
         out.append(f'<text x="{at:.1f}" y="{y0 + 19:.1f}" text-anchor="middle">{text}</text>')
-    y_ticks = nice_ticks(ya, yb)
-    y_texts, y_power = tick_texts(y_ticks)
-    for value, text in zip(y_ticks, y_texts):
-        at = sy(value)
+    y_at, y_power = _placed_ticks(ya, yb, sy)
+    for at, text in y_at:
         out.append(f'<line x1="{x0 - 5:.1f}" x2="{x0:.1f}" y1="{at:.1f}" y2="{at:.1f}" '
                    'stroke="#444"/>')
         out.append(f'<line x1="{x0:.1f}" x2="{x1:.1f}" y1="{at:.1f}" y2="{at:.1f}" '
@@ -187,6 +183,14 @@ def _axes(panel: Panel, box: tuple[float, float, float, float],
     out.append(f'<text transform="translate({x0 - 76:.1f} {(y0 + y1) / 2:.1f}) rotate(-90)" '
                f'text-anchor="middle">{_e(y_label)}</text>')
     return out
+
+
+def _placed_ticks(low: float, high: float, scale: Callable[[float], float]
+                  ) -> tuple[list[tuple[float, str]], int]:
+    """Return each round tick's position on the page and text, and their power of ten."""
+    ticks = nice_ticks(low, high)
+    texts, power = tick_texts(ticks)
+    return [(float(scale(v)), text) for v, text in zip(ticks, texts)], power
 
 
 def _legend(panel: Panel, x0: float, y0: float) -> list[str]:
